@@ -1,0 +1,140 @@
+// libcodec: PTC-style lapped-transform coder for integer images (terrain residuals and DEM levels).
+//
+// Pipeline per tile: 4-point overlap pre-filter across internal block edges -> reversible 4x4 integer
+// lifting transform -> second 4x4 stage on the block DCs of each 16x16 macroblock -> dead-zone
+// quantiser with per-band steps -> adaptive run-length/Golomb-Rice (RLGR) coding of DC, LP and HP bands
+// with separate backward-adaptive states. Tiles are independent (hard tile edges), so any rectangle
+// decodes from the tiles it intersects. Bitstream: docs/codec.md.
+//
+// Supported input: int32 samples with |value| <= kMaxAbsSample (2^20); larger values make encode()
+// return Status::ValueOutOfRange. Within that range no intermediate value overflows.
+//
+// What "step S" means: every band is quantised with step S / g_b, where g_b is the sample-domain
+// (synthesis) norm of band b's basis functions, so each band adds the same error energy per unit step.
+// For data whose coefficients are spread over many steps the sample-domain rms error is
+//   rms ~= S * sqrt(1/12 + 1/64) ~= 0.315 * S           (predicted_rms(S))
+// (the 1/64 comes from the dead zone: the quantiser rounds |c|/step + 3/8 down and reconstructs at
+// q * step, i.e. 1/8 step below the bin centre). Smooth data, where many coefficients fall in the dead
+// zone, gets a lower rms. S = 1 is exactly lossless. Bands whose S / g_b is below 1 use step 1.
+//
+// Max-error mode guarantees |decoded - input| <= E at every sample: each tile is coded either by the
+// transform at step S plus a sparse correction layer, or by spatial quantisation with step 2E+1 coded
+// losslessly; the encoder keeps the smaller one per tile and records the choice.
+//
+// Errors: functions return a Status for bad data; caller mistakes (null pointers, bad strides) assert.
+// Threads: all functions are reentrant; give each thread its own Scratch.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace codec {
+
+inline constexpr int32_t kMaxAbsSample = 1 << 20;  // largest |input sample| the coder accepts
+inline constexpr uint32_t kFormatVersion = 1;
+
+enum class Status {
+  Ok = 0,
+  BufferTooSmall,      // the output buffer cannot hold the result
+  Truncated,           // the stream ends before the data its header/index announce
+  Corrupt,             // inconsistent header, index or bitstream
+  ChecksumMismatch,    // a CRC32C (header, index or tile) does not match
+  UnsupportedVersion,  // right magic, unknown format version
+  InvalidArgument,     // bad options or region (e.g. step < 1, rectangle outside the image)
+  ValueOutOfRange,     // an input sample exceeds +-kMaxAbsSample
+};
+const char* status_name(Status status);
+
+struct EncodeOptions {
+  double step = 1.0;            // absolute quantiser step in sample units (>= 1; 1 = lossless)
+  bool bound_max_error = false; // guarantee |error| <= max_error at every sample
+  uint32_t max_error = 0;       // E for max-error mode (0 = lossless); at most kMaxAbsSample
+  uint32_t tile_size = 64;      // tile side in samples: multiple of 16 in [16, 4096]
+};
+
+// Step giving about `target_rms` sample-domain rms error (inverse of predicted_rms); never below 1.
+double step_for_target_rms(double target_rms);
+// Predicted sample-domain rms error of step S for data with spread-out coefficients (see above).
+double predicted_rms(double step);
+
+// Everything the stream header records.
+struct HeaderInfo {
+  uint32_t version = 0;
+  int64_t width = 0, height = 0;
+  uint32_t tile_size = 0;
+  int64_t tiles_x = 0, tiles_y = 0;
+  double step = 1.0;            // as recorded (1/256 resolution)
+  bool bound_max_error = false;
+  uint32_t max_error = 0;
+  size_t index_offset = 0;      // byte offset of the tile index
+  size_t data_offset = 0;       // first byte after the index
+  int64_t tile_count() const { return tiles_x * tiles_y; }
+};
+
+struct TileEntry {
+  uint64_t offset = 0;   // from the start of the stream
+  uint32_t size = 0;     // bytes
+  uint32_t crc = 0;      // CRC32C of the tile's bytes
+};
+
+struct Rect {
+  int64_t x = 0, y = 0, width = 0, height = 0;
+};
+
+// Caller-owned working memory. Buffers grow on first use and are reused, so steady-state encode and
+// decode calls do not allocate. One per thread.
+class Scratch {
+ public:
+  Scratch();
+  ~Scratch();
+  Scratch(const Scratch&) = delete;
+  Scratch& operator=(const Scratch&) = delete;
+  struct Impl;
+  Impl& impl() { return *impl_; }
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+// Upper bound of the encoded size of a width x height image with these options (0 if options invalid).
+size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options);
+
+// Encodes width x height samples (row r starts at src + r * src_stride; strides count samples) into
+// dst[0 .. dst_capacity). On Ok, *bytes_written holds the stream size. When recon is not null it
+// receives exactly what decode() will return (for closed-loop residual pyramids).
+Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
+              const EncodeOptions& options, uint8_t* dst, size_t dst_capacity, size_t* bytes_written,
+              Scratch& scratch, int32_t* recon = nullptr, ptrdiff_t recon_stride = 0);
+
+// Parses and checks the header (magic, version, header CRC, sizes) without decoding.
+Status read_header(const uint8_t* data, size_t size, HeaderInfo* header);
+// Reads the tile index (row-major tiles) into entries[0 .. header.tile_count()) and checks the
+// index CRC and that every tile lies inside the stream.
+Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries);
+
+// A parsed stream: header and index are validated once, then any number of regions decode from it.
+// The stream bytes must outlive the Decoder.
+class Decoder {
+ public:
+  Status open(const uint8_t* data, size_t size);
+  const HeaderInfo& header() const { return header_; }
+  const std::vector<TileEntry>& index() const { return index_; }
+  // Decodes rect into dst (dst[0] = sample (rect.x, rect.y); stride in samples). Touches only the
+  // tiles the rectangle intersects; each is decoded once and its checksum verified.
+  Status decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const;
+
+ private:
+  const uint8_t* data_ = nullptr;
+  size_t size_ = 0;
+  HeaderInfo header_;
+  std::vector<TileEntry> index_;
+};
+
+// Whole-image and one-shot region decodes (open + decode_region).
+Status decode(const uint8_t* data, size_t size, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch);
+Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst,
+                     ptrdiff_t dst_stride, Scratch& scratch);
+
+}  // namespace codec

@@ -1,0 +1,12 @@
+// CRC32C (Castagnoli, reflected polynomial 0x82F63B78), the checksum of stream headers and tiles.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace codec::detail {
+
+// CRC32C of data[0 .. size); chain calls by passing the previous result as `crc`.
+uint32_t crc32c(const uint8_t* data, size_t size, uint32_t crc = 0);
+
+}  // namespace codec::detail

@@ -1,0 +1,21 @@
+// Reversible integer lapped transform on one tile (PTC / JPEG XR family, own lifting design):
+//  1. overlap pre-filter: a 4-point lifting filter straddling every internal 4x4 block edge, rows then
+//     columns; it stops at the tile edge (hard tile boundaries);
+//  2. stage 1: separable 4-point DCT-like lifting transform on every 4x4 block;
+//  3. stage 2: the same 4x4 transform on the 16 block DCs of every 16x16 macroblock.
+// Coefficients stay in place: HP at (4bx+u, 4by+v) with (u,v) != (0,0), LP at (16mx+4u, 16my+4v) with
+// (u,v) != (0,0), macroblock DC at (16mx, 16my). Every step is integer lifting, so inverse(forward(x))
+// == x exactly. Values are computed in 64 bits and stored saturated to int32: for inputs within
+// +-2^20 nothing saturates (coefficients stay below 2^25); garbage coefficients cannot cause overflow.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace codec::detail {
+
+// tile: width x height samples, row stride = width; width and height are multiples of 16.
+void forward_lapped(int32_t* tile, int width, int height);
+void inverse_lapped(int32_t* tile, int width, int height);
+
+}  // namespace codec::detail

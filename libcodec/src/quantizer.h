@@ -1,0 +1,44 @@
+// Dead-zone uniform quantiser with per-band steps that equalise the sample-domain error of one unit
+// step across bands (the lapped transform is not orthonormal; see codec.h for what "step" means).
+//
+// Bands: 0 = macroblock DC, 1..15 = LP (stage-2 AC, position v*4+u), 16..30 = HP (stage-1 AC, 15+p).
+// Steps are fixed point with 8 fractional bits; 256 means step 1 (exact for integer coefficients).
+#pragma once
+
+#include <cstdint>
+
+namespace codec::detail {
+
+inline constexpr int kBandCount = 31;
+inline constexpr uint32_t kStepOne = 256;
+inline constexpr uint32_t kMaxBandStep = 1u << 30;
+inline constexpr int64_t kMaxCoefficient = int64_t(1) << 27;  // decoder rejects larger coefficients
+
+inline int lp_band(int position) { return position; }
+inline int hp_band(int position) { return 15 + position; }
+
+struct BandSteps {
+  uint32_t q8[kBandCount];
+};
+
+// Synthesis norm of each band's basis function (measured once on the integer inverse transform).
+const double* band_synthesis_norms();
+// Per-band steps for global step step_q8 (step * 256): max(1, step / norm) in 1/256 units; all 1
+// (lossless) when step_q8 == 256.
+BandSteps band_steps_for(uint32_t step_q8);
+// All bands at step 1 (lossless).
+BandSteps unit_band_steps();
+
+// Encoder side: q = sign(c) * floor(|c| / step + 3/8).
+inline int32_t quantize(int32_t c, double inverse_step) {
+  const double magnitude = double(c < 0 ? -int64_t(c) : int64_t(c)) * inverse_step + 0.375;
+  const int32_t q = int32_t(magnitude);
+  return c < 0 ? -q : q;
+}
+// Decoder side: |c| = (|q| * step_q8 + 128) >> 8, reconstructing at q * step (offset 0).
+inline int64_t dequantize(int64_t q, uint32_t step_q8) {
+  const int64_t magnitude = ((q < 0 ? -q : q) * int64_t(step_q8) + 128) >> 8;
+  return q < 0 ? -magnitude : magnitude;
+}
+
+}  // namespace codec::detail

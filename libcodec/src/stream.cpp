@@ -1,0 +1,303 @@
+// Stream container: fixed header (with its CRC32C), tile index of 64-bit offsets with per-tile CRC32C
+// (and an index CRC), then the tile payloads in raster order. Also the public API entry points.
+// Layout: docs/codec.md.
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+
+#include "codec/codec.h"
+#include "crc32c.h"
+#include "quantizer.h"
+#include "tile_coder.h"
+
+namespace codec {
+
+struct Scratch::Impl {
+  detail::TileWork work;
+};
+
+Scratch::Scratch() : impl_(std::make_unique<Impl>()) {}
+Scratch::~Scratch() = default;
+
+namespace {
+
+using detail::crc32c;
+
+constexpr uint8_t kMagic[4] = {'T', 'P', 'T', 'C'};
+constexpr size_t kHeaderSize = 172;
+constexpr size_t kHeaderCrcOffset = 168;
+constexpr size_t kIndexEntrySize = 16;
+constexpr uint32_t kFlagBoundMaxError = 1;
+constexpr int64_t kMaxSide = int64_t(1) << 40;
+constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
+constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
+
+void put_u16(uint8_t* p, uint16_t v) { for (int i = 0; i < 2; ++i) p[i] = uint8_t(v >> (8 * i)); }
+void put_u32(uint8_t* p, uint32_t v) { for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i)); }
+void put_u64(uint8_t* p, uint64_t v) { for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i)); }
+uint16_t get_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
+uint32_t get_u32(const uint8_t* p) {
+  uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+uint64_t get_u64(const uint8_t* p) {
+  uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+
+bool valid_tile_size(uint32_t t) { return t >= kMinTile && t <= kMaxTile && t % 16 == 0; }
+
+int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
+
+int tile_extent(int64_t image_side, int64_t tile, int64_t index) {
+  return int(std::min(tile, image_side - index * tile));
+}
+
+struct StreamLayout {
+  int64_t tiles_x, tiles_y;
+  size_t index_offset, data_offset;
+};
+
+bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
+  if (w < 1 || h < 1 || w > kMaxSide || h > kMaxSide || !valid_tile_size(tile)) return false;
+  out->tiles_x = ceil_div(w, tile);
+  out->tiles_y = ceil_div(h, tile);
+  const unsigned __int128 n = (unsigned __int128)out->tiles_x * out->tiles_y;
+  if (n > (unsigned __int128)(SIZE_MAX / 32)) return false;
+  out->index_offset = kHeaderSize;
+  out->data_offset = kHeaderSize + size_t(n) * kIndexEntrySize + 4;
+  return true;
+}
+
+}  // namespace
+
+const char* status_name(Status status) {
+  switch (status) {
+    case Status::Ok: return "ok";
+    case Status::BufferTooSmall: return "output buffer too small";
+    case Status::Truncated: return "truncated stream";
+    case Status::Corrupt: return "corrupt stream";
+    case Status::ChecksumMismatch: return "checksum mismatch";
+    case Status::UnsupportedVersion: return "unsupported stream version";
+    case Status::InvalidArgument: return "invalid argument";
+    case Status::ValueOutOfRange: return "sample value out of range";
+  }
+  return "unknown status";
+}
+
+double predicted_rms(double step) { return step * kRmsPerStep; }
+double step_for_target_rms(double target_rms) { return std::max(1.0, target_rms / kRmsPerStep); }
+
+size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options) {
+  StreamLayout layout;
+  if (!layout_for(width, height, options.tile_size, &layout)) return 0;
+  const int64_t t = options.tile_size;
+  const int64_t full_x = width / t, full_y = height / t;
+  const int rest_x = int(width % t), rest_y = int(height % t);
+  unsigned __int128 total = layout.data_offset;
+  const auto add = [&](int64_t count, int w, int h) {
+    if (count > 0 && w > 0 && h > 0) total += (unsigned __int128)count * detail::tile_payload_bound(w, h);
+  };
+  add(full_x * full_y, int(t), int(t));
+  add(full_y, rest_x, int(t));
+  add(full_x, int(t), rest_y);
+  add(1, rest_x, rest_y);
+  return total > SIZE_MAX ? 0 : size_t(total);
+}
+
+Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
+              const EncodeOptions& options, uint8_t* dst, size_t dst_capacity, size_t* bytes_written,
+              Scratch& scratch, int32_t* recon, ptrdiff_t recon_stride) {
+  assert(src && dst && bytes_written);
+  assert(src_stride >= width && (!recon || recon_stride >= width));
+  *bytes_written = 0;
+  StreamLayout layout;
+  if (!layout_for(width, height, options.tile_size, &layout)) return Status::InvalidArgument;
+  if (!(options.step >= 1.0 && options.step <= double(kMaxAbsSample))) return Status::InvalidArgument;
+  if (options.bound_max_error && options.max_error > uint32_t(kMaxAbsSample)) return Status::InvalidArgument;
+  for (int64_t y = 0; y < height; ++y) {
+    const int32_t* row = src + y * src_stride;
+    for (int64_t x = 0; x < width; ++x)
+      if (row[x] > kMaxAbsSample || row[x] < -kMaxAbsSample) return Status::ValueOutOfRange;
+  }
+  if (dst_capacity < layout.data_offset) return Status::BufferTooSmall;
+
+  const uint32_t step_q8 = uint32_t(std::lround(options.step * 256.0));
+  detail::TileParams params;
+  params.steps = detail::band_steps_for(step_q8);
+  params.bound_max_error = options.bound_max_error;
+  params.max_error = options.bound_max_error ? options.max_error : 0;
+
+  uint8_t* h = dst;
+  std::memset(h, 0, kHeaderSize);
+  std::memcpy(h, kMagic, 4);
+  put_u16(h + 4, uint16_t(kFormatVersion));
+  put_u16(h + 6, uint16_t(kHeaderSize));
+  put_u64(h + 8, uint64_t(width));
+  put_u64(h + 16, uint64_t(height));
+  put_u32(h + 24, options.tile_size);
+  put_u32(h + 28, options.bound_max_error ? kFlagBoundMaxError : 0);
+  put_u32(h + 32, step_q8);
+  put_u32(h + 36, params.max_error);
+  for (int b = 0; b < detail::kBandCount; ++b) put_u32(h + 40 + 4 * b, params.steps.q8[b]);
+  put_u32(h + kHeaderCrcOffset, crc32c(h, kHeaderCrcOffset));
+
+  detail::TileWork& work = scratch.impl().work;
+  const int64_t t = options.tile_size;
+  size_t pos = layout.data_offset;
+  uint8_t* index = dst + layout.index_offset;
+  for (int64_t ty = 0; ty < layout.tiles_y; ++ty)
+    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
+      const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+      const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+      const size_t size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, dst + pos,
+                                              dst_capacity - pos);
+      if (size == 0) return Status::BufferTooSmall;
+      uint8_t* entry = index + size_t(ty * layout.tiles_x + tx) * kIndexEntrySize;
+      put_u64(entry, pos);
+      put_u32(entry + 8, uint32_t(size));
+      put_u32(entry + 12, crc32c(dst + pos, size));
+      pos += size;
+      if (recon) {
+        int32_t* out = recon + ty * t * recon_stride + tx * t;
+        for (int y = 0; y < th; ++y)
+          std::memcpy(out + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
+                      size_t(tw) * sizeof(int32_t));
+      }
+    }
+  const size_t index_bytes = layout.data_offset - 4 - layout.index_offset;
+  put_u32(dst + layout.data_offset - 4, crc32c(index, index_bytes));
+  *bytes_written = pos;
+  return Status::Ok;
+}
+
+Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
+  assert(header);
+  if (!data) return Status::InvalidArgument;
+  if (std::memcmp(data, kMagic, std::min<size_t>(size, 4)) != 0) return Status::Corrupt;
+  if (size < 6) return Status::Truncated;
+  if (get_u16(data + 4) != kFormatVersion) return Status::UnsupportedVersion;
+  if (size < kHeaderSize) return Status::Truncated;
+  if (crc32c(data, kHeaderCrcOffset) != get_u32(data + kHeaderCrcOffset)) return Status::ChecksumMismatch;
+  if (get_u16(data + 6) != kHeaderSize) return Status::Corrupt;
+  HeaderInfo info;
+  info.version = kFormatVersion;
+  const uint64_t w = get_u64(data + 8), h = get_u64(data + 16);
+  info.tile_size = get_u32(data + 24);
+  const uint32_t flags = get_u32(data + 28);
+  const uint32_t step_q8 = get_u32(data + 32);
+  info.max_error = get_u32(data + 36);
+  if (w > uint64_t(kMaxSide) || h > uint64_t(kMaxSide)) return Status::Corrupt;
+  info.width = int64_t(w);
+  info.height = int64_t(h);
+  StreamLayout layout;
+  if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
+  if ((flags & ~kFlagBoundMaxError) != 0 || step_q8 < detail::kStepOne) return Status::Corrupt;
+  info.bound_max_error = (flags & kFlagBoundMaxError) != 0;
+  if (info.max_error > uint32_t(kMaxAbsSample) || (!info.bound_max_error && info.max_error != 0))
+    return Status::Corrupt;
+  for (int b = 0; b < detail::kBandCount; ++b) {
+    const uint32_t s = get_u32(data + 40 + 4 * b);
+    if (s < detail::kStepOne || s > detail::kMaxBandStep) return Status::Corrupt;
+  }
+  info.step = step_q8 / 256.0;
+  info.tiles_x = layout.tiles_x;
+  info.tiles_y = layout.tiles_y;
+  info.index_offset = layout.index_offset;
+  info.data_offset = layout.data_offset;
+  *header = info;
+  return Status::Ok;
+}
+
+Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries) {
+  assert(data && entries);
+  if (size < header.data_offset) return Status::Truncated;
+  const uint8_t* index = data + header.index_offset;
+  const size_t index_bytes = header.data_offset - 4 - header.index_offset;
+  if (crc32c(index, index_bytes) != get_u32(data + header.data_offset - 4)) return Status::ChecksumMismatch;
+  const int64_t t = header.tile_size;
+  for (int64_t ty = 0; ty < header.tiles_y; ++ty)
+    for (int64_t tx = 0; tx < header.tiles_x; ++tx) {
+      const size_t i = size_t(ty * header.tiles_x + tx);
+      const uint8_t* e = index + i * kIndexEntrySize;
+      TileEntry entry;
+      entry.offset = get_u64(e);
+      entry.size = get_u32(e + 8);
+      entry.crc = get_u32(e + 12);
+      const size_t bound = detail::tile_payload_bound(tile_extent(header.width, t, tx), tile_extent(header.height, t, ty));
+      if (entry.offset < header.data_offset || entry.size < 1 || entry.size > bound) return Status::Corrupt;
+      if (entry.offset > size || size - entry.offset < entry.size) return Status::Truncated;
+      entries[i] = entry;
+    }
+  return Status::Ok;
+}
+
+Status Decoder::open(const uint8_t* data, size_t size) {
+  data_ = nullptr;
+  size_ = 0;
+  index_.clear();
+  HeaderInfo header;
+  Status s = read_header(data, size, &header);
+  if (s != Status::Ok) return s;
+  if (size < header.data_offset) return Status::Truncated;
+  std::vector<TileEntry> index(size_t(header.tile_count()));
+  s = read_tile_index(data, size, header, index.data());
+  if (s != Status::Ok) return s;
+  data_ = data;
+  size_ = size;
+  header_ = header;
+  index_ = std::move(index);
+  return Status::Ok;
+}
+
+Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const {
+  assert(dst && dst_stride >= rect.width);
+  if (!data_) return Status::InvalidArgument;
+  if (rect.width < 1 || rect.height < 1 || rect.x < 0 || rect.y < 0 || rect.x > header_.width - rect.width ||
+      rect.y > header_.height - rect.height)
+    return Status::InvalidArgument;
+  detail::TileParams params;
+  for (int b = 0; b < detail::kBandCount; ++b) params.steps.q8[b] = get_u32(data_ + 40 + 4 * b);
+  params.bound_max_error = header_.bound_max_error;
+  params.max_error = header_.max_error;
+  detail::TileWork& work = scratch.impl().work;
+  const int64_t t = header_.tile_size;
+  const int64_t tx0 = rect.x / t, tx1 = (rect.x + rect.width - 1) / t;
+  const int64_t ty0 = rect.y / t, ty1 = (rect.y + rect.height - 1) / t;
+  for (int64_t ty = ty0; ty <= ty1; ++ty)
+    for (int64_t tx = tx0; tx <= tx1; ++tx) {
+      const TileEntry& entry = index_[size_t(ty * header_.tiles_x + tx)];
+      const uint8_t* payload = data_ + entry.offset;
+      if (crc32c(payload, entry.size) != entry.crc) return Status::ChecksumMismatch;
+      const int tw = tile_extent(header_.width, t, tx), th = tile_extent(header_.height, t, ty);
+      if (detail::decode_tile(payload, entry.size, tw, th, params, work) != detail::TileResult::Ok)
+        return Status::Corrupt;
+      const int64_t x0 = std::max(rect.x, tx * t), x1 = std::min(rect.x + rect.width, tx * t + tw);
+      const int64_t y0 = std::max(rect.y, ty * t), y1 = std::min(rect.y + rect.height, ty * t + th);
+      for (int64_t y = y0; y < y1; ++y)
+        std::memcpy(dst + (y - rect.y) * dst_stride + (x0 - rect.x),
+                    work.reconstruction.data() + size_t(y - ty * t) * tw + size_t(x0 - tx * t),
+                    size_t(x1 - x0) * sizeof(int32_t));
+    }
+  return Status::Ok;
+}
+
+Status decode(const uint8_t* data, size_t size, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) {
+  Decoder decoder;
+  const Status s = decoder.open(data, size);
+  if (s != Status::Ok) return s;
+  return decoder.decode_region({0, 0, decoder.header().width, decoder.header().height}, dst, dst_stride, scratch);
+}
+
+Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst, ptrdiff_t dst_stride,
+                     Scratch& scratch) {
+  Decoder decoder;
+  const Status s = decoder.open(data, size);
+  if (s != Status::Ok) return s;
+  return decoder.decode_region(rect, dst, dst_stride, scratch);
+}
+
+}  // namespace codec

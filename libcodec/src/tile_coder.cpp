@@ -1,0 +1,294 @@
+// Band order inside a tile bitstream: DC (macroblock DCs in raster order, MED-predicted from the
+// quantised neighbours), then LP, then HP, each grouped by frequency position (zig-zag order) and
+// within a position by macroblock / block in raster order. Grouping by position puts coefficients
+// of similar variance next to each other, so RLGR's backward adaptation settles quickly and the high
+// frequencies become long zero runs. Each band group has its own RLGR state, reset per tile.
+#include "tile_coder.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cstring>
+
+#include "bitio.h"
+#include "lapped_transform.h"
+#include "rlgr.h"
+
+namespace codec::detail {
+namespace {
+
+struct Position {
+  int u, v;  // column, row inside the 4x4 block
+};
+// Zig-zag order of the 15 AC positions.
+constexpr Position kScan[15] = {{1, 0}, {0, 1}, {0, 2}, {1, 1}, {2, 0}, {3, 0}, {2, 1}, {1, 2},
+                                {0, 3}, {1, 3}, {2, 2}, {3, 1}, {3, 2}, {2, 3}, {3, 3}};
+
+inline int32_t saturate(int64_t v) { return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX)); }
+
+inline int64_t med_predict(int64_t left, int64_t top, int64_t top_left) {
+  const int64_t lo = std::min(left, top), hi = std::max(left, top);
+  if (top_left >= hi) return lo;
+  if (top_left <= lo) return hi;
+  return left + top - top_left;
+}
+
+inline int64_t dc_prediction(const int32_t* tile, int pw, int mx, int my) {
+  const auto at = [&](int x, int y) { return int64_t(tile[size_t(y) * 16 * pw + size_t(x) * 16]); };
+  if (mx == 0 && my == 0) return 0;
+  if (my == 0) return at(mx - 1, 0);
+  if (mx == 0) return at(0, my - 1);
+  return med_predict(at(mx - 1, my), at(mx, my - 1), at(mx - 1, my - 1));
+}
+
+void load_padded(const int32_t* src, ptrdiff_t stride, int w, int h, int pw, int ph, int32_t* tile) {
+  for (int y = 0; y < ph; ++y) {
+    const int32_t* row = src + ptrdiff_t(std::min(y, h - 1)) * stride;
+    int32_t* dst = tile + size_t(y) * pw;
+    std::memcpy(dst, row, size_t(w) * sizeof(int32_t));
+    std::fill(dst + w, dst + pw, row[w - 1]);
+  }
+}
+
+// Quantises the transformed tile in place and writes the three bands.
+void code_bands(BitWriter& out, int32_t* tile, int pw, int ph, const BandSteps& steps, int32_t* seq) {
+  double inverse[kBandCount];
+  for (int b = 0; b < kBandCount; ++b) inverse[b] = double(kStepOne) / double(steps.q8[b]);
+  const int mbx = pw / 16, mby = ph / 16, bx_count = pw / 4, by_count = ph / 4;
+  for (int y = 0; y < ph; ++y)
+    for (int x = 0; x < pw; ++x) {
+      const int p = (y & 3) * 4 + (x & 3);
+      int band = hp_band(p);
+      if (p == 0) {
+        const int q = ((y >> 2) & 3) * 4 + ((x >> 2) & 3);
+        band = q == 0 ? 0 : lp_band(q);
+      }
+      int32_t& c = tile[size_t(y) * pw + x];
+      c = quantize(c, inverse[band]);
+    }
+
+  size_t n = 0;
+  for (int my = 0; my < mby; ++my)
+    for (int mx = 0; mx < mbx; ++mx)
+      seq[n++] = int32_t(tile[size_t(my) * 16 * pw + size_t(mx) * 16] - dc_prediction(tile, pw, mx, my));
+  RlgrState dc_state;
+  rlgr_encode(out, seq, n, dc_state);
+
+  n = 0;
+  for (const Position& pos : kScan)
+    for (int my = 0; my < mby; ++my)
+      for (int mx = 0; mx < mbx; ++mx) seq[n++] = tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u];
+  RlgrState lp_state;
+  rlgr_encode(out, seq, n, lp_state);
+
+  n = 0;
+  for (const Position& pos : kScan)
+    for (int by = 0; by < by_count; ++by)
+      for (int bx = 0; bx < bx_count; ++bx) seq[n++] = tile[size_t(4 * by + pos.v) * pw + 4 * bx + pos.u];
+  RlgrState hp_state;
+  rlgr_encode(out, seq, n, hp_state);
+}
+
+void dequantize_tile(int32_t* tile, int pw, int ph, const BandSteps& steps) {
+  for (int y = 0; y < ph; ++y)
+    for (int x = 0; x < pw; ++x) {
+      const int p = (y & 3) * 4 + (x & 3);
+      int band = hp_band(p);
+      if (p == 0) {
+        const int q = ((y >> 2) & 3) * 4 + ((x >> 2) & 3);
+        band = q == 0 ? 0 : lp_band(q);
+      }
+      int32_t& c = tile[size_t(y) * pw + x];
+      c = saturate(dequantize(c, steps.q8[band]));
+    }
+}
+
+// Reads the three bands and writes dequantised coefficients into the tile.
+bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps& steps, int32_t* seq) {
+  const int mbx = pw / 16, mby = ph / 16, bx_count = pw / 4, by_count = ph / 4;
+  size_t n = size_t(mbx) * mby;
+  RlgrState dc_state;
+  if (!rlgr_decode(in, seq, n, dc_state)) return false;
+  // DC prediction runs on quantised values, so keep them in the tile until all DCs are known.
+  size_t i = 0;
+  for (int my = 0; my < mby; ++my)
+    for (int mx = 0; mx < mbx; ++mx) {
+      const int64_t q = dc_prediction(tile, pw, mx, my) + seq[i++];
+      if (q > kMaxCoefficient || q < -kMaxCoefficient) return false;
+      tile[size_t(my) * 16 * pw + size_t(mx) * 16] = int32_t(q);
+    }
+  for (int my = 0; my < mby; ++my)
+    for (int mx = 0; mx < mbx; ++mx) {
+      int32_t& c = tile[size_t(my) * 16 * pw + size_t(mx) * 16];
+      const int64_t value = dequantize(c, steps.q8[0]);
+      if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
+      c = int32_t(value);
+    }
+
+  n = size_t(mbx) * mby * 15;
+  RlgrState lp_state;
+  if (!rlgr_decode(in, seq, n, lp_state)) return false;
+  i = 0;
+  for (int s = 0; s < 15; ++s) {
+    const Position pos = kScan[s];
+    const uint32_t step = steps.q8[lp_band(pos.v * 4 + pos.u)];
+    for (int my = 0; my < mby; ++my)
+      for (int mx = 0; mx < mbx; ++mx) {
+        const int64_t value = dequantize(seq[i++], step);
+        if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
+        tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u] = int32_t(value);
+      }
+  }
+
+  n = size_t(bx_count) * by_count * 15;
+  RlgrState hp_state;
+  if (!rlgr_decode(in, seq, n, hp_state)) return false;
+  i = 0;
+  for (int s = 0; s < 15; ++s) {
+    const Position pos = kScan[s];
+    const uint32_t step = steps.q8[hp_band(pos.v * 4 + pos.u)];
+    if (step == kStepOne) {
+      for (int by = 0; by < by_count; ++by) {
+        int32_t* row = tile + size_t(4 * by + pos.v) * pw + pos.u;
+        for (int bx = 0; bx < bx_count; ++bx) row[4 * bx] = seq[i++];  // RLGR bounds |v| < 2^30
+      }
+      continue;
+    }
+    for (int by = 0; by < by_count; ++by) {
+      int32_t* row = tile + size_t(4 * by + pos.v) * pw + pos.u;
+      for (int bx = 0; bx < bx_count; ++bx) {
+        const int64_t value = dequantize(seq[i++], step);
+        if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
+        row[4 * bx] = int32_t(value);
+      }
+    }
+  }
+  return true;
+}
+
+void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {
+  for (int y = 0; y < h; ++y) std::memcpy(dst + size_t(y) * w, tile + size_t(y) * pw, size_t(w) * sizeof(int32_t));
+}
+
+inline int64_t floor_div(int64_t a, int64_t b) {
+  const int64_t q = a / b;
+  return (a % b != 0 && ((a < 0) != (b < 0))) ? q - 1 : q;
+}
+
+// Transform-mode payload; leaves the decoder's output in work.reconstruction.
+size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, const TileParams& params,
+                        TileWork& work, uint8_t* out, size_t capacity) {
+  if (capacity < 1) return 0;
+  const int pw = padded_side(w), ph = padded_side(h);
+  int32_t* tile = work.coefficients.data();
+  out[0] = uint8_t(TileMode::Transform);
+  BitWriter bits(out + 1, capacity - 1);
+  load_padded(src, stride, w, h, pw, ph, tile);
+  forward_lapped(tile, pw, ph);
+  code_bands(bits, tile, pw, ph, params.steps, work.sequence.data());
+  dequantize_tile(tile, pw, ph, params.steps);
+  inverse_lapped(tile, pw, ph);
+  int32_t* recon = work.reconstruction.data();
+  crop(tile, pw, w, h, recon);
+  if (params.bound_max_error) {
+    const int64_t e = params.max_error;
+    int32_t* corrections = work.sequence.data();
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const int64_t r = int64_t(src[y * stride + x]) - recon[size_t(y) * w + x];
+        const int64_t v = r > e ? r - e : r < -e ? r + e : 0;
+        corrections[size_t(y) * w + x] = int32_t(v);
+        recon[size_t(y) * w + x] = int32_t(recon[size_t(y) * w + x] + v);
+      }
+    RlgrState state;
+    rlgr_encode(bits, corrections, size_t(w) * h, state);
+  }
+  const size_t size = bits.finish();
+  return bits.overflow() ? 0 : size + 1;
+}
+
+// Spatial-quantisation payload (max-error mode): q = floor((x + E) / (2E + 1)) coded losslessly.
+size_t encode_spatial(const int32_t* src, ptrdiff_t stride, int w, int h, const TileParams& params,
+                      TileWork& work, uint8_t* out, size_t capacity) {
+  if (capacity < 1) return 0;
+  const int pw = padded_side(w), ph = padded_side(h);
+  const int64_t e = params.max_error, bin = 2 * e + 1;
+  int32_t* quantized = work.reconstruction.data();  // reused as input, rewritten below
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) quantized[size_t(y) * w + x] = int32_t(floor_div(src[y * stride + x] + e, bin));
+  out[0] = uint8_t(TileMode::SpatialQuantized);
+  BitWriter bits(out + 1, capacity - 1);
+  int32_t* tile = work.coefficients.data();
+  load_padded(quantized, w, w, h, pw, ph, tile);
+  forward_lapped(tile, pw, ph);
+  code_bands(bits, tile, pw, ph, unit_band_steps(), work.sequence.data());
+  for (size_t i = 0; i < size_t(w) * h; ++i) quantized[i] = saturate(int64_t(quantized[i]) * bin);
+  const size_t size = bits.finish();
+  return bits.overflow() ? 0 : size + 1;
+}
+
+}  // namespace
+
+void TileWork::reserve(int pw, int ph, int w, int h, size_t payload_bound) {
+  const size_t padded = size_t(pw) * ph;
+  if (coefficients.size() < padded) coefficients.resize(padded);
+  if (sequence.size() < padded) sequence.resize(padded);
+  if (reconstruction.size() < size_t(w) * h) reconstruction.resize(size_t(w) * h);
+  if (alternative.size() < payload_bound) alternative.resize(payload_bound);
+}
+
+size_t tile_payload_bound(int width, int height) {
+  const size_t padded = size_t(padded_side(width)) * padded_side(height);
+  const size_t codes = padded + size_t(width) * height;  // coefficients + corrections
+  return 1 + codes * (kRlgrMaxCodeBits / 8) + 8;
+}
+
+size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const TileParams& params,
+                   TileWork& work, uint8_t* out, size_t capacity) {
+  work.reserve(padded_side(w), padded_side(h), w, h, params.bound_max_error ? tile_payload_bound(w, h) : 0);
+  if (!params.bound_max_error) return encode_transform(src, src_stride, w, h, params, work, out, capacity);
+  // Max-error mode: try spatial quantisation first (into the side buffer), then the transform with
+  // corrections (into out, leaving its reconstruction in work); keep the smaller.
+  const size_t spatial = encode_spatial(src, src_stride, w, h, params, work, work.alternative.data(),
+                                        work.alternative.size());
+  assert(spatial > 0);
+  const size_t transform = encode_transform(src, src_stride, w, h, params, work, out, capacity);
+  if (transform > 0 && transform <= spatial) return transform;
+  if (spatial > capacity) return 0;
+  std::memcpy(out, work.alternative.data(), spatial);
+  // Rebuild the spatial reconstruction, which encode_transform overwrote.
+  const int64_t e = params.max_error, bin = 2 * e + 1;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      work.reconstruction[size_t(y) * w + x] = saturate(floor_div(src[y * src_stride + x] + e, bin) * bin);
+  return spatial;
+}
+
+TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const TileParams& params,
+                       TileWork& work) {
+  if (size < 1) return TileResult::Corrupt;
+  const int pw = padded_side(w), ph = padded_side(h);
+  work.reserve(pw, ph, w, h, 0);
+  const uint8_t mode = payload[0];
+  const bool spatial = mode == uint8_t(TileMode::SpatialQuantized);
+  if (mode != uint8_t(TileMode::Transform) && !(spatial && params.bound_max_error)) return TileResult::Corrupt;
+  BitReader bits(payload + 1, size - 1);
+  int32_t* tile = work.coefficients.data();
+  if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work.sequence.data()))
+    return TileResult::Corrupt;
+  inverse_lapped(tile, pw, ph);
+  int32_t* recon = work.reconstruction.data();
+  crop(tile, pw, w, h, recon);
+  const size_t n = size_t(w) * h;
+  if (spatial) {
+    const int64_t bin = 2 * int64_t(params.max_error) + 1;
+    for (size_t i = 0; i < n; ++i) recon[i] = saturate(int64_t(recon[i]) * bin);
+  } else if (params.bound_max_error) {
+    int32_t* corrections = work.sequence.data();
+    RlgrState state;
+    if (!rlgr_decode(bits, corrections, n, state)) return TileResult::Corrupt;
+    for (size_t i = 0; i < n; ++i) recon[i] = saturate(int64_t(recon[i]) + corrections[i]);
+  }
+  return bits.overrun() ? TileResult::Corrupt : TileResult::Ok;
+}
+
+}  // namespace codec::detail

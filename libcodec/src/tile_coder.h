@@ -1,0 +1,48 @@
+// Coding of one tile: padding to whole macroblocks, transform, quantisation, band ordering, RLGR, and
+// the max-error layer. A tile payload is one mode byte followed by one bitstream (docs/codec.md).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "quantizer.h"
+
+namespace codec::detail {
+
+enum class TileMode : uint8_t {
+  Transform = 0,            // lapped transform at the stream's band steps (+ corrections if bounded)
+  SpatialQuantized = 1,     // max-error mode only: samples quantised with step 2E+1, coded losslessly
+};
+
+struct TileParams {
+  BandSteps steps;
+  bool bound_max_error = false;
+  uint32_t max_error = 0;
+};
+
+// Working buffers for one tile, owned by the caller's Scratch and grown as needed.
+struct TileWork {
+  std::vector<int32_t> coefficients;  // padded tile
+  std::vector<int32_t> sequence;      // one band's values in coding order
+  std::vector<int32_t> reconstruction;  // width x height
+  std::vector<uint8_t> alternative;     // second candidate payload in max-error mode
+  void reserve(int padded_width, int padded_height, int width, int height, size_t payload_bound);
+};
+
+inline int padded_side(int side) { return (side + 15) & ~15; }
+// Largest payload a tile of width x height can produce (any data, any mode).
+size_t tile_payload_bound(int width, int height);
+
+// Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
+// the payload size, or 0 when it does not fit. On return work.reconstruction holds the decoder's
+// output (row stride = width).
+size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height,
+                   const TileParams& params, TileWork& work, uint8_t* out, size_t capacity);
+
+enum class TileResult { Ok, Corrupt };
+// Decodes a payload into work.reconstruction (width x height, row stride = width).
+TileResult decode_tile(const uint8_t* payload, size_t size, int width, int height,
+                       const TileParams& params, TileWork& work);
+
+}  // namespace codec::detail

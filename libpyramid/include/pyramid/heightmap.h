@@ -1,0 +1,134 @@
+// Heightmap grids and GDAL-free readers/writers: the "reader" stage of the data flow.
+//
+// Samples are held as double in the file's native units (an int16 .hgt sample is held exactly as
+// that integer, a float32 sample exactly as that float); metres = value * vertical_scale +
+// vertical_offset. Doubles hold every supported sample type exactly, so integer inputs can be
+// coded losslessly downstream.
+//
+// Errors: every reader/writer throws terrain::IoError whose message names the file and the
+// problem, and whose code() classifies it (tools map codes to documented exit statuses).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace terrain {
+
+enum class SampleType { Int16, UInt16, Int32, Float32, TerrainRGB };
+const char* sample_type_name(SampleType t);
+// Parses "int16", "uint16", "int32", "float32" (also "i16", "u16", "i32", "f32"); nullopt if unknown.
+std::optional<SampleType> sample_type_from_name(const std::string& name);
+
+enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage };
+const char* file_format_name(FileFormat f);
+
+enum class IoErrorCode {
+  NotFound = 2,        // file missing or unreadable (values equal the tools' exit codes)
+  Truncated,           // fewer bytes than the dimensions need
+  Oversized,           // more bytes than the dimensions need
+  DimensionMismatch,   // size cannot be derived / does not match the header or sidecar
+  UnknownType,         // unsupported sample type, format or byte order
+  NonFinite,           // NaN or Inf in float input
+  MissingField,        // sidecar/header lacks a required field, or a field is malformed
+  WriteFailed,         // could not write output (= 9)
+  CorruptData,         // bad checksum, bad bitstream, unknown version (= 10)
+};
+
+class IoError : public std::runtime_error {
+ public:
+  IoError(IoErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
+  IoErrorCode code() const { return code_; }
+
+ private:
+  IoErrorCode code_;
+};
+
+// Everything known about a grid except its samples.
+struct GridInfo {
+  int64_t width = 0;
+  int64_t height = 0;
+  SampleType sample_type = SampleType::Int16;
+  FileFormat format = FileFormat::Raw;
+  double spacing_x = 1.0;            // horizontal sample spacing, in horizontal_units
+  double spacing_y = 1.0;
+  std::string horizontal_units = "m";  // "m" or "arc-second"
+  double vertical_scale = 1.0;       // metres = value * vertical_scale + vertical_offset
+  double vertical_offset = 0.0;
+  std::optional<double> nodata;      // native value marking a void, if any
+  // Georeference of the north-west sample centre, when the input has one (e.g. .hgt file name).
+  std::optional<double> origin_x;    // longitude or easting of column 0
+  std::optional<double> origin_y;    // latitude or northing of row 0
+  bool integer_valued() const { return sample_type != SampleType::Float32; }
+};
+
+// A whole grid in memory. Row-major, row 0 is the northern edge.
+struct Heightmap {
+  GridInfo info;
+  std::vector<double> values;   // width*height native values (voids hold 0)
+  std::vector<uint8_t> valid;   // width*height, 1 = data, 0 = void; empty means all valid
+
+  int64_t width() const { return info.width; }
+  int64_t height() const { return info.height; }
+  double at(int64_t x, int64_t y) const { return values[size_t(y * info.width + x)]; }
+  bool is_valid(int64_t x, int64_t y) const { return valid.empty() || valid[size_t(y * info.width + x)]; }
+  double metres(int64_t x, int64_t y) const { return at(x, y) * info.vertical_scale + info.vertical_offset; }
+};
+
+// How to interpret a file whose layout is not self-describing (raw grids), and overrides.
+// Fields left unset come from the file, its header or its JSON sidecar (<file>.json).
+struct ReadOptions {
+  std::optional<int64_t> width, height;
+  std::optional<SampleType> sample_type;
+  std::optional<bool> big_endian;
+  std::optional<double> spacing_x, spacing_y;
+  std::optional<double> vertical_scale, vertical_offset;
+  std::optional<double> nodata;
+  bool terrain_rgb = false;   // decode an RGB(A) 8-bit image as Mapbox Terrain-RGB
+};
+
+// Streams a grid in bands of rows; memory is O(width * rows requested). Opened through open_band_reader.
+class BandReader {
+ public:
+  virtual ~BandReader() = default;
+  virtual const GridInfo& info() const = 0;
+  // Reads up to `rows` further rows into values (rows*width) and valid (rows*width, 1 = data).
+  // Returns the number of rows read: 0 at the end. Throws IoError on bad data (e.g. NaN, truncation).
+  virtual int64_t read_rows(int64_t rows, double* values, uint8_t* valid) = 0;
+  int64_t rows_read() const { return rows_read_; }
+
+ protected:
+  int64_t rows_read_ = 0;
+};
+
+// Detects the format from the name and contents: .hgt/.hgt.gz, .bil/.flt (+ .hdr), .raw/.bin/.r16/.r32
+// (+ .json sidecar or options), .png/.tif/.tiff/.exr via OpenImageIO. An 8-bit RGB(A) image is decoded
+// as Mapbox Terrain-RGB when options.terrain_rgb is set or when it is a PNG (auto-detected); an 8-bit
+// RGB TIFF without the option is an UnknownType error. See docs/io.md for the sidecar schema.
+GridInfo probe(const std::string& path, const ReadOptions& options = {});
+std::unique_ptr<BandReader> open_band_reader(const std::string& path, const ReadOptions& options = {});
+// Reads the whole grid (through the band reader).
+Heightmap read_heightmap(const std::string& path, const ReadOptions& options = {});
+
+// Writers. Each writes to a temporary name beside the target and renames it when complete.
+// Raw: samples in info.sample_type (little endian unless big_endian), plus <path>.json sidecar.
+void write_raw(const std::string& path, const Heightmap& map, bool big_endian = false);
+// 16-bit grey PNG or TIFF (by extension): values must be integers within uint16 (or int16 for TIFF).
+void write_image16(const std::string& path, const Heightmap& map);
+// float32 EXR of the native values.
+void write_exr(const std::string& path, const Heightmap& map);
+
+// Statistics over valid samples, in metres.
+struct GridStats {
+  double min_m = 0, max_m = 0, mean_m = 0;
+  int64_t valid_count = 0, nodata_count = 0;
+};
+GridStats compute_stats(const Heightmap& map);
+// Same statistics, streamed from a freshly opened band reader in bands of band_rows rows
+// (memory O(width * band_rows)). Throws IoError like read_rows.
+GridStats stream_stats(BandReader& reader, int64_t band_rows = 256);
+
+}  // namespace terrain

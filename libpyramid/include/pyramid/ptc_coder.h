@@ -1,0 +1,37 @@
+// The real residual coder for the pyramid: libcodec's lapped-transform coder behind the
+// ResidualCoder interface. Each band of a level becomes one self-contained libcodec stream (with
+// its own tile index), so a region decoder can find a band, then decode only the tiles it needs.
+#pragma once
+
+#include <cstdint>
+
+#include "pyramid/pyramid.h"
+
+namespace terrain {
+
+struct PtcCoderOptions {
+  double step = 1.0;           // absolute quantiser step in level units, the same for every level
+  uint32_t max_error = 0;      // with bound_max_error: |residual error| <= max_error at every sample
+  bool bound_max_error = false;
+  uint32_t tile_size = 64;     // libcodec tile side; also the band height unless band_rows says otherwise
+  int64_t band_rows = 0;       // 0: 4 tile rows per band
+};
+
+class PtcResidualCoder final : public ResidualCoder {
+ public:
+  // Throws std::invalid_argument for options libcodec rejects (step < 1, bad tile size).
+  explicit PtcResidualCoder(const PtcCoderOptions& options);
+  int64_t band_rows() const override { return band_rows_; }
+  // Thread-safe: the builder codes bands of a level in parallel (each thread has its own scratch).
+  // Throws std::runtime_error naming the libcodec status if a band cannot be coded (e.g. a residual
+  // beyond libcodec's +-2^20 range).
+  std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed) override;
+  bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;
+  const PtcCoderOptions& options() const { return options_; }
+
+ private:
+  PtcCoderOptions options_;
+  int64_t band_rows_;
+};
+
+}  // namespace terrain

@@ -1,0 +1,264 @@
+// D: the 11x11 downsampling filter, its symmetric parametrisation and the streaming row engine.
+#include "filter_downsample.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+#include "pyramid_parallel.h"
+
+namespace terrain {
+
+bool DownsampleFilter::symmetric8() const {
+  for (int dy = -kRadius; dy <= kRadius; ++dy)
+    for (int dx = -kRadius; dx <= kRadius; ++dx) {
+      const double v = tap(dx, dy);
+      if (v != tap(-dx, dy) || v != tap(dx, -dy) || v != tap(dy, dx)) return false;
+    }
+  return true;
+}
+
+double DownsampleFilter::sum() const {
+  double s = 0;
+  for (double v : taps) s += v;
+  return s;
+}
+
+const std::array<FilterOrbit, 21>& symmetric_orbits() {
+  static const std::array<FilterOrbit, 21> orbits = [] {
+    std::array<FilterOrbit, 21> o{};
+    int k = 0;
+    for (int a = 0; a <= DownsampleFilter::kRadius; ++a)
+      for (int b = 0; b <= a; ++b) {
+        const int count = (a == 0) ? 1 : (b == 0 || b == a) ? 4 : 8;
+        o[size_t(k++)] = {a, b, count};
+      }
+    return o;
+  }();
+  return orbits;
+}
+
+DownsampleFilter DownsampleFilter::from_orbit_weights(const std::array<double, 21>& w, Kind kind) {
+  DownsampleFilter f;
+  f.kind = kind;
+  const auto& orbits = symmetric_orbits();
+  for (int dy = -kRadius; dy <= kRadius; ++dy)
+    for (int dx = -kRadius; dx <= kRadius; ++dx) {
+      const int a = std::max(std::abs(dx), std::abs(dy)), b = std::min(std::abs(dx), std::abs(dy));
+      for (size_t k = 0; k < orbits.size(); ++k)
+        if (orbits[k].a == a && orbits[k].b == b) f.taps[size_t((dy + kRadius) * kSize + dx + kRadius)] = w[k];
+    }
+  return f;
+}
+
+DownsampleFilter DownsampleFilter::default_filter() {
+  std::array<double, 21> w{};
+  w[0] = 0.25;     // (0,0)
+  w[1] = 0.125;    // (1,0)
+  w[2] = 0.0625;   // (1,1)
+  return from_orbit_weights(w, Kind::Default);
+}
+
+DownsampleFilter DownsampleFilter::impulse() {
+  std::array<double, 21> w{};
+  w[0] = 1.0;
+  return from_orbit_weights(w, Kind::Impulse);
+}
+
+DownsampleFilter DownsampleFilter::box2x2() {
+  DownsampleFilter f;
+  f.kind = Kind::Box2x2;
+  for (int dy = 0; dy <= 1; ++dy)
+    for (int dx = 0; dx <= 1; ++dx) f.taps[size_t((dy + kRadius) * kSize + dx + kRadius)] = 0.25;
+  return f;
+}
+
+namespace detail {
+
+int32_t round_to_int32(double x) {
+  const double r = std::round(x);
+  if (!(r > double(std::numeric_limits<int32_t>::min()))) return std::numeric_limits<int32_t>::min();
+  if (r >= double(std::numeric_limits<int32_t>::max())) return std::numeric_limits<int32_t>::max();
+  return int32_t(r);
+}
+
+DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows)
+    : filter_(filter),
+      symmetric_(filter.symmetric8()),
+      fine_(fine),
+      coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},
+      threads_(std::max(1, threads)),
+      batch_(std::max<int64_t>(1, batch_rows)),
+      padded_width_(fine.width + 2 * DownsampleFilter::kRadius) {
+  if (fine.width <= 0 || fine.height <= 0) throw std::invalid_argument("downsample: empty grid");
+  capacity_ = std::min(fine.height, 2 * batch_ + 16);
+  rows_.resize(size_t(capacity_ * padded_width_));
+  scratch_.resize(size_t(threads_));
+}
+
+const double* DownsampleEngine::padded_row(int64_t fine_row) const {
+  return rows_.data() + (fine_row - base_) * padded_width_;
+}
+
+int64_t DownsampleEngine::min_row_needed(int64_t j) const {
+  // Small grids fold the reflection several times: keep everything (they fit the buffer).
+  if (fine_.height < 16 || j >= coarse_.height) return fine_.height < 16 ? 0 : base_ + count_;
+  int64_t lo = fine_.height;
+  for (int dy = -DownsampleFilter::kRadius; dy <= DownsampleFilter::kRadius; ++dy)
+    lo = std::min(lo, reflect_index(2 * j + dy, fine_.height));
+  return lo;
+}
+
+int64_t DownsampleEngine::rows_needed_through(int64_t j_end) const {
+  int64_t hi = -1;
+  for (int64_t j = next_coarse_; j < j_end; ++j)
+    for (int dy = -DownsampleFilter::kRadius; dy <= DownsampleFilter::kRadius; ++dy)
+      hi = std::max(hi, reflect_index(2 * j + dy, fine_.height));
+  return hi + 1;
+}
+
+void DownsampleEngine::push_rows(const int32_t* rows, int64_t count, const Emit& emit) {
+  const int64_t r = DownsampleFilter::kRadius;
+  for (int64_t n = 0; n < count; ++n) {
+    if (pushed_ >= fine_.height) throw std::invalid_argument("downsample: more rows than the grid height");
+    if (count_ == capacity_) throw std::logic_error("downsample engine: row buffer overflow");
+    const int32_t* src = rows + n * fine_.width;
+    double* dst = rows_.data() + count_ * padded_width_;
+    for (int64_t x = 0; x < fine_.width; ++x) dst[x + r] = double(src[x]);
+    for (int64_t p = 0; p < r; ++p) {
+      dst[p] = double(src[reflect_index(p - r, fine_.width)]);
+      dst[fine_.width + r + p] = double(src[reflect_index(fine_.width + p, fine_.width)]);
+    }
+    ++count_;
+    ++pushed_;
+    for (;;) {
+      const int64_t j_end = std::min(coarse_.height, next_coarse_ + batch_);
+      if (next_coarse_ >= coarse_.height || pushed_ < rows_needed_through(j_end)) break;
+      compute(next_coarse_, j_end, emit);
+      next_coarse_ = j_end;
+      const int64_t keep_from = std::max(base_, std::min(min_row_needed(next_coarse_), base_ + count_));
+      const int64_t drop = keep_from - base_;
+      if (drop > 0) {
+        std::memmove(rows_.data(), rows_.data() + drop * padded_width_,
+                     size_t((count_ - drop) * padded_width_) * sizeof(double));
+        base_ += drop;
+        count_ -= drop;
+      }
+    }
+  }
+}
+
+void DownsampleEngine::finish(const Emit& emit) {
+  if (pushed_ != fine_.height) throw std::invalid_argument("downsample: fewer rows than the grid height");
+  while (next_coarse_ < coarse_.height) {
+    const int64_t j_end = std::min(coarse_.height, next_coarse_ + batch_);
+    compute(next_coarse_, j_end, emit);
+    next_coarse_ = j_end;
+  }
+}
+
+void DownsampleEngine::compute(int64_t j0, int64_t j1, const Emit& emit) {
+  const int64_t cw = coarse_.width;
+  out_.resize(size_t((j1 - j0) * cw));
+  // Threads only pay for themselves on wide batches.
+  const int workers = ((j1 - j0) * fine_.width >= (int64_t(1) << 16)) ? threads_ : 1;
+  parallel_chunks(workers, j1 - j0, [&](int w, int64_t b, int64_t e) {
+    for (int64_t j = b; j < e; ++j) compute_row(j0 + j, scratch_[size_t(w)], out_.data() + j * cw);
+  });
+  emit(j0, j1 - j0, out_.data());
+}
+
+void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
+  const int R = DownsampleFilter::kRadius;
+  const int64_t cw = coarse_.width, pw = padded_width_;
+  const int64_t half_even = (pw + 1) / 2, half_odd = pw / 2;
+  const double* rp[DownsampleFilter::kSize];
+  for (int dy = -R; dy <= R; ++dy) rp[dy + R] = padded_row(reflect_index(2 * j + dy, fine_.height));
+  s.acc.assign(size_t(cw), 0.0);
+  s.even.resize(size_t(half_even));
+  s.odd.resize(size_t(std::max<int64_t>(half_odd, 1)));
+  s.fold.resize(size_t(pw));
+  double* acc = s.acc.data();
+  const double* E = s.even.data();
+  const double* O = s.odd.data();
+  // Sample at padded position 2i + 5 + d lives in E[i + (5+d)/2] (5+d even) or O[i + (4+d)/2].
+  auto source = [&](int d) -> const double* { return ((5 + d) % 2 == 0) ? E + (5 + d) / 2 : O + (4 + d) / 2; };
+  auto split = [&](const double* row) {
+    for (int64_t t = 0; t < half_even; ++t) s.even[size_t(t)] = row[2 * t];
+    for (int64_t t = 0; t < half_odd; ++t) s.odd[size_t(t)] = row[2 * t + 1];
+  };
+  if (symmetric_) {
+    for (int k = 0; k <= R; ++k) {
+      const double* row = rp[R + k];
+      if (k > 0) {
+        const double* up = rp[R - k];
+        for (int64_t p = 0; p < pw; ++p) s.fold[size_t(p)] = row[p] + up[p];
+        row = s.fold.data();
+      }
+      split(row);
+      for (int m = 0; m <= R; ++m) {
+        const double w = filter_.tap(m, k);
+        if (w == 0.0) continue;
+        const double* a = source(m);
+        if (m == 0) {
+          for (int64_t i = 0; i < cw; ++i) acc[i] += w * a[i];
+        } else {
+          const double* b = source(-m);
+          for (int64_t i = 0; i < cw; ++i) acc[i] += w * (a[i] + b[i]);
+        }
+      }
+    }
+  } else {
+    for (int dy = -R; dy <= R; ++dy) {
+      split(rp[dy + R]);
+      for (int dx = -R; dx <= R; ++dx) {
+        const double w = filter_.tap(dx, dy);
+        if (w == 0.0) continue;
+        const double* a = source(dx);
+        for (int64_t i = 0; i < cw; ++i) acc[i] += w * a[i];
+      }
+    }
+  }
+  std::copy(acc, acc + cw, out);
+}
+
+void downsample_real(const DownsampleFilter& filter, const int32_t* fine, GridSize fine_level, double* coarse,
+                     int threads) {
+  DownsampleEngine engine(filter, fine_level, threads);
+  const int64_t cw = engine.coarse().width;
+  auto emit = [&](int64_t j0, int64_t n, const double* rows) {
+    std::copy(rows, rows + n * cw, coarse + j0 * cw);
+  };
+  engine.push_rows(fine, fine_level.height, emit);
+  engine.finish(emit);
+}
+
+}  // namespace detail
+
+void downsample(const DownsampleFilter& filter, const int32_t* fine, GridSize fine_level, int32_t* coarse,
+                int threads) {
+  detail::DownsampleEngine engine(filter, fine_level, threads);
+  const int64_t cw = engine.coarse().width;
+  auto emit = [&](int64_t j0, int64_t n, const double* rows) {
+    for (int64_t k = 0; k < n * cw; ++k) coarse[j0 * cw + k] = detail::round_to_int32(rows[k]);
+  };
+  engine.push_rows(fine, fine_level.height, emit);
+  engine.finish(emit);
+}
+
+double prediction_rms(const DownsampleFilter& filter, const int32_t* grid, GridSize level, int threads) {
+  GridSize c{coarse_extent(level.width), coarse_extent(level.height)};
+  std::vector<int32_t> coarse(size_t(c.width * c.height)), pred(size_t(level.width * level.height));
+  downsample(filter, grid, level, coarse.data(), threads);
+  upsample(coarse.data(), level, pred.data());
+  double sum = 0;
+  for (size_t k = 0; k < pred.size(); ++k) {
+    const double d = double(grid[k]) - double(pred[k]);
+    sum += d * d;
+  }
+  return std::sqrt(sum / double(pred.size()));
+}
+
+}  // namespace terrain

@@ -1,0 +1,64 @@
+// Row engine of the 11x11 downsampling filter D, shared by the in-memory wrapper, the filter fit and
+// the streaming builder (so all three compute bit-identical coarse samples).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "pyramid/pyramid.h"
+
+namespace terrain::detail {
+
+// Mirror reflection without repeating the edge sample, folded as often as needed (n >= 1).
+inline int64_t reflect_index(int64_t i, int64_t n) {
+  if (n == 1) return 0;
+  const int64_t period = 2 * (n - 1);
+  i %= period;
+  if (i < 0) i += period;
+  return i < n ? i : period - i;
+}
+
+// Fine rows go in top to bottom; coarse rows (real-valued D, unrounded) come out in batches as soon
+// as the rows they read have arrived. Holds O(batch + filter height) fine rows.
+class DownsampleEngine {
+ public:
+  // emit(first_coarse_row, rows, data) with data = rows x coarse width doubles.
+  using Emit = std::function<void(int64_t, int64_t, const double*)>;
+
+  DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows = 32);
+  void push_rows(const int32_t* rows, int64_t count, const Emit& emit);
+  // Emits the remaining coarse rows; every fine row must have been pushed.
+  void finish(const Emit& emit);
+  GridSize coarse() const { return coarse_; }
+
+ private:
+  struct Scratch {
+    std::vector<double> fold, even, odd, acc;
+  };
+  int64_t min_row_needed(int64_t j) const;
+  int64_t rows_needed_through(int64_t j_end) const;  // 1 + highest fine row read by coarse rows < j_end
+  void compute(int64_t j0, int64_t j1, const Emit& emit);
+  void compute_row(int64_t j, Scratch& s, double* out) const;
+  const double* padded_row(int64_t fine_row) const;
+
+  DownsampleFilter filter_;
+  bool symmetric_;
+  GridSize fine_, coarse_;
+  int threads_;
+  int64_t batch_;
+  int64_t padded_width_;
+  std::vector<double> rows_;   // capacity_ padded fine rows, ring-free: rows base_.. base_+count_-1
+  int64_t capacity_ = 0, base_ = 0, count_ = 0, pushed_ = 0, next_coarse_ = 0;
+  std::vector<Scratch> scratch_;
+  std::vector<double> out_;
+};
+
+// round(x) half away from zero, saturated to int32.
+int32_t round_to_int32(double x);
+
+// Real-valued D over a whole in-memory grid (filter design).
+void downsample_real(const DownsampleFilter& filter, const int32_t* fine, GridSize fine_level, double* coarse,
+                     int threads = 1);
+
+}  // namespace terrain::detail

@@ -1,0 +1,206 @@
+// U: tensor-product four-point interpolatory subdivision (Dyn et al. 1987, Kobbelt 1996), in exact
+// integer arithmetic for the pyramid and in double for filter design. One implementation serves
+// both the encoder and the runtime region decoder, so prediction is bit-identical on both sides.
+#include <algorithm>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "pyramid/pyramid.h"
+
+namespace terrain {
+namespace {
+
+// An extended coarse index (-1 .. n+1) as a combination of at most two real samples. Point
+// reflection about the edge sample keeps linear ramps exact across the edge.
+struct Combo {
+  int64_t index[2];
+  int64_t weight[2];
+  int terms;
+};
+
+Combo extension(int64_t e, int64_t n) {
+  if (n == 1) return {{0, 0}, {1, 0}, 1};
+  if (e >= 0 && e < n) return {{e, 0}, {1, 0}, 1};
+  if (e == -1) return {{0, 1}, {2, -1}, 2};
+  if (e == n) return {{n - 1, n - 2}, {2, -1}, 2};
+  // e == n + 1: 2c[n-1] - c[n-3], where for n == 2 c[-1] = 2c[0] - c[1] gives 3c[1] - 2c[0].
+  if (n >= 3) return {{n - 1, n - 3}, {2, -1}, 2};
+  return {{1, 0}, {3, -2}, 2};
+}
+
+// Coarse index range [lo, hi] (extended) that fine samples [f0, f1) may read along one axis: odd
+// sample 2i+1 reads i-1..i+2, even sample 2i reads i. Kept simple and conservative (one sample more
+// than strictly needed at some ends) so windows are easy to reason about.
+void extended_span(int64_t f0, int64_t f1, int64_t* lo, int64_t* hi) {
+  *lo = f0 / 2 - 1;
+  *hi = (f1 - 1) / 2 + 2;
+}
+
+// Real coarse samples [lo, hi] that the extended span needs.
+void real_span(int64_t f0, int64_t f1, int64_t n, int64_t* lo, int64_t* hi) {
+  int64_t elo, ehi;
+  extended_span(f0, f1, &elo, &ehi);
+  int64_t rlo = std::numeric_limits<int64_t>::max(), rhi = std::numeric_limits<int64_t>::min();
+  for (int64_t e : {elo, std::max<int64_t>(elo, 0), std::min(ehi, n - 1), ehi}) {
+    Combo c = extension(e, n);
+    for (int t = 0; t < c.terms; ++t) {
+      rlo = std::min(rlo, c.index[t]);
+      rhi = std::max(rhi, c.index[t]);
+    }
+  }
+  // Interior extended indices map to themselves, so the four probes above bound the whole span.
+  *lo = std::clamp<int64_t>(std::min(rlo, std::max<int64_t>(elo, 0)), 0, n - 1);
+  *hi = std::clamp<int64_t>(std::max(rhi, std::min(ehi, n - 1)), 0, n - 1);
+}
+
+// Horizontal pass on one coarse row: h[x - fx0] = 16 * U_x(row)(x), exact in int64 (or double).
+// `row` points at coarse column `col0`.
+template <class In, class Acc>
+void horizontal_row(const In* row, int64_t col0, int64_t n, int64_t fx0, int64_t fw, Acc* h) {
+  auto at = [&](int64_t e) -> Acc {
+    if (e >= 0 && e < n) return Acc(row[e - col0]);
+    Combo c = extension(e, n);
+    Acc v = 0;
+    for (int t = 0; t < c.terms; ++t) v += Acc(c.weight[t]) * Acc(row[c.index[t] - col0]);
+    return v;
+  };
+  for (int64_t k = 0; k < fw; ++k) {
+    int64_t x = fx0 + k;
+    int64_t i = x >> 1;
+    if ((x & 1) == 0) {
+      h[k] = Acc(16) * at(i);
+    } else if (i >= 1 && i + 2 < n) {
+      const In* p = row + (i - 1 - col0);
+      h[k] = Acc(9) * (Acc(p[1]) + Acc(p[2])) - Acc(p[0]) - Acc(p[3]);
+    } else {
+      h[k] = Acc(9) * (at(i) + at(i + 1)) - at(i - 1) - at(i + 2);
+    }
+  }
+}
+
+inline int32_t saturate_int32(int64_t v) {
+  return int32_t(std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
+}
+
+struct IntegerFinish {
+  // s is 16 * value (even rows) or 256 * value (odd rows): round half up, once.
+  static int32_t even(int64_t s) { return saturate_int32((s + 8) >> 4); }
+  static int32_t odd(int64_t s) { return saturate_int32((s + 128) >> 8); }
+};
+struct RealFinish {
+  static double even(double s) { return s / 16.0; }
+  static double odd(double s) { return s / 256.0; }
+};
+
+template <class In, class Acc, class Out, class Finish>
+void upsample_generic(const In* data, int64_t stride, const Rect& have, GridSize clevel, GridSize flevel,
+                      const Rect& fine, Out* out, int64_t out_stride, std::vector<Acc>& scratch) {
+  if (fine.width <= 0 || fine.height <= 0) return;
+  int64_t ely0, ely1;
+  extended_span(fine.y0, fine.y0 + fine.height, &ely0, &ely1);
+  const int64_t nrows = ely1 - ely0 + 1;
+  const int64_t fw = fine.width;
+  scratch.resize(size_t(nrows * fw));
+  auto hrow = [&](int64_t e) { return scratch.data() + (e - ely0) * fw; };
+  (void)flevel;
+  // Real rows first, then extended rows as combinations of real ones (U is linear).
+  for (int64_t e = ely0; e <= ely1; ++e) {
+    if (e < 0 || e >= clevel.height) continue;
+    const In* row = data + (e - have.y0) * stride;
+    horizontal_row<In, Acc>(row, have.x0, clevel.width, fine.x0, fw, hrow(e));
+  }
+  for (int64_t e = ely0; e <= ely1; ++e) {
+    if (e >= 0 && e < clevel.height) continue;
+    Combo c = extension(e, clevel.height);
+    Acc* dst = hrow(e);
+    const Acc* a = hrow(c.index[0]);
+    if (c.terms == 1) {
+      std::copy(a, a + fw, dst);
+    } else {
+      const Acc* b = hrow(c.index[1]);
+      const Acc wa = Acc(c.weight[0]), wb = Acc(c.weight[1]);
+      for (int64_t k = 0; k < fw; ++k) dst[k] = wa * a[k] + wb * b[k];
+    }
+  }
+  for (int64_t r = 0; r < fine.height; ++r) {
+    const int64_t y = fine.y0 + r;
+    const int64_t j = y >> 1;
+    Out* o = out + r * out_stride;
+    if ((y & 1) == 0) {
+      const Acc* a = hrow(j);
+      for (int64_t k = 0; k < fw; ++k) o[k] = Finish::even(a[k]);
+    } else {
+      const Acc *a = hrow(j - 1), *b = hrow(j), *c = hrow(j + 1), *d = hrow(j + 2);
+      for (int64_t k = 0; k < fw; ++k) o[k] = Finish::odd(Acc(9) * (b[k] + c[k]) - a[k] - d[k]);
+    }
+  }
+}
+
+void check_window(const CoarseWindow& coarse, GridSize fine_level, const Rect& fine) {
+  GridSize expect{coarse_extent(fine_level.width), coarse_extent(fine_level.height)};
+  if (!(expect == coarse.level))
+    throw std::invalid_argument("upsample_region: coarse level size does not match the fine level");
+  if (fine.x0 < 0 || fine.y0 < 0 || fine.x0 + fine.width > fine_level.width ||
+      fine.y0 + fine.height > fine_level.height)
+    throw std::invalid_argument("upsample_region: fine rectangle outside the level");
+  Rect need = upsample_required_window(fine, fine_level);
+  const Rect& h = coarse.rect;
+  if (need.x0 < h.x0 || need.y0 < h.y0 || need.x0 + need.width > h.x0 + h.width ||
+      need.y0 + need.height > h.y0 + h.height || coarse.data == nullptr || coarse.stride < h.width)
+    throw std::invalid_argument("upsample_region: coarse window does not cover the required samples");
+}
+
+}  // namespace
+
+std::vector<GridSize> pyramid_level_sizes(GridSize finest, int level_count, int64_t min_coarsest_side) {
+  if (finest.width <= 0 || finest.height <= 0) throw std::invalid_argument("pyramid: empty grid");
+  std::vector<GridSize> sizes{finest};
+  for (;;) {
+    GridSize cur = sizes.back();
+    if (cur.width == 1 && cur.height == 1) break;
+    GridSize next{coarse_extent(cur.width), coarse_extent(cur.height)};
+    if (level_count > 0) {
+      if (int(sizes.size()) >= level_count) break;
+    } else if (std::max(next.width, next.height) < min_coarsest_side) {
+      break;
+    }
+    sizes.push_back(next);
+  }
+  std::reverse(sizes.begin(), sizes.end());
+  return sizes;
+}
+
+Rect upsample_required_window(const Rect& fine, GridSize fine_level) {
+  GridSize c{coarse_extent(fine_level.width), coarse_extent(fine_level.height)};
+  if (fine.width <= 0 || fine.height <= 0) return {0, 0, 0, 0};
+  int64_t x0, x1, y0, y1;
+  real_span(fine.x0, fine.x0 + fine.width, c.width, &x0, &x1);
+  real_span(fine.y0, fine.y0 + fine.height, c.height, &y0, &y1);
+  return {x0, y0, x1 - x0 + 1, y1 - y0 + 1};
+}
+
+void upsample_region(const CoarseWindow& coarse, GridSize fine_level, const Rect& fine, int32_t* out,
+                     int64_t out_stride, UpsampleScratch& scratch) {
+  if (fine.width <= 0 || fine.height <= 0) return;
+  check_window(coarse, fine_level, fine);
+  upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(coarse.data, coarse.stride, coarse.rect, coarse.level,
+                                                             fine_level, fine, out, out_stride, scratch.rows);
+}
+
+void upsample(const int32_t* coarse, GridSize fine_level, int32_t* fine) {
+  GridSize c{coarse_extent(fine_level.width), coarse_extent(fine_level.height)};
+  CoarseWindow w{coarse, c.width, Rect{0, 0, c.width, c.height}, c};
+  UpsampleScratch scratch;
+  upsample_region(w, fine_level, Rect{0, 0, fine_level.width, fine_level.height}, fine, fine_level.width, scratch);
+}
+
+void upsample_real(const double* coarse, GridSize fine_level, double* fine) {
+  GridSize c{coarse_extent(fine_level.width), coarse_extent(fine_level.height)};
+  std::vector<double> scratch;
+  upsample_generic<double, double, double, RealFinish>(coarse, c.width, Rect{0, 0, c.width, c.height}, c,
+                                                       fine_level, Rect{0, 0, fine_level.width, fine_level.height},
+                                                       fine, fine_level.width, scratch);
+}
+
+}  // namespace terrain

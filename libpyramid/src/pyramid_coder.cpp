@@ -1,0 +1,88 @@
+// UniformQuantizerCoder: the stand-in residual coder (one absolute step, zigzag varints), and the
+// run-length validity mask format.
+#include <algorithm>
+#include <cstdlib>
+#include <limits>
+#include <stdexcept>
+
+#include "pyramid/pyramid.h"
+#include "pyramid_varint.h"
+
+namespace terrain {
+
+UniformQuantizerCoder::UniformQuantizerCoder(int32_t step, int64_t band_rows) : step_(step), band_rows_(band_rows) {
+  if (step < 1) throw std::invalid_argument("UniformQuantizerCoder: step must be >= 1");
+  if (band_rows < 1) throw std::invalid_argument("UniformQuantizerCoder: band_rows must be >= 1");
+}
+
+std::vector<uint8_t> UniformQuantizerCoder::encode(const int32_t* residual, int64_t w, int64_t h,
+                                                   int32_t* reconstructed) {
+  const int64_t n = w * h;
+  std::vector<uint8_t> out(size_t(n) * 5);
+  uint8_t* p = out.data();
+  const int64_t s = step_, half = step_ / 2;
+  for (int64_t k = 0; k < n; ++k) {
+    const int64_t r = residual[k];
+    // Round half away from zero, symmetric for both signs so |r - q*S| <= S/2.
+    const int64_t q = r >= 0 ? (r + half) / s : -((-r + half) / s);
+    const int64_t q32 = std::clamp<int64_t>(q, -(int64_t(1) << 30), int64_t(1) << 30);
+    reconstructed[k] = int32_t(std::clamp<int64_t>(q32 * s, std::numeric_limits<int32_t>::min(),
+                                                   std::numeric_limits<int32_t>::max()));
+    p = detail::put_varint(p, detail::zigzag(int32_t(q32)));
+  }
+  out.resize(size_t(p - out.data()));
+  return out;
+}
+
+bool UniformQuantizerCoder::decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) {
+  const uint8_t* p = data;
+  const uint8_t* end = data + n;
+  const int64_t s = step_;
+  for (int64_t k = 0; k < w * h; ++k) {
+    uint64_t v;
+    if (!detail::get_varint(&p, end, &v) || v > 0xffffffffu) return false;
+    const int64_t q = detail::unzigzag(uint32_t(v));
+    out[k] = int32_t(std::clamp<int64_t>(q * s, std::numeric_limits<int32_t>::min(),
+                                         std::numeric_limits<int32_t>::max()));
+  }
+  return p == end;
+}
+
+std::vector<uint8_t> encode_mask_rows(const uint8_t* valid, int64_t w, int64_t rows) {
+  std::vector<uint8_t> out;
+  uint8_t buf[10];
+  for (int64_t y = 0; y < rows; ++y) {
+    const uint8_t* row = valid + y * w;
+    int64_t x = 0;
+    bool want_valid = true;
+    while (x < w) {
+      int64_t run = 0;
+      while (x + run < w && (row[x + run] != 0) == want_valid) ++run;
+      out.insert(out.end(), buf, detail::put_varint(buf, uint64_t(run)));
+      x += run;
+      want_valid = !want_valid;
+    }
+    if (w == 0) out.push_back(0);
+  }
+  return out;
+}
+
+bool decode_mask_rows(const uint8_t* data, size_t n, int64_t w, int64_t rows, uint8_t* valid) {
+  const uint8_t* p = data;
+  const uint8_t* end = data + n;
+  for (int64_t y = 0; y < rows; ++y) {
+    uint8_t* row = valid + y * w;
+    int64_t x = 0;
+    bool is_valid = true;
+    do {
+      uint64_t run;
+      if (!detail::get_varint(&p, end, &run) || run > uint64_t(w - x)) return false;
+      std::fill(row + x, row + x + int64_t(run), uint8_t(is_valid ? 1 : 0));
+      x += int64_t(run);
+      is_valid = !is_valid;
+    } while (x < w);
+  }
+  return p == end;
+}
+
+}  // namespace terrain

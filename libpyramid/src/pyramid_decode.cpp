@@ -1,0 +1,90 @@
+// In-memory sink and the coarse-to-fine decoder over it (tests and small inputs; the runtime decodes
+// regions from the container with the same upsample_region and coder).
+#include <algorithm>
+#include <limits>
+
+#include "pyramid/pyramid.h"
+
+namespace terrain {
+
+void MemoryPyramid::begin(const PyramidHeader& h) {
+  header = h;
+  bands.assign(h.levels.size(), {});
+  mask.clear();
+  recon.assign(h.levels.size(), {});
+}
+
+void MemoryPyramid::band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
+  bands.at(size_t(level)).push_back({y0, rows, std::move(bytes)});
+}
+
+void MemoryPyramid::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
+  mask.push_back({y0, rows, std::move(bytes)});
+}
+
+void MemoryPyramid::reconstructed_rows(int level, int64_t y0, int64_t rows, const int32_t* data) {
+  const int64_t w = header.levels.at(size_t(level)).width;
+  auto& r = recon[size_t(level)];
+  r.resize(size_t((y0 + rows) * w));
+  std::copy(data, data + rows * w, r.begin() + y0 * w);
+}
+
+uint64_t MemoryPyramid::total_bytes() const {
+  uint64_t n = 0;
+  for (auto& level : bands)
+    for (auto& b : level) n += b.bytes.size();
+  for (auto& b : mask) n += b.bytes.size();
+  return n;
+}
+
+std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder, int up_to_level,
+                                    std::vector<uint8_t>* valid) {
+  const auto& levels = p.header.levels;
+  if (up_to_level < 0 || up_to_level >= int(levels.size()) || p.bands.size() != levels.size())
+    throw IoError(IoErrorCode::CorruptData, "pyramid: level " + std::to_string(up_to_level) + " not present");
+  std::vector<int32_t> prev, cur, rhat;
+  UpsampleScratch scratch;
+  for (int l = 0; l <= up_to_level; ++l) {
+    const GridSize fs = levels[size_t(l)];
+    cur.assign(size_t(fs.width * fs.height), 0);
+    if (l > 0) {
+      const GridSize cs = levels[size_t(l - 1)];
+      const CoarseWindow w{prev.data(), cs.width, Rect{0, 0, cs.width, cs.height}, cs};
+      upsample_region(w, fs, Rect{0, 0, fs.width, fs.height}, cur.data(), fs.width, scratch);
+    }
+    int64_t covered = 0;
+    for (const auto& b : p.bands[size_t(l)]) {
+      if (b.y0 != covered || b.rows <= 0 || b.y0 + b.rows > fs.height)
+        throw IoError(IoErrorCode::CorruptData, "pyramid: bands of level " + std::to_string(l) + " out of order");
+      rhat.resize(size_t(b.rows * fs.width));
+      if (!coder.decode(b.bytes.data(), b.bytes.size(), fs.width, b.rows, rhat.data()))
+        throw IoError(IoErrorCode::CorruptData, "pyramid: bad residual band at level " + std::to_string(l) +
+                                                    ", row " + std::to_string(b.y0));
+      int32_t* row = cur.data() + b.y0 * fs.width;
+      for (size_t k = 0; k < rhat.size(); ++k)
+        row[k] = int32_t(std::clamp<int64_t>(int64_t(row[k]) + rhat[k], std::numeric_limits<int32_t>::min(),
+                                             std::numeric_limits<int32_t>::max()));
+      covered += b.rows;
+    }
+    if (covered != fs.height)
+      throw IoError(IoErrorCode::CorruptData, "pyramid: level " + std::to_string(l) + " is incomplete");
+    prev.swap(cur);
+  }
+  if (valid) {
+    const GridSize fs = levels[size_t(up_to_level)];
+    valid->assign(size_t(fs.width * fs.height), 1);
+    if (up_to_level == int(levels.size()) - 1 && p.header.has_voids) {
+      int64_t covered = 0;
+      for (const auto& b : p.mask) {
+        if (b.y0 != covered || b.y0 + b.rows > fs.height ||
+            !decode_mask_rows(b.bytes.data(), b.bytes.size(), fs.width, b.rows, valid->data() + b.y0 * fs.width))
+          throw IoError(IoErrorCode::CorruptData, "pyramid: bad validity mask band at row " + std::to_string(b.y0));
+        covered += b.rows;
+      }
+      if (covered != fs.height) throw IoError(IoErrorCode::CorruptData, "pyramid: validity mask incomplete");
+    }
+  }
+  return prev;
+}
+
+}  // namespace terrain

@@ -1,0 +1,76 @@
+// Byte layout of the container (see docs/format.md, which this file must match) and the
+// little-endian field helpers shared by the writer and the reader.
+#pragma once
+
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+namespace terrain::runtime::layout {
+
+inline constexpr uint8_t kMagic[8] = {0x89, 'T', 'P', 'Y', 'R', '\r', '\n', 0x1A};
+inline constexpr uint64_t kAlignment = 8;
+
+// Superblock at offset 0. Magic, version and superblock size keep their places in every version;
+// the superblock CRC is always its last 4 bytes and covers every byte before them.
+namespace sb {
+inline constexpr size_t kMajor = 8, kMinor = 10, kSize = 12, kFileSize = 16, kIndexOffset = 24,
+                        kIndexSize = 32, kIndexCrc = 40, kFlags = 44, kReserved = 48, kCrc = 60;
+inline constexpr uint32_t kSizeV1 = 64;
+}  // namespace sb
+
+// Index "info" block at the start of the index.
+namespace info {
+inline constexpr size_t kInfoSize = 0, kLevelCount = 4, kLevelRecordSize = 8, kFilterSize = 12,
+                        kWidth = 16, kHeight = 24, kSpacingX = 32, kSpacingY = 40,
+                        kHorizontalUnits = 48, kVerticalUnits = 80, kVerticalScale = 112,
+                        kVerticalOffset = 120, kHasGeoreference = 128, kFilterProvenance = 132,
+                        kOriginX = 136, kOriginY = 144, kGeoreferenceUnits = 152,
+                        kStepUnits = 184, kStepMetres = 192, kErrorMode = 200, kMaskEncoding = 204,
+                        kTarget = 208, kMaskOffset = 216, kMaskSize = 224, kVoidCount = 232,
+                        kMaskCrc = 240, kMetadataCrc = 244, kMetadataOffset = 248,
+                        kMetadataSize = 256;
+inline constexpr uint32_t kSizeV1 = 264;
+inline constexpr size_t kUnitsField = 32;
+}  // namespace info
+
+// One record per level, following the info block; then filter_size^2 f64 coefficients.
+namespace level {
+inline constexpr size_t kWidth = 0, kHeight = 8, kBlobOffset = 16, kBlobSize = 24, kBlobCrc = 32,
+                        kFlags = 36, kMean = 40, kVariance = 48, kRms = 56, kMin = 64, kMax = 72;
+inline constexpr uint32_t kSizeV1 = 80;
+inline constexpr uint32_t kFlagHasCrc = 1;
+}  // namespace level
+
+inline constexpr uint32_t kMaskNone = 0;     // no voids: mask size 0
+inline constexpr uint32_t kMaskRunsLeb128 = 1;
+
+inline void put_u16(uint8_t* p, uint16_t v) {
+  p[0] = uint8_t(v);
+  p[1] = uint8_t(v >> 8);
+}
+inline void put_u32(uint8_t* p, uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+inline void put_u64(uint8_t* p, uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+inline void put_f64(uint8_t* p, double v) { put_u64(p, std::bit_cast<uint64_t>(v)); }
+// Writes s NUL-padded into a field of `field` bytes; the caller has checked s.size() < field.
+inline void put_string(uint8_t* p, const std::string& s, size_t field) {
+  std::memset(p, 0, field);
+  std::memcpy(p, s.data(), s.size());
+}
+
+inline uint16_t get_u16(const uint8_t* p) { return uint16_t(p[0] | p[1] << 8); }
+inline uint32_t get_u32(const uint8_t* p) {
+  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
+inline uint64_t get_u64(const uint8_t* p) { return uint64_t(get_u32(p)) | uint64_t(get_u32(p + 4)) << 32; }
+inline double get_f64(const uint8_t* p) { return std::bit_cast<double>(get_u64(p)); }
+
+inline uint64_t align_up(uint64_t v) { return (v + kAlignment - 1) & ~(kAlignment - 1); }
+
+}  // namespace terrain::runtime::layout

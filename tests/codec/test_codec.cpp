@@ -1,0 +1,378 @@
+// libcodec tests: lossless round trips, quantiser error predictions, max-error guarantee, region
+// decoding, and rejection of corrupted / truncated streams.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "codec/codec.h"
+#include "pyramid/heightmap.h"
+#include "shared_data.h"
+
+namespace {
+
+struct Image {
+  int64_t width = 0, height = 0;
+  std::vector<int32_t> samples;
+  int32_t at(int64_t x, int64_t y) const { return samples[size_t(y * width + x)]; }
+};
+
+std::vector<uint8_t> encode_image(const Image& img, const codec::EncodeOptions& options,
+                                  std::vector<int32_t>* recon = nullptr) {
+  codec::Scratch scratch;
+  std::vector<uint8_t> out(codec::encode_bound(img.width, img.height, options));
+  REQUIRE(!out.empty());
+  size_t written = 0;
+  if (recon) recon->assign(img.samples.size(), 0);
+  const codec::Status s = codec::encode(img.samples.data(), img.width, img.width, img.height, options, out.data(),
+                                        out.size(), &written, scratch, recon ? recon->data() : nullptr, img.width);
+  REQUIRE(codec::status_name(s) == std::string("ok"));
+  out.resize(written);
+  return out;
+}
+
+std::vector<int32_t> decode_image(const std::vector<uint8_t>& stream, const Image& like) {
+  codec::Scratch scratch;
+  std::vector<int32_t> out(like.samples.size(), 0);
+  const codec::Status s = codec::decode(stream.data(), stream.size(), out.data(), like.width, scratch);
+  REQUIRE(codec::status_name(s) == std::string("ok"));
+  return out;
+}
+
+// Index of the first differing sample, or -1 (Catch would print whole vectors on failure).
+int64_t first_difference(const std::vector<int32_t>& a, const std::vector<int32_t>& b) {
+  if (a.size() != b.size()) return int64_t(std::min(a.size(), b.size()));
+  for (size_t i = 0; i < a.size(); ++i)
+    if (a[i] != b[i]) return int64_t(i);
+  return -1;
+}
+
+// Integer grid of a shared DEM: native values when they are integers, else tenths (Terrain-RGB).
+Image load_dem(const std::string& path) {
+  terrain::ReadOptions options;
+  if (path.find("terrainrgb") != std::string::npos) options.terrain_rgb = true;
+  const terrain::Heightmap map = terrain::read_heightmap(path, options);
+  Image img{map.width(), map.height(), std::vector<int32_t>(map.values.size())};
+  bool integral = true;
+  for (double v : map.values) integral = integral && v == std::floor(v);
+  for (size_t i = 0; i < map.values.size(); ++i)
+    img.samples[i] = int32_t(std::lround(integral ? map.values[i] : map.values[i] * 10.0));
+  return img;
+}
+
+Image crop(const Image& src, int64_t x0, int64_t y0, int64_t w, int64_t h) {
+  Image out{w, h, std::vector<int32_t>(size_t(w * h))};
+  for (int64_t y = 0; y < h; ++y)
+    for (int64_t x = 0; x < w; ++x) out.samples[size_t(y * w + x)] = src.at(x0 + x, y0 + y);
+  return out;
+}
+
+// Residual-like image: Laplacian noise (scale b) with rare outliers up to +-2^20.
+Image residual_like(int64_t w, int64_t h, double b, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::exponential_distribution<double> expo(1.0 / b);
+  std::uniform_int_distribution<int> coin(0, 1), rare(0, 999);
+  std::uniform_int_distribution<int32_t> big(-codec::kMaxAbsSample, codec::kMaxAbsSample);
+  Image img{w, h, std::vector<int32_t>(size_t(w * h))};
+  for (auto& v : img.samples) {
+    v = int32_t(std::lround(expo(rng))) * (coin(rng) ? 1 : -1);
+    if (rare(rng) == 0) v = big(rng);
+  }
+  return img;
+}
+
+Image uniform_noise(int64_t w, int64_t h, int32_t amplitude, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int32_t> dist(-amplitude, amplitude);
+  Image img{w, h, std::vector<int32_t>(size_t(w * h))};
+  for (auto& v : img.samples) v = dist(rng);
+  return img;
+}
+
+struct ErrorStats {
+  double rms = 0;
+  int64_t max_abs = 0;
+};
+
+ErrorStats error_stats(const Image& img, const std::vector<int32_t>& decoded) {
+  double sum = 0;
+  int64_t worst = 0;
+  for (size_t i = 0; i < decoded.size(); ++i) {
+    const int64_t e = int64_t(decoded[i]) - img.samples[i];
+    sum += double(e) * double(e);
+    worst = std::max<int64_t>(worst, e < 0 ? -e : e);
+  }
+  return {std::sqrt(sum / double(decoded.size())), worst};
+}
+
+}  // namespace
+
+TEST_CASE("lossless round trip at step 1 on every shared DEM", "[codec][data]") {
+  const auto dems = testdata::all_dems();
+  for (const auto& path : dems) {
+    INFO(path);
+    const Image img = load_dem(path);
+    REQUIRE(img.width > 0);
+    codec::EncodeOptions options;  // step 1
+    std::vector<int32_t> recon;
+    const auto stream = encode_image(img, options, &recon);
+    CHECK(first_difference(decode_image(stream, img), img.samples) == -1);
+    CHECK(first_difference(recon, img.samples) == -1);
+    // A DEM must compress: under 8 bits/sample for every file in the set.
+    CHECK(double(stream.size()) * 8.0 / double(img.samples.size()) < 8.0);
+  }
+}
+
+TEST_CASE("lossless round trip on residual-like and extreme synthetic data", "[codec]") {
+  for (uint32_t tile : {16u, 64u, 128u}) {
+    codec::EncodeOptions options;
+    options.tile_size = tile;
+    const Image residual = residual_like(300, 211, 3.0, 7 + tile);
+    CHECK(first_difference(decode_image(encode_image(residual, options), residual), residual.samples) == -1);
+  }
+  const Image noise = uniform_noise(97, 131, codec::kMaxAbsSample, 3);
+  CHECK(first_difference(decode_image(encode_image(noise, {}), noise), noise.samples) == -1);
+  // Largest possible steps between neighbours: +-2^20 checkerboard and stripes.
+  Image checker{70, 50, std::vector<int32_t>(70 * 50)};
+  for (int64_t y = 0; y < 50; ++y)
+    for (int64_t x = 0; x < 70; ++x)
+      checker.samples[size_t(y * 70 + x)] = ((x + y) & 1) ? codec::kMaxAbsSample : -codec::kMaxAbsSample;
+  CHECK(first_difference(decode_image(encode_image(checker, {}), checker), checker.samples) == -1);
+  Image stripes = checker;
+  for (int64_t y = 0; y < 50; ++y)
+    for (int64_t x = 0; x < 70; ++x)
+      stripes.samples[size_t(y * 70 + x)] = ((x / 2 + y / 3) & 1) ? codec::kMaxAbsSample : -codec::kMaxAbsSample;
+  CHECK(first_difference(decode_image(encode_image(stripes, {}), stripes), stripes.samples) == -1);
+  // Lossy at a large step on extreme data stays consistent with the encoder's reconstruction.
+  codec::EncodeOptions lossy;
+  lossy.step = 4096;
+  std::vector<int32_t> recon;
+  const auto stream = encode_image(checker, lossy, &recon);
+  CHECK(first_difference(decode_image(stream, checker), recon) == -1);
+}
+
+TEST_CASE("odd sizes round trip losslessly and lossily", "[codec]") {
+  std::vector<std::pair<int64_t, int64_t>> sizes;
+  for (int64_t h = 1; h <= 7; ++h)
+    for (int64_t w = 1; w <= 7; ++w) sizes.push_back({w, h});
+  sizes.push_back({1, 1000});
+  sizes.push_back({1000, 1});
+  sizes.push_back({65, 129});
+  for (auto [w, h] : sizes) {
+    INFO(w << "x" << h);
+    const Image img = residual_like(w, h, 20.0, uint32_t(w * 1000 + h));
+    CHECK(first_difference(decode_image(encode_image(img, {}), img), img.samples) == -1);
+    codec::EncodeOptions lossy;
+    lossy.step = 5;
+    std::vector<int32_t> recon;
+    const auto stream = encode_image(img, lossy, &recon);
+    CHECK(first_difference(decode_image(stream, img), recon) == -1);
+    codec::HeaderInfo header;
+    REQUIRE(codec::read_header(stream.data(), stream.size(), &header) == codec::Status::Ok);
+    CHECK(header.width == w);
+    CHECK(header.height == h);
+    CHECK(header.step == 5.0);
+  }
+}
+
+// Prediction (codec.h): rms = S * sqrt(1/12 + 1/64) = 0.315 S when coefficients spread over many
+// steps (uniform noise with amplitude >> S): checked within 15 % (plus 0.3 for integer rounding in the
+// lifting steps). Smooth DEMs put many coefficients in the dead zone, so there the prediction is an
+// upper bound (checked with 10 % slack). Max error has no hard bound outside max-error mode; errors
+// are near Gaussian, so over these sizes the maximum stays below 3 S + 2 (about 9.5 sigma).
+TEST_CASE("rms and max error at steps 2..64 follow the quantiser prediction", "[codec]") {
+  const Image noise = uniform_noise(256, 256, 1 << 16, 11);
+  for (double step : {2.0, 3.0, 5.0, 8.0, 16.0, 32.0, 64.0}) {
+    INFO("step " << step);
+    codec::EncodeOptions options;
+    options.step = step;
+    const ErrorStats e = error_stats(noise, decode_image(encode_image(noise, options), noise));
+    CHECK(std::abs(e.rms - codec::predicted_rms(step)) <= 0.15 * codec::predicted_rms(step) + 0.3);
+    CHECK(double(e.max_abs) <= 3.0 * step + 2.0);
+    CHECK(codec::step_for_target_rms(codec::predicted_rms(step)) == Approx(step));
+  }
+  const auto dems = testdata::all_dems();
+  for (size_t d = 0; d < dems.size(); d += 4) {
+    const Image dem = crop(load_dem(dems[d]), 100, 100, 384, 320);
+    for (double step : {2.0, 4.0, 16.0, 64.0}) {
+      INFO(dems[d] << " step " << step);
+      codec::EncodeOptions options;
+      options.step = step;
+      const ErrorStats e = error_stats(dem, decode_image(encode_image(dem, options), dem));
+      CHECK(e.rms <= 1.1 * codec::predicted_rms(step) + 0.3);
+      CHECK(double(e.max_abs) <= 3.0 * step + 2.0);
+      CHECK(e.rms > 0.0);  // step > 1 on real terrain must lose something
+    }
+  }
+}
+
+TEST_CASE("max-error mode never exceeds E", "[codec]") {
+  std::vector<Image> images;
+  const auto dems = testdata::all_dems();
+  for (size_t d = 0; d < dems.size(); d += 5) images.push_back(crop(load_dem(dems[d]), 400, 300, 300, 260));
+  images.push_back(uniform_noise(150, 90, 5000, 5));
+  images.push_back(residual_like(211, 77, 4.0, 9));
+  for (const Image& img : images) {
+    for (uint32_t e : {0u, 1u, 2u, 5u, 17u, 100u}) {
+      for (double step : {0.0, 8.0}) {
+        INFO("E " << e << " step " << step << " size " << img.width << "x" << img.height);
+        codec::EncodeOptions options;
+        options.bound_max_error = true;
+        options.max_error = e;
+        options.step = step > 0 ? step : std::max(1.0, 1.5 * e);
+        std::vector<int32_t> recon;
+        const auto stream = encode_image(img, options, &recon);
+        const auto decoded = decode_image(stream, img);
+        CHECK(first_difference(decoded, recon) == -1);
+        CHECK(error_stats(img, decoded).max_abs <= int64_t(e));
+      }
+    }
+  }
+}
+
+TEST_CASE("decode_region equals the same window of a full decode", "[codec]") {
+  const Image img = residual_like(333, 257, 6.0, 21);
+  std::mt19937 rng(5);
+  for (int variant = 0; variant < 3; ++variant) {
+    codec::EncodeOptions options;
+    options.tile_size = variant == 0 ? 64 : variant == 1 ? 16 : 128;
+    options.step = variant == 1 ? 1.0 : 6.0;
+    options.bound_max_error = variant == 2;
+    options.max_error = 3;
+    const auto stream = encode_image(img, options);
+    const auto full = decode_image(stream, img);
+    codec::Decoder decoder;
+    REQUIRE(decoder.open(stream.data(), stream.size()) == codec::Status::Ok);
+    codec::Scratch scratch;
+    for (int trial = 0; trial < 40; ++trial) {
+      codec::Rect r;
+      r.width = std::uniform_int_distribution<int64_t>(1, img.width)(rng);
+      r.height = std::uniform_int_distribution<int64_t>(1, img.height)(rng);
+      r.x = std::uniform_int_distribution<int64_t>(0, img.width - r.width)(rng);
+      r.y = std::uniform_int_distribution<int64_t>(0, img.height - r.height)(rng);
+      const ptrdiff_t stride = r.width + 3;
+      std::vector<int32_t> window(size_t(stride * r.height), 12345);
+      REQUIRE(decoder.decode_region(r, window.data(), stride, scratch) == codec::Status::Ok);
+      bool same = true;
+      for (int64_t y = 0; y < r.height; ++y)
+        for (int64_t x = 0; x < r.width; ++x)
+          same = same && window[size_t(y * stride + x)] == full[size_t((r.y + y) * img.width + r.x + x)];
+      for (int64_t y = 0; y < r.height; ++y)  // padding past the row width is untouched
+        for (int64_t x = r.width; x < stride; ++x) same = same && window[size_t(y * stride + x)] == 12345;
+      CHECK(same);
+    }
+    std::vector<int32_t> one(1);
+    CHECK(decoder.decode_region({img.width, 0, 1, 1}, one.data(), 1, scratch) == codec::Status::InvalidArgument);
+    CHECK(decoder.decode_region({0, 0, 0, 1}, one.data(), 1, scratch) == codec::Status::InvalidArgument);
+  }
+}
+
+TEST_CASE("header and tile index are readable without decoding", "[codec]") {
+  const Image img = residual_like(130, 70, 2.0, 4);
+  codec::EncodeOptions options;
+  options.tile_size = 32;
+  options.step = 2.5;
+  options.bound_max_error = true;
+  options.max_error = 4;
+  const auto stream = encode_image(img, options);
+  codec::HeaderInfo header;
+  REQUIRE(codec::read_header(stream.data(), stream.size(), &header) == codec::Status::Ok);
+  CHECK(header.version == codec::kFormatVersion);
+  CHECK(header.tiles_x == 5);
+  CHECK(header.tiles_y == 3);
+  CHECK(header.step == 2.5);
+  CHECK(header.bound_max_error);
+  CHECK(header.max_error == 4);
+  std::vector<codec::TileEntry> index(size_t(header.tile_count()));
+  REQUIRE(codec::read_tile_index(stream.data(), stream.size(), header, index.data()) == codec::Status::Ok);
+  uint64_t expected = header.data_offset;
+  for (const auto& e : index) {  // tiles are stored back to back in raster order
+    CHECK(e.offset == expected);
+    expected += e.size;
+  }
+  CHECK(expected == stream.size());
+}
+
+TEST_CASE("truncated and corrupted streams are rejected", "[codec]") {
+  const Image img = residual_like(40, 35, 3.0, 8);
+  codec::EncodeOptions options;
+  options.tile_size = 16;
+  options.step = 2;
+  options.bound_max_error = true;
+  options.max_error = 2;
+  const auto stream = encode_image(img, options);
+  codec::Scratch scratch;
+  std::vector<int32_t> out(img.samples.size());
+  for (size_t len = 0; len < stream.size(); ++len) {
+    INFO("length " << len);
+    CHECK(codec::decode(stream.data(), len, out.data(), img.width, scratch) != codec::Status::Ok);
+  }
+  std::mt19937 rng(99);
+  int rejected = 0, flips = 0;
+  for (size_t byte = 0; byte < stream.size(); ++byte) {
+    for (int trial = 0; trial < 2; ++trial) {
+      auto bad = stream;
+      bad[byte] ^= uint8_t(1u << std::uniform_int_distribution<int>(0, 7)(rng));
+      ++flips;
+      rejected += codec::decode(bad.data(), bad.size(), out.data(), img.width, scratch) != codec::Status::Ok;
+    }
+  }
+  CHECK(rejected == flips);
+  // Multi-byte garbage anywhere in the stream.
+  for (int trial = 0; trial < 300; ++trial) {
+    auto bad = stream;
+    const size_t at = std::uniform_int_distribution<size_t>(0, stream.size() - 1)(rng);
+    const size_t n = std::min<size_t>(bad.size() - at, 1 + trial % 40);
+    for (size_t i = 0; i < n; ++i) bad[at + i] = uint8_t(rng());
+    if (bad == stream) continue;
+    CHECK(codec::decode(bad.data(), bad.size(), out.data(), img.width, scratch) != codec::Status::Ok);
+  }
+  auto wrong_version = stream;
+  wrong_version[4] = 9;
+  CHECK(codec::decode(wrong_version.data(), wrong_version.size(), out.data(), img.width, scratch) ==
+        codec::Status::UnsupportedVersion);
+  auto wrong_magic = stream;
+  wrong_magic[0] = 'X';
+  CHECK(codec::decode(wrong_magic.data(), wrong_magic.size(), out.data(), img.width, scratch) == codec::Status::Corrupt);
+}
+
+TEST_CASE("bad arguments return a status", "[codec]") {
+  Image img = residual_like(20, 20, 2.0, 1);
+  codec::Scratch scratch;
+  std::vector<uint8_t> out(codec::encode_bound(20, 20, {}));
+  size_t written = 0;
+  const auto run = [&](const codec::EncodeOptions& o, size_t capacity) {
+    return codec::encode(img.samples.data(), 20, 20, 20, o, out.data(), capacity, &written, scratch);
+  };
+  codec::EncodeOptions o;
+  CHECK(run(o, out.size()) == codec::Status::Ok);
+  CHECK(run(o, 100) == codec::Status::BufferTooSmall);
+  CHECK(run(o, written - 1) == codec::Status::BufferTooSmall);
+  o.step = 0.5;
+  CHECK(run(o, out.size()) == codec::Status::InvalidArgument);
+  o = {};
+  o.tile_size = 24;
+  CHECK(run(o, out.size()) == codec::Status::InvalidArgument);
+  CHECK(codec::encode_bound(20, 20, o) == 0);
+  o = {};
+  img.samples[37] = codec::kMaxAbsSample + 1;
+  CHECK(run(o, out.size()) == codec::Status::ValueOutOfRange);
+  img.samples[37] = -codec::kMaxAbsSample - 1;
+  CHECK(run(o, out.size()) == codec::Status::ValueOutOfRange);
+}
+
+TEST_CASE("encoding is deterministic and the encoder's reconstruction is the decoder's output", "[codec]") {
+  const Image img = residual_like(200, 150, 10.0, 77);
+  codec::EncodeOptions options;
+  options.step = 7.3;
+  std::vector<int32_t> recon1, recon2;
+  const auto a = encode_image(img, options, &recon1);
+  const auto b = encode_image(img, options, &recon2);
+  CHECK((a == b));
+  CHECK(first_difference(recon1, recon2) == -1);
+  CHECK(first_difference(decode_image(a, img), recon1) == -1);
+}

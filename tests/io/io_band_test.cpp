@@ -1,0 +1,104 @@
+// The streaming band reader yields exactly the samples of a whole-file read, whatever the band height,
+// for .hgt, .hgt.gz (made here with zlib), PNG and raw input.
+#include <catch2/catch.hpp>
+#include <zlib.h>
+
+#include <cstring>
+
+#include "io_test_util.h"
+#include "pyramid/heightmap.h"
+#include "shared_data.h"
+
+namespace {
+
+void check_bands_match(const std::string& path, const terrain::ReadOptions& options = {}) {
+  terrain::Heightmap whole = terrain::read_heightmap(path, options);
+  const int64_t w = whole.width(), h = whole.height();
+  for (int64_t band : {int64_t(1), int64_t(7), int64_t(64), h}) {
+    INFO(path << " band height " << band);
+    auto reader = terrain::open_band_reader(path, options);
+    REQUIRE(reader->info().width == w);
+    REQUIRE(reader->info().height == h);
+    std::vector<double> values(size_t(band * w));
+    std::vector<uint8_t> valid(values.size());
+    int64_t row = 0;
+    bool same = true;
+    while (int64_t n = reader->read_rows(band, values.data(), valid.data())) {
+      REQUIRE(n <= band);
+      REQUIRE(row + n <= h);
+      for (int64_t i = 0; i < n * w && same; ++i) {
+        int64_t x = i % w, y = row + i / w;
+        same = values[size_t(i)] == whole.at(x, y) && (valid[size_t(i)] != 0) == whole.is_valid(x, y);
+      }
+      row += n;
+      REQUIRE(reader->rows_read() == row);
+    }
+    CHECK(same);
+    CHECK(row == h);
+    CHECK(reader->read_rows(band, values.data(), valid.data()) == 0);  // stays at the end
+  }
+}
+
+void gzip_file(const std::string& from, const std::string& to) {
+  auto bytes = iotest::read_file(from);
+  gzFile gz = gzopen(to.c_str(), "wb1");
+  REQUIRE(gz != nullptr);
+  REQUIRE(gzwrite(gz, bytes.data(), unsigned(bytes.size())) == int(bytes.size()));
+  REQUIRE(gzclose(gz) == Z_OK);
+}
+
+}  // namespace
+
+TEST_CASE("band reader matches whole reads on hgt and hgt.gz", "[io][band]") {
+  // N52E013 has 160 voids, so the valid mask is exercised too.
+  auto hgt = testdata::require("srtm3_N52E013_berlin_flat_plain.hgt");
+  if (hgt.empty()) return;
+  check_bands_match(hgt);
+  iotest::TempDir dir;
+  std::string gz = dir.file("N52E013.hgt.gz");
+  gzip_file(hgt, gz);
+  terrain::Heightmap plain = terrain::read_heightmap(hgt), zipped = terrain::read_heightmap(gz);
+  CHECK(plain.values == zipped.values);
+  CHECK(plain.valid == zipped.valid);
+  CHECK(terrain::compute_stats(zipped).nodata_count == 160);
+  CHECK(*zipped.info.origin_x == 13.0);
+  CHECK(*zipped.info.origin_y == 53.0);
+  check_bands_match(gz);
+}
+
+TEST_CASE("band reader matches whole reads on PNG", "[io][band]") {
+  auto png = testdata::require("pugetsound_ps_height_1k.png");
+  if (png.empty()) return;
+  terrain::ReadOptions o;
+  o.vertical_scale = 0.1;
+  check_bands_match(png, o);
+}
+
+TEST_CASE("band reader matches whole reads on raw", "[io][band]") {
+  iotest::TempDir dir;
+  terrain::Heightmap m;
+  m.info.width = 301;
+  m.info.height = 150;
+  m.info.sample_type = terrain::SampleType::Float32;
+  m.info.nodata = -1.0;
+  for (int64_t i = 0; i < 301 * 150; ++i) m.values.push_back(double(float(double(i % 977) * 0.5 - 17.25)));
+  m.valid.assign(m.values.size(), 1);
+  m.valid[1234] = 0;
+  m.values[1234] = 0;
+  std::string path = dir.file("band.raw");
+  terrain::write_raw(path, m, true);
+  check_bands_match(path);
+}
+
+TEST_CASE("stream_stats equals compute_stats", "[io][band]") {
+  auto hgt = testdata::require("srtm3_N44E033_crimea_coast_mountains.hgt");
+  if (hgt.empty()) return;
+  auto reader = terrain::open_band_reader(hgt);
+  terrain::GridStats streamed = terrain::stream_stats(*reader, 13);
+  terrain::GridStats whole = terrain::compute_stats(terrain::read_heightmap(hgt));
+  CHECK(streamed.min_m == whole.min_m);
+  CHECK(streamed.max_m == whole.max_m);
+  CHECK(streamed.mean_m == Approx(whole.mean_m).epsilon(1e-12));
+  CHECK(streamed.nodata_count == 852);  // MANIFEST.md
+  CHECK(streamed.valid_count == whole.valid_count);
+}

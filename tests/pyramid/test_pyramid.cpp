@@ -1,0 +1,285 @@
+// The closed-loop residual pyramid: coding, decoding, streaming, nodata, tiny grids.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <random>
+#include <unistd.h>
+
+#include "pyramid/pyramid.h"
+#include "shared_data.h"
+
+using namespace terrain;
+
+namespace {
+
+std::string temp_dir() { return std::filesystem::temp_directory_path().string(); }
+
+BuildOptions options(int levels = 0, int threads = 2) {
+  BuildOptions o;
+  o.level_count = levels;
+  o.threads = threads;
+  o.temp_dir = temp_dir();
+  o.temp_name = "test_pyramid_" + std::to_string(::getpid());
+  return o;
+}
+
+// Deterministic rough terrain: octaves of value noise, int16 range.
+Heightmap synthetic(int64_t w, int64_t h, uint32_t seed) {
+  Heightmap m;
+  m.info.width = w, m.info.height = h;
+  m.info.sample_type = SampleType::Int16;
+  m.values.resize(size_t(w * h));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> phase(0, 6.283);
+  double p[8];
+  for (double& v : p) v = phase(rng);
+  for (int64_t y = 0; y < h; ++y)
+    for (int64_t x = 0; x < w; ++x) {
+      double v = 0, amp = 900, fx = 0.013, fy = 0.011;
+      for (int o = 0; o < 4; ++o, amp *= 0.45, fx *= 2.1, fy *= 1.9)
+        v += amp * std::sin(x * fx + p[o]) * std::cos(y * fy + p[o + 4]);
+      v += double(int(rng() % 7) - 3);  // sensor noise
+      m.values[size_t(y * w + x)] = std::round(v + 1000);
+    }
+  return m;
+}
+
+Heightmap grid_from(const std::vector<int32_t>& g, int64_t w, int64_t h) {
+  Heightmap m;
+  m.info.width = w, m.info.height = h;
+  m.info.sample_type = SampleType::Int32;
+  m.values.assign(g.begin(), g.end());
+  return m;
+}
+
+// Feeds rows in small uneven chunks, as a file reader on a slow pipe might.
+class TricklingReader final : public BandReader {
+ public:
+  TricklingReader(std::unique_ptr<BandReader> inner, uint32_t seed) : inner_(std::move(inner)), rng_(seed) {}
+  const GridInfo& info() const override { return inner_->info(); }
+  int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
+    const int64_t n = std::min<int64_t>(rows, 1 + int64_t(rng_() % 7));
+    const int64_t got = inner_->read_rows(n, values, valid);
+    rows_read_ += got;
+    return got;
+  }
+
+ private:
+  std::unique_ptr<BandReader> inner_;
+  std::mt19937 rng_;
+};
+
+void require_same_output(const MemoryPyramid& a, const MemoryPyramid& b) {
+  REQUIRE(a.header.levels == b.header.levels);
+  REQUIRE(a.header.filter.taps == b.header.filter.taps);
+  REQUIRE(a.bands.size() == b.bands.size());
+  for (size_t l = 0; l < a.bands.size(); ++l) {
+    REQUIRE(a.bands[l].size() == b.bands[l].size());
+    for (size_t k = 0; k < a.bands[l].size(); ++k) REQUIRE(a.bands[l][k].bytes == b.bands[l][k].bytes);
+  }
+  REQUIRE(a.mask.size() == b.mask.size());
+  for (size_t k = 0; k < a.mask.size(); ++k) REQUIRE(a.mask[k].bytes == b.mask[k].bytes);
+  REQUIRE(a.recon == b.recon);
+}
+
+}  // namespace
+
+TEST_CASE("uniform quantiser: error within step/2, exact at step 1, rejects bad bytes") {
+  std::vector<int32_t> r{0, 1, -1, 2, -2, 3, -3, 1000, -1000, 2147483647, -2147483647 - 1, 5, -6};
+  for (int32_t step : {1, 2, 3, 4, 7}) {
+    UniformQuantizerCoder coder(step);
+    std::vector<int32_t> rec(r.size()), dec(r.size());
+    auto bytes = coder.encode(r.data(), int64_t(r.size()), 1, rec.data());
+    REQUIRE(coder.decode(bytes.data(), bytes.size(), int64_t(r.size()), 1, dec.data()));
+    CHECK(rec == dec);
+    for (size_t k = 0; k + 2 < r.size(); ++k) {  // the int32 extremes saturate
+      if (k == 9 || k == 10) continue;
+      REQUIRE(std::abs(int64_t(r[k]) - rec[k]) <= step / 2);
+    }
+    if (step == 1) CHECK(std::vector<int32_t>(r.begin(), r.end()) == rec);
+    CHECK_FALSE(coder.decode(bytes.data(), bytes.size() - 1, int64_t(r.size()), 1, dec.data()));
+    auto longer = bytes;
+    longer.push_back(0);
+    CHECK_FALSE(coder.decode(longer.data(), longer.size(), int64_t(r.size()), 1, dec.data()));
+  }
+  CHECK_THROWS_AS(UniformQuantizerCoder(0), std::invalid_argument);
+}
+
+TEST_CASE("validity mask run-length rows round trip") {
+  std::mt19937 rng(3);
+  for (int64_t w : {1, 2, 5, 64}) {
+    std::vector<uint8_t> m(size_t(w * 9));
+    for (auto& v : m) v = uint8_t(rng() % 3 != 0);
+    std::fill(m.begin(), m.begin() + w, uint8_t(0));  // a fully void row
+    auto bytes = encode_mask_rows(m.data(), w, 9);
+    std::vector<uint8_t> back(m.size(), 7);
+    REQUIRE(decode_mask_rows(bytes.data(), bytes.size(), w, 9, back.data()));
+    CHECK(back == m);
+    CHECK_FALSE(decode_mask_rows(bytes.data(), bytes.size() - 1, w, 9, back.data()));
+  }
+}
+
+TEST_CASE("closed loop: decoder output equals the builder's reconstruction; step 1 is lossless") {
+  Heightmap map = synthetic(203, 157, 11);
+  for (int32_t step : {1, 4}) {
+    UniformQuantizerCoder coder(step, 16);
+    MemoryPyramid out;
+    BuildResult res = build_pyramid(map, options(4), coder, out);
+    REQUIRE(res.header.levels.size() == 4);
+    for (int l = 0; l < 4; ++l) REQUIRE(decode_pyramid(out, coder, l) == out.recon[size_t(l)]);
+    auto finest = decode_pyramid(out, coder, 3);
+    int64_t max_err = 0;
+    for (size_t k = 0; k < finest.size(); ++k)
+      max_err = std::max<int64_t>(max_err, std::llabs(int64_t(map.values[k]) - finest[k]));
+    CHECK(max_err <= step / 2);
+    CHECK(res.levels.back().error_max_abs == max_err);
+  }
+}
+
+TEST_CASE("closed loop: finest-level error does not grow with the number of levels") {
+  std::vector<std::pair<std::string, Heightmap>> inputs;
+  inputs.emplace_back("synthetic 515x389", synthetic(515, 389, 5));
+  const std::string dem = testdata::require("srtm3_N46W122_rainier_adams_cascades.hgt");
+  if (!dem.empty()) inputs.emplace_back("N46W122", read_heightmap(dem));
+  const int32_t step = 4;
+  for (auto& [name, map] : inputs) {
+    std::vector<double> rms;
+    for (int levels : {2, 4, 6}) {
+      UniformQuantizerCoder coder(step);
+      MemoryPyramid out;
+      out.keep_reconstruction = false;
+      BuildResult res = build_pyramid(map, options(levels), coder, out);
+      const LevelStats& fin = res.levels.back();
+      std::cout << "[closed loop] " << name << " step " << step << ", " << levels << " levels: finest error rms "
+                << fin.error_rms << ", max " << fin.error_max_abs << ", residual rms " << fin.residual_rms
+                << ", bytes " << out.total_bytes() << "\n";
+      CHECK(fin.error_max_abs <= step / 2);
+      rms.push_back(fin.error_rms);
+    }
+    // The quantiser alone sets the error: uniform on {-2..2} gives rms ~1.2 at every depth.
+    CHECK(rms[1] <= rms[0] * 1.05 + 0.01);
+    CHECK(rms[2] <= rms[0] * 1.05 + 0.01);
+  }
+}
+
+TEST_CASE("streamed == in-memory, bit-exact, whatever the chunking and thread count") {
+  SECTION("synthetic") {
+    Heightmap map = synthetic(290, 333, 9);
+    map.valid.assign(map.values.size(), 1);
+    for (int64_t k = 0; k < 200; ++k) map.valid[size_t((k * 7919) % int64_t(map.values.size()))] = 0;
+    UniformQuantizerCoder coder(3, 32);
+    BuildOptions o = options(4, 2);
+    o.fill_band_rows = 40;
+    MemoryPyramid mem, streamed, one_thread;
+    build_pyramid(map, o, coder, mem);
+    TricklingReader trickle(make_memory_band_reader(map, 5), 42);
+    build_pyramid(trickle, o, coder, streamed);
+    require_same_output(mem, streamed);
+    o.threads = 1;
+    build_pyramid(map, o, coder, one_thread);
+    require_same_output(mem, one_thread);
+  }
+  SECTION("shared tiles read through open_band_reader") {
+    for (const char* name : {"srtm3_N44E033_crimea_coast_mountains.hgt", "pugetsound_ps_height_1k.png"}) {
+      const std::string path = testdata::require(name);
+      if (path.empty()) continue;
+      INFO(name);
+      Heightmap map = read_heightmap(path);
+      UniformQuantizerCoder coder(2);
+      MemoryPyramid mem, streamed;
+      build_pyramid(map, options(), coder, mem);
+      auto file_reader = open_band_reader(path);
+      TricklingReader trickle(std::move(file_reader), 1);
+      BuildOptions o = options();
+      o.threads = 1;
+      build_pyramid(trickle, o, coder, streamed);
+      require_same_output(mem, streamed);
+    }
+  }
+}
+
+TEST_CASE("nodata: voids survive a round trip, valid samples stay within step/2") {
+  Heightmap map = synthetic(300, 270, 21);
+  map.valid.assign(map.values.size(), 1);
+  auto void_at = [&](int64_t x, int64_t y) {
+    map.valid[size_t(y * 300 + x)] = 0;
+    map.values[size_t(y * 300 + x)] = -32768;  // what a reader might leave behind
+  };
+  for (int64_t y = 100; y < 160; ++y)
+    for (int64_t x = 40; x < 120; ++x) void_at(x, y);  // a lake-sized hole
+  for (int64_t x = 0; x < 300; ++x) void_at(x, 7);   // a whole void row
+  for (int64_t k = 0; k < 500; ++k) void_at((k * 97) % 300, (k * 61) % 270);  // scattered
+  for (int64_t y = 0; y < 270; ++y) void_at(299, y);  // the east edge column
+  const int32_t step = 4;
+  UniformQuantizerCoder coder(step);
+  MemoryPyramid out;
+  BuildResult res = build_pyramid(map, options(3), coder, out);
+  REQUIRE(res.header.has_voids);
+  CHECK(res.void_count == std::count(map.valid.begin(), map.valid.end(), uint8_t(0)));
+  std::vector<uint8_t> valid;
+  auto dec = decode_pyramid(out, coder, 2, &valid);
+  CHECK(valid == map.valid);
+  for (size_t k = 0; k < dec.size(); ++k)
+    if (map.valid[k]) REQUIRE(std::llabs(int64_t(map.values[k]) - dec[k]) <= step / 2);
+  // The fill keeps voids from polluting the coarse levels: no sample near -32768 anywhere.
+  for (int l = 0; l < 2; ++l)
+    for (int32_t v : out.recon[size_t(l)]) REQUIRE(v > -2000);
+
+  // Real voids (852 samples in N44E033).
+  const std::string dem = testdata::require("srtm3_N44E033_crimea_coast_mountains.hgt");
+  if (!dem.empty()) {
+    Heightmap real = read_heightmap(dem);
+    MemoryPyramid out2;
+    out2.keep_reconstruction = false;
+    BuildResult r2 = build_pyramid(real, options(), coder, out2);
+    std::vector<uint8_t> v2;
+    auto d2 = decode_pyramid(out2, coder, int(out2.header.levels.size()) - 1, &v2);
+    std::vector<uint8_t> expect = real.valid.empty() ? std::vector<uint8_t>(d2.size(), 1) : real.valid;
+    CHECK(r2.void_count == 852);
+    CHECK(v2 == expect);
+    int64_t max_err = 0;
+    for (size_t k = 0; k < d2.size(); ++k)
+      if (expect[k]) max_err = std::max<int64_t>(max_err, std::llabs(int64_t(real.values[k]) - d2[k]));
+    CHECK(max_err <= step / 2);
+  }
+}
+
+TEST_CASE("tiny grids 1x1..7x7 and strips round-trip losslessly at step 1") {
+  std::mt19937 rng(99);
+  std::vector<GridSize> sizes;
+  for (int64_t w = 1; w <= 7; ++w)
+    for (int64_t h = 1; h <= 7; ++h) sizes.push_back({w, h});
+  for (GridSize s : {GridSize{1, 300}, GridSize{300, 1}, GridSize{2, 515}, GridSize{515, 3}}) sizes.push_back(s);
+  UniformQuantizerCoder coder(1, 4);
+  for (GridSize s : sizes)
+    for (int levels : {0, 3, 20}) {
+      INFO(s.width << "x" << s.height << ", levels " << levels);
+      std::vector<int32_t> g(size_t(s.width * s.height));
+      for (auto& v : g) v = int32_t(rng() % 5000) - 2500;
+      MemoryPyramid out;
+      BuildResult res = build_pyramid(grid_from(g, s.width, s.height), options(levels), coder, out);
+      const int L = int(res.header.levels.size());
+      REQUIRE(res.header.levels.back() == s);
+      REQUIRE(decode_pyramid(out, coder, L - 1) == g);
+    }
+}
+
+TEST_CASE("bad input gives clear errors") {
+  UniformQuantizerCoder coder(1);
+  MemoryPyramid out;
+  Heightmap frac = grid_from({1, 2, 3, 4}, 2, 2);
+  frac.info.sample_type = SampleType::Int16;
+  frac.values[1] = 2.5;
+  CHECK_THROWS_WITH(build_pyramid(frac, options(), coder, out), Catch::Contains("non-integer"));
+  Heightmap huge = grid_from({1, 2, 3, 4}, 2, 2);
+  huge.info.sample_type = SampleType::Float32;
+  huge.values[0] = 1e12;
+  CHECK_THROWS_WITH(build_pyramid(huge, options(), coder, out), Catch::Contains("int32"));
+  Heightmap empty;
+  CHECK_THROWS_AS(build_pyramid(empty, options(), coder, out), std::invalid_argument);
+  BuildOptions bad = options();
+  bad.temp_dir = "/nonexistent/dir";
+  CHECK_THROWS_AS(build_pyramid(grid_from({1}, 1, 1), bad, coder, out), IoError);
+}

@@ -1,0 +1,84 @@
+// Shared command-line plumbing for every tool: a tiny argument parser (with -q/-v/--json/--help),
+// the heightmap read-option flags, and the mapping from errors to the documented exit statuses.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "pyramid/heightmap.h"
+
+namespace cli {
+
+// Exit statuses shared by all tools (the IoError ones equal terrain::IoErrorCode values).
+constexpr int kExitOk = 0;
+constexpr int kExitUsage = 1;
+constexpr int kExitInternal = 70;
+int exit_code_for(const terrain::IoError& error);
+// The exit-status table, for the end of every tool's --help.
+const char* exit_codes_help();
+
+// Bad command line: reported as "<tool>: <message>" plus a hint to --help, exit status 1.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct CommonFlags {
+  bool quiet = false;    // -q: no progress, no informational messages
+  bool verbose = false;  // -v: extra detail on stderr
+  bool json = false;     // --json: machine-readable result on stdout
+};
+
+class ArgParser {
+ public:
+  ArgParser(std::string program, std::string synopsis, std::string description);
+
+  // names: comma-separated spellings, e.g. "-o,--output". Setters run during parse() and may throw UsageError.
+  void flag(const std::string& names, const std::string& help, bool* target);
+  void option(const std::string& names, const std::string& metavar, const std::string& help,
+              std::function<void(const std::string&)> set);
+  void positional(const std::string& name, const std::string& help, std::string* target, bool required = true);
+  // Adds -q/--quiet, -v/--verbose and (if with_json) --json.
+  void add_common(CommonFlags& flags, bool with_json = true);
+  // Text printed after the option list in --help (the exit-code table is always appended).
+  void epilog(std::string text) { epilog_ = std::move(text); }
+
+  // Returns nullopt when the tool should go on, or the status to exit with now:
+  // 0 after printing --help to stdout, 1 after printing a usage error to stderr.
+  std::optional<int> parse(int argc, char** argv);
+  std::string help() const;
+
+ private:
+  struct Option {
+    std::vector<std::string> names;
+    std::string metavar, help;
+    std::function<void(const std::string&)> set;  // flags ignore the argument
+    bool takes_value = false;
+  };
+  struct Positional {
+    std::string name, help;
+    std::string* target;
+    bool required;
+  };
+  std::string program_, synopsis_, description_, epilog_;
+  std::vector<Option> options_;
+  std::vector<Positional> positionals_;
+  const Option* find(const std::string& name) const;
+};
+
+// Value parsers for option setters; they throw UsageError naming the option.
+int64_t parse_int(const std::string& option, const std::string& text, int64_t min, int64_t max);
+double parse_double(const std::string& option, const std::string& text);
+
+// Adds --vscale --voffset --spacing --width --height --type --endian --nodata --terrain-rgb.
+void add_read_options(ArgParser& parser, terrain::ReadOptions& options);
+
+// Runs a tool body, turning exceptions into "<program>: error: <message>" on stderr and the documented
+// exit status (IoError -> its code, UsageError -> 1, anything else -> 70).
+int run_tool(const std::string& program, const std::function<int()>& body);
+
+}  // namespace cli

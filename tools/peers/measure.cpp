@@ -1,0 +1,102 @@
+// Measurement shared by all peers: timing loop, error statistics and rate interpolation. Keeping it
+// outside the peers guarantees every codec is timed and judged the same way.
+#include "peers.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+namespace peers {
+
+ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded) {
+  const size_t n = size_t(img.sample_count());
+  if (decoded.size() != n) throw PeerError("decoded sample count does not match the image");
+  std::vector<double> abs_err;
+  abs_err.reserve(n);
+  double sum_sq = 0;
+  int32_t zmin = std::numeric_limits<int32_t>::max(), zmax = std::numeric_limits<int32_t>::min();
+  for (size_t i = 0; i < n; ++i) {
+    if (!img.valid.empty() && !img.valid[i]) continue;
+    const int32_t z = img.samples[i];
+    zmin = std::min(zmin, z);
+    zmax = std::max(zmax, z);
+    const double e = double(decoded[i]) - double(z);
+    sum_sq += e * e;
+    abs_err.push_back(std::fabs(e));
+  }
+  ErrorStats s;
+  if (abs_err.empty()) return s;
+  s.rms = std::sqrt(sum_sq / double(abs_err.size()));
+  s.max_abs = *std::max_element(abs_err.begin(), abs_err.end());
+  // Nearest-rank percentile: the smallest error that at least 99.9 % of samples do not exceed.
+  const size_t rank = size_t(std::ceil(0.999 * double(abs_err.size()))) - 1;
+  std::nth_element(abs_err.begin(), abs_err.begin() + ptrdiff_t(rank), abs_err.end());
+  s.p999_abs = abs_err[rank];
+  const double range = double(zmax) - double(zmin);
+  s.psnr_db = s.rms > 0 ? 20.0 * std::log10(std::max(range, 1.0) / s.rms)
+                        : std::numeric_limits<double>::infinity();
+  return s;
+}
+
+namespace {
+
+// Runs fn until the runs total min_total_seconds (at least once, at most max_reps); returns the fastest.
+template <class Fn>
+double best_time(Fn&& fn, double min_total_seconds, int max_reps, int* reps) {
+  using clock = std::chrono::steady_clock;
+  double best = std::numeric_limits<double>::infinity(), total = 0;
+  int count = 0;
+  do {
+    const auto t0 = clock::now();
+    fn();
+    const double t = std::chrono::duration<double>(clock::now() - t0).count();
+    best = std::min(best, t);
+    total += t;
+    ++count;
+  } while (total < min_total_seconds && count < max_reps);
+  *reps = count;
+  return best;
+}
+
+}  // namespace
+
+Result measure(Peer& peer, const Image16& img, const Setting& setting, double min_total_seconds,
+               int max_reps) {
+  Result r;
+  Bytes stream;
+  r.encode_seconds = best_time([&] { peer.encode(img, setting, stream); }, min_total_seconds, max_reps,
+                               &r.encode_reps);
+  r.bytes = stream.size();
+  r.bits_per_sample = 8.0 * double(r.bytes) / double(img.sample_count());
+  r.decoded.assign(size_t(img.sample_count()), 0);
+  r.decode_seconds = best_time(
+      [&] { peer.decode(stream.data(), stream.size(), img, setting, r.decoded.data()); },
+      min_total_seconds, max_reps, &r.decode_reps);
+  r.error = error_stats(img, r.decoded);
+  return r;
+}
+
+double bits_at_error(std::vector<RatePoint> points, double target) {
+  std::erase_if(points, [](const RatePoint& p) { return !(p.error > 0) || !(p.bits > 0); });
+  std::sort(points.begin(), points.end(), [](const RatePoint& a, const RatePoint& b) {
+    return a.error < b.error || (a.error == b.error && a.bits < b.bits);
+  });
+  // Lower envelope: a point is useful only if it needs fewer bits than every point with less error.
+  std::vector<RatePoint> envelope;
+  for (const RatePoint& p : points)
+    if (envelope.empty() || p.bits < envelope.back().bits) envelope.push_back(p);
+  if (envelope.empty() || target < envelope.front().error || target > envelope.back().error) return -1;
+  for (size_t i = 0; i < envelope.size(); ++i) {
+    if (envelope[i].error == target) return envelope[i].bits;
+    if (i + 1 < envelope.size() && target < envelope[i + 1].error) {
+      const RatePoint& a = envelope[i];
+      const RatePoint& b = envelope[i + 1];
+      const double t = std::log(target / a.error) / std::log(b.error / a.error);
+      return std::exp(std::log(a.bits) + t * (std::log(b.bits) - std::log(a.bits)));
+    }
+  }
+  return envelope.back().bits;
+}
+
+}  // namespace peers

@@ -1,0 +1,78 @@
+// Our codec (libcodec) as one more peer, through its public API only: lossy at a quantiser step
+// (step 1 = lossless) and the max-error mode, default 64x64 tiles, one thread.
+#include "peers.h"
+
+#include <codec/codec.h>
+
+#include <cstdio>
+#include <string>
+
+namespace peers {
+namespace {
+
+constexpr int kStep = 0;
+constexpr int kMaxError = 1;
+
+class OursPeer final : public Peer {
+ public:
+  std::string name() const override { return "ours"; }
+  std::string configuration() const override {
+    return "libcodec format v" + std::to_string(codec::kFormatVersion) +
+           ": int32 input, tile_size 64, one thread; step sweep (step 1 = lossless) with "
+           "bound_max_error off, and max-error sweep (bound_max_error on, max_error = E)";
+  }
+  bool lossless_capable() const override { return true; }
+  std::vector<Setting> sweep(bool quick) const override {
+    std::vector<double> steps = quick ? std::vector<double>{1, 8}
+                                      : std::vector<double>{1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64};
+    std::vector<double> errors = quick ? std::vector<double>{2} : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    std::vector<Setting> out;
+    for (double s : steps) {
+      char label[40];
+      std::snprintf(label, sizeof label, s == 1 ? "step=1 lossless" : "step=%g", s);
+      out.push_back({label, s, kStep, s == 1 ? 0.0 : -1.0});
+    }
+    for (double e : errors)
+      out.push_back({e == 0 ? "maxerr=0 lossless" : "maxerr=" + std::to_string(int(e)), e, kMaxError, e});
+    return out;
+  }
+
+  void encode(const Image16& img, const Setting& setting, Bytes& out) override {
+    samples_.assign(img.samples.begin(), img.samples.end());
+    codec::EncodeOptions options;
+    if (setting.mode == kStep) {
+      options.step = setting.param;
+    } else {
+      options.bound_max_error = true;
+      options.max_error = uint32_t(setting.param);
+    }
+    const size_t capacity = codec::encode_bound(img.width, img.height, options);
+    if (capacity == 0) throw PeerError("ours: invalid options for this image");
+    if (out.size() < capacity) out.resize(capacity);
+    size_t written = 0;
+    const codec::Status status = codec::encode(samples_.data(), img.width, img.width, img.height, options,
+                                               out.data(), out.size(), &written, scratch_);
+    if (status != codec::Status::Ok) throw PeerError(std::string("ours: encode: ") + codec::status_name(status));
+    out.resize(written);
+  }
+
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
+              int32_t* dst) override {
+    codec::HeaderInfo header;
+    codec::Status status = codec::read_header(data, size, &header);
+    if (status == codec::Status::Ok && (header.width != shape.width || header.height != shape.height))
+      throw PeerError("ours: decoded image has the wrong shape");
+    if (status == codec::Status::Ok) status = codec::decode(data, size, dst, shape.width, scratch_);
+    if (status != codec::Status::Ok) throw PeerError(std::string("ours: decode: ") + codec::status_name(status));
+  }
+
+ private:
+  std::vector<int32_t> samples_;  // int32 copy of the input; reused across calls
+  codec::Scratch scratch_;
+};
+
+}  // namespace
+
+std::unique_ptr<Peer> make_ours_peer() { return std::make_unique<OursPeer>(); }
+
+}  // namespace peers

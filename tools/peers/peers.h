@@ -1,0 +1,100 @@
+// Peer-codec benchmark harness: thin wrappers of the Debian-packaged peer codecs (OpenJPEG, jxrlib,
+// CharLS, LERC, ZFP, zstd, and our own libcodec) behind one interface, plus the measurement loop
+// (codec time only, one thread, best of N) and the error metrics every peer is judged by.
+//
+// The benchmark codes int16-range integer grids: each Peer gets the same Image16 and must return
+// exactly width*height decoded samples; errors are measured by the harness, never by the peer.
+// Peers throw PeerError (message names the codec and the problem) when the library reports failure.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace peers {
+
+class PeerError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// A grid of integer heights in int16 range, row-major, row 0 north.
+struct Image16 {
+  int64_t width = 0;
+  int64_t height = 0;
+  std::vector<int16_t> samples;  // width*height
+  std::vector<uint8_t> valid;    // width*height, 1 = data; empty = all valid. Errors count valid samples only.
+  double unit_m = 1.0;           // metres per sample unit (1 for SRTM, 0.2 for Puget Sound halved)
+  int64_t sample_count() const { return width * height; }
+};
+
+// One point of a peer's parameter sweep. `param` means what the peer says (rate, QP, NEAR, tolerance...).
+struct Setting {
+  std::string label;             // e.g. "9/7 1.50bps", "near=2"
+  double param = 0;
+  int mode = 0;                  // peer-specific variant (e.g. lossless vs lossy family)
+  double max_error_bound = -1;   // declared max |decoded - input| in sample units; < 0 = no guarantee
+};
+
+using Bytes = std::vector<uint8_t>;
+
+class Peer {
+ public:
+  virtual ~Peer() = default;
+  // Short identifier used on the command line and in CSV rows.
+  virtual std::string name() const = 0;
+  // Library version and every fixed coding parameter, for the report.
+  virtual std::string configuration() const = 0;
+  // The settings to benchmark; `quick` gives a shorter sweep for smoke runs.
+  virtual std::vector<Setting> sweep(bool quick) const = 0;
+  virtual bool lossless_capable() const = 0;
+  // Encodes img into out; on return out.size() is the complete stream size in bytes (everything a
+  // decoder needs besides width and height). Reuses out's capacity. Throws PeerError.
+  virtual void encode(const Image16& img, const Setting& setting, Bytes& out) = 0;
+  // Decodes a stream made by encode() for an image of shape's width/height into dst[width*height].
+  virtual void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting& setting,
+                      int32_t* dst) = 0;
+};
+
+// Every peer linked into this build, in a fixed order.
+std::vector<std::unique_ptr<Peer>> all_peers();
+
+// Error figures of decoded against img over valid samples, in sample units.
+struct ErrorStats {
+  double rms = 0;
+  double max_abs = 0;
+  double p999_abs = 0;   // 99.9th percentile of |error|
+  double psnr_db = 0;    // 20 log10((zmax - zmin) / rms); +inf when lossless
+};
+ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded);
+
+struct Result {
+  size_t bytes = 0;
+  double bits_per_sample = 0;
+  double encode_seconds = 0;   // best of encode_reps
+  double decode_seconds = 0;   // best of decode_reps
+  int encode_reps = 0, decode_reps = 0;
+  ErrorStats error;
+  std::vector<int32_t> decoded;
+};
+
+// Encodes and decodes img with one setting, timing encode and decode separately with
+// std::chrono::steady_clock: each is repeated until its repetitions total at least min_total_seconds
+// (at least once, at most max_reps times) and the fastest repetition is kept.
+Result measure(Peer& peer, const Image16& img, const Setting& setting, double min_total_seconds,
+               int max_reps);
+
+// One (error, bits/sample) point of a sweep.
+struct RatePoint {
+  double error = 0;
+  double bits = 0;
+};
+// Bits/sample needed for `target` error, log-log interpolated on the lower envelope of points (those
+// with error > 0; a point with error <= target exactly at a sweep point returns its rate). Returns a
+// negative value when target lies outside the envelope's error range.
+double bits_at_error(std::vector<RatePoint> points, double target);
+
+}  // namespace peers

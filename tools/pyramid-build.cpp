@@ -1,0 +1,146 @@
+// pyramid-build: heightmap file -> compressed, error-controlled multiresolution pyramid (.pyr).
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "cli.h"
+#include "json_writer.h"
+#include "progress.h"
+#include "runtime/pyramid_build.h"
+
+namespace {
+
+using terrain::runtime::ErrorTarget;
+
+int run(int argc, char** argv) {
+  std::string input, output, json_path;
+  cli::CommonFlags common;
+  terrain::ReadOptions read_options;
+  terrain::runtime::BuildFileOptions o;
+  int targets = 0;
+  auto set_target = [&](ErrorTarget t, const std::string& name, const std::string& v) {
+    o.target = t;
+    o.target_metres = cli::parse_double(name, v);
+    if (!(o.target_metres > 0) || !std::isfinite(o.target_metres) || o.target_metres > 1e6)
+      throw cli::UsageError(name + " must be a positive number of metres (at most 1e6)");
+    ++targets;
+  };
+  cli::ArgParser parser(
+      "pyramid-build", "INPUT -o OUT.pyr [--rms M | --max-error M | --step S | --lossless] [options]",
+      "Streams a heightmap (any format of terrain-info) once, builds the filtered pyramid with the\n"
+      "per-terrain optimal 11x11 downsampling filter, and codes the closed-loop residuals of every level\n"
+      "with one absolute quantisation step (libcodec). Memory stays bounded for any input height.\n"
+      "Error targets, in metres at the finest level: --rms M (the step is calibrated on a window of the\n"
+      "input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; integer input).\n"
+      "The output is written to OUT.pyr.tmp.<pid> and renamed when complete.");
+  parser.positional("INPUT", "heightmap to read", &input);
+  parser.option("-o,--output", "OUT", "pyramid file to write (required)", [&](const std::string& v) { output = v; });
+  parser.option("--rms", "M", "target rms error in metres", [&](const std::string& v) { set_target(ErrorTarget::Rms, "--rms", v); });
+  parser.option("--max-error", "M", "guaranteed max |error| in metres",
+                [&](const std::string& v) { set_target(ErrorTarget::MaxError, "--max-error", v); });
+  parser.option("--step", "S", "quantiser step in metres", [&](const std::string& v) { set_target(ErrorTarget::Step, "--step", v); });
+  bool lossless = false;
+  parser.flag("--lossless", "exact reconstruction (integer input, or float at --quantum)", &lossless);
+  parser.option("--quantum", "Q", "level unit in metres for float input (default 0.01)", [&](const std::string& v) {
+    o.quantum_metres = cli::parse_double("--quantum", v);
+    if (!(o.quantum_metres > 0) || !std::isfinite(o.quantum_metres)) throw cli::UsageError("--quantum must be positive");
+  });
+  parser.option("--levels", "N", "number of levels (default: until the coarsest is about 128 samples)",
+                [&](const std::string& v) { o.levels = int(cli::parse_int("--levels", v, 1, 40)); });
+  parser.option("--tile", "T", "codec tile side, multiple of 16 in [16, 1024] (default 64)",
+                [&](const std::string& v) {
+                  o.tile_size = uint32_t(cli::parse_int("--tile", v, 16, 1024));
+                  if (o.tile_size % 16) throw cli::UsageError("--tile must be a multiple of 16");
+                });
+  parser.option("--threads", "N", "worker threads (default: all cores; output is identical for any N)",
+                [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
+  parser.option("--json", "FILE", "write a JSON build report to FILE ('-' for stdout)",
+                [&](const std::string& v) { json_path = v; });
+  cli::add_read_options(parser, read_options);
+  parser.add_common(common, false);
+  if (auto status = parser.parse(argc, argv)) return *status;
+  if (output.empty()) throw cli::UsageError("missing -o OUT.pyr");
+  if (lossless) ++targets;
+  if (targets > 1) throw cli::UsageError("give at most one of --rms, --max-error, --step, --lossless");
+
+  std::ostringstream opts;
+  opts << "{\"target\":\"" << (o.target == ErrorTarget::Rms ? "rms" : o.target == ErrorTarget::MaxError ? "max-error"
+                                : o.target == ErrorTarget::Step ? "step" : "lossless")
+       << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size << "}";
+
+  std::unique_ptr<cli::Progress> bar;
+  std::string phase;
+  auto progress = [&](const std::string& p, double f) {
+    if (common.quiet) return;
+    if (p != phase) {
+      if (bar) bar->finish();
+      bar = std::make_unique<cli::Progress>("pyramid-build: " + p, 1000, true);
+      phase = p;
+    }
+    bar->update(int64_t(f * 1000));
+  };
+  terrain::runtime::BuildFileResult r;
+  try {
+    r = terrain::runtime::build_pyramid_file(input, read_options, output, o, opts.str(), progress);
+  } catch (const std::invalid_argument& e) {
+    throw cli::UsageError(e.what());
+  }
+  if (bar) bar->finish();
+
+  const double mpu = r.metres_per_unit;
+  const auto& lv = r.build.levels;
+  const double bits = 8.0 * double(r.file_bytes) / double(std::max<int64_t>(1, r.finest_samples));
+  if (!common.quiet) {
+    if (common.verbose)
+      for (const auto& line : r.calibration_log) std::cerr << "pyramid-build: calibration: " << line << "\n";
+    for (const auto& line : r.build.log) std::cerr << "pyramid-build: " << line << "\n";
+    std::fprintf(stderr, "pyramid-build: %s: %zu levels, step %.4g m, %llu bytes = %.4f bits/sample, finest rms %.4g m, max %.4g m, %.1f Msamples/s\n",
+                 output.c_str(), lv.size(), r.step_units * mpu, (unsigned long long)r.file_bytes, bits,
+                 lv.back().error_rms * mpu, double(lv.back().error_max_abs) * mpu,
+                 double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
+  }
+  if (!json_path.empty()) {
+    std::ofstream file;
+    if (json_path != "-") {
+      file.open(json_path);
+      if (!file) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
+    }
+    std::ostream& os = json_path == "-" ? std::cout : file;
+    cli::JsonWriter j(os);
+    j.begin_object();
+    j.field("input", input).field("output", output).field("bytes", int64_t(r.file_bytes));
+    j.field("finest_samples", r.finest_samples).field("bits_per_sample", bits);
+    j.field("metres_per_unit", mpu).field("step_metres", r.step_units * mpu);
+    j.field("max_error_bound_metres", o.target == ErrorTarget::MaxError ? double(r.max_error_units) * mpu : -1.0);
+    j.field("filter", r.build.filter_report.summary()).field("filter_fallback", r.build.filter_report.fallback);
+    j.field("seconds_calibrate", r.seconds_calibrate).field("seconds_build", r.seconds_build);
+    j.field("build_msamples_per_s", double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
+    j.field("voids", r.build.void_count);
+    j.key("levels").begin_array();
+    for (size_t l = 0; l < lv.size(); ++l) {
+      j.begin_object();
+      j.field("level", int64_t(l)).field("width", lv[l].size.width).field("height", lv[l].size.height);
+      j.field("bytes", int64_t(lv[l].bytes)).field("residual_rms_m", lv[l].residual_rms * mpu);
+      j.field("error_rms_m", lv[l].error_rms * mpu).field("error_max_m", double(lv[l].error_max_abs) * mpu);
+      j.end_object();
+    }
+    j.end_array();
+    j.end_object();
+    j.finish();
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return cli::run_tool("pyramid-build", [&] {
+    try {
+      return run(argc, argv);
+    } catch (const terrain::runtime::FormatError& e) {
+      std::cerr << "pyramid-build: error: " << e.what() << "\n";
+      return terrain::runtime::exit_code(e.code());
+    }
+  });
+}

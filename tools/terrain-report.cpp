@@ -1,0 +1,237 @@
+// terrain-report: how far a compressed pyramid is from its source: per-level and overall error in
+// metres, bits per finest sample, compression factor, build and decode speed, and an error heat-map.
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+
+#include "cli.h"
+#include "json_writer.h"
+#include "pyramid/pyramid.h"
+#include "runtime/pyramid_build.h"
+#include "runtime/region_decoder.h"
+
+namespace {
+
+using namespace terrain;
+using namespace terrain::runtime;
+
+struct ErrorStats {
+  int64_t count = 0;
+  double rms = 0, max = 0, p999 = 0, psnr = 0;
+};
+
+// |errors| in metres (reordered in place); range = zmax - zmin of the reference in metres.
+ErrorStats error_stats(std::vector<double>& abs_err, double range) {
+  ErrorStats s;
+  s.count = int64_t(abs_err.size());
+  if (abs_err.empty()) return s;
+  double sq = 0;
+  for (double e : abs_err) sq += e * e, s.max = std::max(s.max, e);
+  s.rms = std::sqrt(sq / double(abs_err.size()));
+  const size_t k = std::min(abs_err.size() - 1, size_t(std::ceil(0.999 * double(abs_err.size()))) - 1);
+  std::nth_element(abs_err.begin(), abs_err.begin() + std::ptrdiff_t(k), abs_err.end());
+  s.p999 = abs_err[k];
+  s.psnr = s.rms > 0 ? 20 * std::log10(range / s.rms) : INFINITY;
+  return s;
+}
+
+// Linear ramp black -> blue -> magenta -> orange -> yellow, for e in [0, 1].
+void heat_colour(double e, uint8_t* rgb) {
+  static const double stops[5][3] = {{0, 0, 0}, {20, 40, 160}, {170, 40, 150}, {250, 130, 30}, {255, 250, 150}};
+  e = std::clamp(e, 0.0, 1.0) * 4;
+  const int i = std::min(3, int(e));
+  const double f = e - i;
+  for (int c = 0; c < 3; ++c) rgb[c] = uint8_t(stops[i][c] + f * (stops[i + 1][c] - stops[i][c]) + 0.5);
+}
+
+void write_heatmap(const std::string& path, const std::vector<float>& abs_err, int64_t w, int64_t h, double scale_max) {
+  // Max-pool to at most 2048 pixels on the longer side so isolated large errors stay visible.
+  const int64_t f = std::max<int64_t>(1, (std::max(w, h) + 2047) / 2048);
+  const int64_t ow = (w + f - 1) / f, oh = (h + f - 1) / f;
+  std::vector<uint8_t> rgb(size_t(ow * oh * 3));
+  for (int64_t oy = 0; oy < oh; ++oy)
+    for (int64_t ox = 0; ox < ow; ++ox) {
+      float m = 0;
+      bool any = false;
+      for (int64_t y = oy * f; y < std::min(h, (oy + 1) * f); ++y)
+        for (int64_t x = ox * f; x < std::min(w, (ox + 1) * f); ++x) {
+          const float e = abs_err[size_t(y * w + x)];
+          if (!std::isnan(e)) m = std::max(m, e), any = true;
+        }
+      uint8_t* p = &rgb[size_t((oy * ow + ox) * 3)];
+      if (!any) p[0] = p[1] = p[2] = 128;  // void
+      else heat_colour(scale_max > 0 ? m / scale_max : 0, p);
+    }
+  const std::string tmp = path + ".tmp.png";
+  auto out = OIIO::ImageOutput::create(tmp);
+  OIIO::ImageSpec spec(int(ow), int(oh), 3, OIIO::TypeDesc::UINT8);
+  if (!out || !out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) || !out->close())
+    throw IoError(IoErrorCode::WriteFailed, path + ": cannot write the heat-map");
+  std::filesystem::rename(tmp, path);
+}
+
+int run(int argc, char** argv) {
+  std::string input, pyr_path, json_path, heatmap;
+  cli::CommonFlags common;
+  ReadOptions read_options;
+  cli::ArgParser parser("terrain-report", "INPUT PYRAMID.pyr [--json FILE] [--heatmap FILE.png] [read options]",
+                        "Compares a pyramid file with the input it was built from. Per level and overall: rms,\n"
+                        "max |error|, 99.9th percentile of |error| (metres) and PSNR = 20 log10((zmax-zmin)/rms) dB,\n"
+                        "where level l of the source is the builder's own filtered level (same D filter, same void\n"
+                        "fill) and zmin/zmax are the finest source level's. Also bits per finest sample,\n"
+                        "compression factor against the source samples, build time (from the file) and decode time.\n"
+                        "Holds the input in memory (8 bytes per sample).");
+  parser.positional("INPUT", "the heightmap the pyramid was built from", &input);
+  parser.positional("PYRAMID", "the .pyr file", &pyr_path);
+  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)", [&](const std::string& v) { json_path = v; });
+  parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)",
+                [&](const std::string& v) { heatmap = v; });
+  cli::add_read_options(parser, read_options);
+  parser.add_common(common, false);
+  if (auto status = parser.parse(argc, argv)) return *status;
+
+  auto file = PyramidFile::open(pyr_path);
+  const ContainerInfo& info = file->info();
+  const Heightmap map = read_heightmap(input, read_options);
+  if (uint64_t(map.width()) != info.width || uint64_t(map.height()) != info.height)
+    throw IoError(IoErrorCode::DimensionMismatch, input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
+                                                      " does not match the pyramid's " + std::to_string(info.width) + "x" +
+                                                      std::to_string(info.height));
+  const double mpu = info.vertical_scale, off = info.vertical_offset;
+
+  // The source levels exactly as the builder formed them: a lossless build with the stored filter.
+  BuildOptions bo;
+  bo.level_count = file->level_count();
+  bo.value_scale = map.info.vertical_scale / mpu;
+  bo.use_fixed_filter = true;
+  std::copy(info.filter.begin(), info.filter.end(), bo.fixed_filter.taps.begin());
+  bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
+  bo.temp_dir = std::filesystem::temp_directory_path().string();
+  bo.temp_name = "terrain-report";
+  UniformQuantizerCoder lossless(1, 256);
+  MemoryPyramid source;
+  build_pyramid(map, bo, lossless, source);
+
+  double zmin = INFINITY, zmax = -INFINITY;
+  for (int64_t i = 0; i < map.width() * map.height(); ++i)
+    if (map.valid.empty() || map.valid[size_t(i)]) {
+      const double z = map.values[size_t(i)] * map.info.vertical_scale + map.info.vertical_offset;
+      zmin = std::min(zmin, z), zmax = std::max(zmax, z);
+    }
+  const double range = zmax > zmin ? zmax - zmin : 1.0;
+
+  RegionDecoder decoder(file, 0);
+  const int levels = file->level_count();
+  std::vector<ErrorStats> per_level(size_t(levels));
+  std::vector<double> all_err;
+  std::vector<float> finest_err;
+  double decode_seconds = 0;
+  int64_t voids_mismatch = 0;
+  for (int l = 0; l < levels; ++l) {
+    const GridSize s = file->level_size(l);
+    std::vector<float> dec(size_t(s.width * s.height));
+    const auto t0 = std::chrono::steady_clock::now();
+    decoder.decode_metres(l, terrain::Rect{0, 0, s.width, s.height}, dec.data(), s.width);
+    if (l == levels - 1) decode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const std::vector<int32_t>& ref = source.recon[size_t(l)];
+    std::vector<double> err;
+    err.reserve(dec.size());
+    if (l == levels - 1) finest_err.assign(dec.size(), NAN);
+    for (size_t i = 0; i < dec.size(); ++i) {
+      const bool valid = l < levels - 1 || map.valid.empty() || map.valid[i];
+      if (!valid) {
+        if (!std::isnan(dec[i])) ++voids_mismatch;
+        continue;
+      }
+      // float output holds metres to about 1e-7 relative; the error is measured on that output.
+      const double e = std::abs(double(dec[i]) - (double(ref[i]) * mpu + off));
+      err.push_back(e);
+      if (l == levels - 1) finest_err[i] = float(e);
+    }
+    all_err.insert(all_err.end(), err.begin(), err.end());
+    per_level[size_t(l)] = error_stats(err, range);
+  }
+  const ErrorStats overall = error_stats(all_err, range);
+  const ErrorStats& finest = per_level.back();
+
+  const uint64_t bytes = std::filesystem::file_size(pyr_path);
+  const int64_t samples = map.width() * map.height();
+  const double bits = 8.0 * double(bytes) / double(samples);
+  const int source_bits = map.info.sample_type == SampleType::Int16 || map.info.sample_type == SampleType::UInt16 ? 16
+                          : map.info.sample_type == SampleType::TerrainRGB                                     ? 24
+                                                                                                               : 32;
+  double build_seconds = -1;
+  const std::string meta(file->container().metadata_json());
+  if (auto p = meta.find("\"seconds_build\":"); p != std::string::npos) build_seconds = std::atof(meta.c_str() + p + 16);
+
+  if (!heatmap.empty()) write_heatmap(heatmap, finest_err, map.width(), map.height(), finest.max);
+
+  if (!common.quiet) {
+    std::printf("%s vs %s: %dx%d, %d levels, %s\n", pyr_path.c_str(), input.c_str(), int(map.width()), int(map.height()),
+                levels, voids_mismatch ? "VOIDS NOT RESTORED" : "voids restored");
+    std::printf("%-6s %11s %10s %10s %10s %8s\n", "level", "size", "rms m", "max m", "p99.9 m", "PSNR dB");
+    for (int l = 0; l < levels; ++l) {
+      const GridSize s = file->level_size(l);
+      const ErrorStats& e = per_level[size_t(l)];
+      std::printf("%-6d %5lldx%-5lld %10.4f %10.4f %10.4f %8.2f\n", l, (long long)s.width, (long long)s.height, e.rms, e.max,
+                  e.p999, e.psnr);
+    }
+    std::printf("%-6s %11s %10.4f %10.4f %10.4f %8.2f\n", "all", "", overall.rms, overall.max, overall.p999, overall.psnr);
+    std::printf("size %llu bytes, %.4f bits per finest sample, compression factor %.2f (vs %d-bit source samples)\n",
+                (unsigned long long)bytes, bits, double(source_bits) / bits, source_bits);
+    std::printf("build %.3f s (%.1f Msamples/s), finest-level decode %.3f s (%.1f Msamples/s, one thread, cold cache)\n",
+                build_seconds, build_seconds > 0 ? samples / 1e6 / build_seconds : 0.0, decode_seconds,
+                samples / 1e6 / std::max(1e-9, decode_seconds));
+  }
+  if (!json_path.empty()) {
+    std::ofstream f;
+    if (json_path != "-") {
+      f.open(json_path);
+      if (!f) throw IoError(IoErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
+    }
+    std::ostream& os = json_path == "-" ? std::cout : f;
+    cli::JsonWriter j(os);
+    auto put = [&](const ErrorStats& e) {
+      j.field("samples", e.count).field("rms_m", e.rms).field("max_m", e.max).field("p999_m", e.p999).field("psnr_db", e.psnr);
+    };
+    j.begin_object();
+    j.field("input", input).field("pyramid", pyr_path).field("width", map.width()).field("height", map.height());
+    j.field("bytes", int64_t(bytes)).field("bits_per_sample", bits).field("compression_factor", double(source_bits) / bits);
+    j.field("zmin_m", zmin).field("zmax_m", zmax).field("voids_restored", voids_mismatch == 0);
+    j.field("build_seconds", build_seconds).field("decode_seconds", decode_seconds);
+    j.field("decode_msamples_per_s", samples / 1e6 / std::max(1e-9, decode_seconds));
+    j.key("overall").begin_object();
+    put(overall);
+    j.end_object();
+    j.key("levels").begin_array();
+    for (int l = 0; l < levels; ++l) {
+      j.begin_object();
+      j.field("level", l).field("width", file->level_size(l).width).field("height", file->level_size(l).height);
+      put(per_level[size_t(l)]);
+      j.end_object();
+    }
+    j.end_array();
+    j.end_object();
+    j.finish();
+  }
+  return voids_mismatch ? 10 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return cli::run_tool("terrain-report", [&] {
+    try {
+      return run(argc, argv);
+    } catch (const FormatError& e) {
+      std::cerr << "terrain-report: error: " << e.what() << "\n";
+      return exit_code(e.code());
+    }
+  });
+}
