@@ -1,8 +1,8 @@
 // codec-bench: rate/error/speed comparison of our codec and the peer codecs on DEMs.
 //
-// Every input grid is converted to int16 sample units (metres for SRTM; the native quantum doubled
-// until the range fits int16 otherwise, e.g. Puget Sound's 0.1 m units become 0.2 m units), coded by
-// every setting of every peer, and judged against that int16 grid. Errors are reported in metres.
+// Every input grid is converted to int16 sample units (the file's own integers for SRTM; the native
+// quantum minus a mid-range offset for 16-bit data such as Puget Sound's 0.1 m units), coded by every
+// setting of every peer, and judged against that int16 grid. Errors are reported in metres.
 #include <peers.h>
 #include <pyramid/heightmap.h>
 
@@ -14,7 +14,6 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <map>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -200,19 +199,21 @@ std::string short_name(const std::string& path) { return std::filesystem::path(p
 
 void write_csv_header(std::ostream& os) {
   os << "file,codec,setting,unit_m,width,height,bytes,bits_per_sample,rms_m,max_abs_m,p999_abs_m,psnr_db,"
-        "encode_s,decode_s,encode_msamples_s,decode_msamples_s,encode_reps,decode_reps,declared_bound_m,"
+        "encode_s,decode_s,encode_cpu_s,decode_cpu_s,encode_msamples_s,decode_msamples_s,encode_cpu_msamples_s,"
+        "decode_cpu_msamples_s,encode_reps,decode_reps,declared_bound_m,"
         "error\n";
 }
 
 void write_csv_row(std::ostream& os, const Row& r) {
   const double n = double(r.width * r.height);
   const peers::Result& x = r.result;
-  char buf[512];
-  std::snprintf(buf, sizeof buf, "%zu,%.5f,%.5f,%.4f,%.4f,%.3f,%.6f,%.6f,%.2f,%.2f,%d,%d,%.4g", x.bytes,
-                x.bits_per_sample, x.error.rms * r.unit_m, x.error.max_abs * r.unit_m,
+  char buf[640];
+  const auto msps = [n](double seconds) { return seconds > 0 ? n / seconds / 1e6 : 0.0; };
+  std::snprintf(buf, sizeof buf, "%zu,%.5f,%.5f,%.4f,%.4f,%.3f,%.6f,%.6f,%.6f,%.6f,%.2f,%.2f,%.2f,%.2f,%d,%d,%.4g",
+                x.bytes, x.bits_per_sample, x.error.rms * r.unit_m, x.error.max_abs * r.unit_m,
                 x.error.p999_abs * r.unit_m, x.error.psnr_db, x.encode_seconds, x.decode_seconds,
-                x.encode_seconds > 0 ? n / x.encode_seconds / 1e6 : 0.0,
-                x.decode_seconds > 0 ? n / x.decode_seconds / 1e6 : 0.0, x.encode_reps, x.decode_reps,
+                x.encode_cpu_seconds, x.decode_cpu_seconds, msps(x.encode_seconds), msps(x.decode_seconds),
+                msps(x.encode_cpu_seconds), msps(x.decode_cpu_seconds), x.encode_reps, x.decode_reps,
                 r.bound < 0 ? -1.0 : r.bound * r.unit_m);
   os << r.file << ',' << r.codec << ",\"" << r.setting << "\"," << r.unit_m << ',' << r.width << ','
      << r.height << ',' << buf << ",\"" << r.error << "\"\n";
@@ -240,7 +241,8 @@ void write_json(std::ostream& os, const std::vector<Row>& rows) {
        << ", \"bits_per_sample\": " << x.bits_per_sample << ", \"rms_m\": " << x.error.rms * r.unit_m
        << ", \"max_abs_m\": " << x.error.max_abs * r.unit_m << ", \"p999_abs_m\": " << x.error.p999_abs * r.unit_m
        << ", \"psnr_db\": " << psnr << ", \"encode_s\": " << x.encode_seconds
-       << ", \"decode_s\": " << x.decode_seconds << ", \"error\": " << json_string(r.error) << "}"
+       << ", \"decode_s\": " << x.decode_seconds << ", \"encode_cpu_s\": " << x.encode_cpu_seconds
+       << ", \"decode_cpu_s\": " << x.decode_cpu_seconds << ", \"error\": " << json_string(r.error) << "}"
        << (i + 1 < rows.size() ? ",\n" : "\n");
   }
   os << "]\n";
@@ -268,7 +270,7 @@ void write_summary(std::ostream& os, const std::vector<Row>& rows, const std::ve
   const double rms_targets[] = {0.5, 1, 2, 4};
   const double max_targets[] = {1, 2, 5};
   os << "| DEM | codec | lossless | @rms 0.5 m | @rms 1 m | @rms 2 m | @rms 4 m | @max 1 m | @max 2 m | @max 5 m "
-        "| encode Ms/s | decode Ms/s |\n";
+        "| encode Ms/s (CPU) | decode Ms/s (CPU) |\n";
   os << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const std::string& file : file_order) {
     for (const std::string& codec : codec_order) {
@@ -284,8 +286,8 @@ void write_summary(std::ostream& os, const std::vector<Row>& rows, const std::ve
         by_max.push_back({x.error.max_abs * r.unit_m, x.bits_per_sample});
         if (x.error.max_abs == 0 && (lossless < 0 || x.bits_per_sample < lossless)) lossless = x.bits_per_sample;
         const double n = double(r.width * r.height);
-        if (x.encode_seconds > 0) enc.push_back(n / x.encode_seconds / 1e6);
-        if (x.decode_seconds > 0) dec.push_back(n / x.decode_seconds / 1e6);
+        if (x.encode_cpu_seconds > 0) enc.push_back(n / x.encode_cpu_seconds / 1e6);
+        if (x.decode_cpu_seconds > 0) dec.push_back(n / x.decode_cpu_seconds / 1e6);
       }
       if (!any) continue;
       os << "| " << file << " | " << codec << " | " << cell(lossless);
@@ -294,8 +296,9 @@ void write_summary(std::ostream& os, const std::vector<Row>& rows, const std::ve
       os << " | " << speed_range(enc) << " | " << speed_range(dec) << " |\n";
     }
   }
-  os << "\nBits/sample; '—' = the sweep does not reach that error. Ms/s = million samples per second, "
-        "one thread, best of N repetitions, range over the sweep.\n";
+  os << "\nBits/sample; '—' = the sweep does not reach that error. Ms/s = million samples per second of "
+        "process CPU time, one thread, best of N repetitions, range over the sweep (wall-clock figures: "
+        "CSV).\n";
 }
 
 std::vector<std::unique_ptr<peers::Peer>> select_peers(const std::vector<std::string>& names) {
@@ -336,7 +339,7 @@ int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
   int failures = 0;
   for (auto& peer : peer_list) {
     bool has_lossless = false;
-    for (const peers::Setting& s : peer->sweep(false)) {
+    for (const peers::Setting& s : peer->sweep(false, 1.0)) {
       std::string verdict = "ok";
       try {
         const peers::Result r = peers::measure(*peer, img, s, 0, 1);
@@ -424,7 +427,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %lldx%lld, %s\n", file.c_str(), (long long)img.width, (long long)img.height,
                  note.c_str());
     for (auto& peer : peer_list) {
-      for (const peers::Setting& s : peer->sweep(opt.quick)) {
+      for (const peers::Setting& s : peer->sweep(opt.quick, img.unit_m)) {
         Row row{file, peer->name(), s.label, img.unit_m, img.width, img.height, {}, s.max_error_bound, {}};
         try {
           row.result = peers::measure(*peer, img, s, opt.min_time, 50);

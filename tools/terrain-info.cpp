@@ -88,23 +88,28 @@ int run(int argc, char** argv) {
     j.finish();
     return cli::kExitOk;
   }
+  using cli::shortest;
   std::printf("file:         %s\n", path.c_str());
   std::printf("format:       %s\n", terrain::file_format_name(g.format));
   std::printf("dimensions:   %" PRId64 " x %" PRId64 "\n", g.width, g.height);
   std::printf("sample type:  %s\n", terrain::sample_type_name(g.sample_type));
-  std::printf("vertical:     metres = value * %.17g + %.17g\n", g.vertical_scale, g.vertical_offset);
+  std::printf("vertical:     metres = value * %s + %s\n", shortest(g.vertical_scale).c_str(),
+              shortest(g.vertical_offset).c_str());
   if (valid_count)
-    std::printf("min / max:    %.6g / %.6g m (mean %.6g m)\n", min_m, max_m, mean_m);
+    // 10 significant digits hide binary noise such as 13.700000000000728; --json has the exact values.
+    std::printf("min / max:    %.10g / %.10g m (mean %.6g m)\n", min_m, max_m, mean_m);
   else
     std::printf("min / max:    - (no valid samples)\n");
   if (g.nodata)
-    std::printf("nodata:       %" PRId64 " of %" PRId64 " samples (value %.17g)\n", nodata_count, g.width * g.height,
-                *g.nodata);
+    std::printf("nodata:       %" PRId64 " of %" PRId64 " samples (value %s)\n", nodata_count, g.width * g.height,
+                shortest(*g.nodata).c_str());
   else
     std::printf("nodata:       none defined\n");
-  std::printf("spacing:      %.17g x %.17g %s\n", g.spacing_x, g.spacing_y, g.horizontal_units.c_str());
+  std::printf("spacing:      %s x %s %s\n", shortest(g.spacing_x).c_str(), shortest(g.spacing_y).c_str(),
+              g.horizontal_units.c_str());
   if (g.origin_x && g.origin_y)
-    std::printf("origin:       north-west sample at x %.17g, y %.17g\n", *g.origin_x, *g.origin_y);
+    std::printf("origin:       north-west sample at x %s, y %s\n", shortest(*g.origin_x).c_str(),
+                shortest(*g.origin_y).c_str());
   else
     std::printf("origin:       unknown\n");
   return cli::kExitOk;

@@ -128,7 +128,7 @@ int run(int argc, char** argv) {
 
   RegionDecoder decoder(file, 0);
   const int levels = file->level_count();
-  std::vector<ErrorStats> per_level(size_t(levels));
+  std::vector<ErrorStats> per_level(static_cast<size_t>(levels));
   std::vector<double> all_err;
   std::vector<float> finest_err;
   double decode_seconds = 0;

@@ -94,14 +94,24 @@ class BitReader {
       count_ += 8;
     }
   }
-  // Next n bits (1 <= n <= 32) without consuming; the cache must hold them (call refill()).
-  uint32_t peek(int n) const { return uint32_t(cache_ >> (64 - n)); }
+  // Next n bits (0 <= n <= 32) without consuming; the cache must hold them (call refill()).
+  uint32_t peek(int n) const { return uint32_t((cache_ >> 32) >> (32 - n)); }
+  // Consumes n bits (0 <= n <= 32) that refill() has made available.
+  uint32_t take(int n) {
+    const uint32_t v = peek(n);
+    skip(n);
+    return v;
+  }
+  // Leading one bits in the cache (valid up to the cached count, at least 57 after refill()).
+  int leading_ones() const {
+    const uint64_t inverted = ~cache_;
+    return inverted ? __builtin_clzll(inverted) : 64;
+  }
   void skip(int n) {
     cache_ <<= n;
     count_ -= n;
   }
   uint32_t get(int n) {  // n <= 32
-    if (n == 0) return 0;
     if (count_ < n) refill();
     const uint32_t v = peek(n);
     skip(n);

@@ -8,131 +8,157 @@
 //  the decoder's post-filter undoes it and so smooths quantisation steps across the edge.
 #include "lapped_transform.h"
 
-#include <algorithm>
 #include <cstdint>
 
 namespace codec::detail {
 namespace {
 
-constexpr int64_t kTanPi16 = 51;   // tan(pi/16) * 256 (0.1992 vs 0.1989)
-constexpr int64_t kSinPi8 = 98;    // sin(pi/8) * 256 (0.3828 vs 0.3827)
+constexpr int32_t kTanPi16 = 51;   // tan(pi/16) * 256 (0.1992 vs 0.1989)
+constexpr int32_t kSinPi8 = 98;    // sin(pi/8) * 256 (0.3828 vs 0.3827)
 
-inline int32_t saturate(int64_t v) {
-  return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX));
+// Additions wrap instead of overflowing: valid streams never come near 2^31 (see the header), and
+// wrapping keeps garbage coefficients from a corrupt stream free of undefined behaviour.
+inline int32_t add(int32_t a, int32_t b) { return int32_t(uint32_t(a) + uint32_t(b)); }
+inline int32_t sub(int32_t a, int32_t b) { return int32_t(uint32_t(a) - uint32_t(b)); }
+// (coefficient * v + 128) >> 8 exactly, in 32-bit arithmetic so that it vectorises: with
+// v = 256 h + l, that is coefficient * h + ((coefficient * l + 128) >> 8), and |coefficient * h| < 2^30
+// for every int32 v because coefficient < 128.
+inline int32_t shear(int32_t coefficient, int32_t v) {
+  const int32_t high = v >> 8, low = v & 255;
+  return coefficient * high + ((coefficient * low + 128) >> 8);
 }
 
-inline int64_t shear(int64_t coefficient, int64_t v) { return (coefficient * v + 128) >> 8; }
+#define CODEC_INLINE inline __attribute__((always_inline))
 
-inline void fwd4(int64_t& x0, int64_t& x1, int64_t& x2, int64_t& x3) {
-  const int64_t d03 = x0 - x3, s03 = x3 + (d03 >> 1);
-  const int64_t d12 = x1 - x2, s12 = x2 + (d12 >> 1);
-  const int64_t even_diff = s03 - s12;
-  const int64_t mean = s12 + (even_diff >> 1);
-  int64_t a = d03, b = d12;
-  a += shear(kTanPi16, b);
-  b -= shear(kSinPi8, a);
-  a += shear(kTanPi16, b);
+CODEC_INLINE void fwd4(int32_t& x0, int32_t& x1, int32_t& x2, int32_t& x3) {
+  const int32_t d03 = sub(x0, x3), s03 = add(x3, d03 >> 1);
+  const int32_t d12 = sub(x1, x2), s12 = add(x2, d12 >> 1);
+  const int32_t even_diff = sub(s03, s12);
+  const int32_t mean = add(s12, even_diff >> 1);
+  int32_t a = d03, b = d12;
+  a = add(a, shear(kTanPi16, b));
+  b = sub(b, shear(kSinPi8, a));
+  a = add(a, shear(kTanPi16, b));
   x0 = mean;
   x1 = a;
   x2 = even_diff;
   x3 = b;
 }
 
-inline void inv4(int64_t& x0, int64_t& x1, int64_t& x2, int64_t& x3) {
-  int64_t a = x1, b = x3;
-  a -= shear(kTanPi16, b);
-  b += shear(kSinPi8, a);
-  a -= shear(kTanPi16, b);
-  const int64_t d03 = a, d12 = b;
-  const int64_t s12 = x0 - (x2 >> 1);
-  const int64_t s03 = x2 + s12;
-  const int64_t r2 = s12 - (d12 >> 1), r1 = d12 + r2;
-  const int64_t r3 = s03 - (d03 >> 1), r0 = d03 + r3;
+CODEC_INLINE void inv4(int32_t& x0, int32_t& x1, int32_t& x2, int32_t& x3) {
+  int32_t a = x1, b = x3;
+  a = sub(a, shear(kTanPi16, b));
+  b = add(b, shear(kSinPi8, a));
+  a = sub(a, shear(kTanPi16, b));
+  const int32_t d03 = a, d12 = b;
+  const int32_t s12 = sub(x0, x2 >> 1);
+  const int32_t s03 = add(x2, s12);
+  const int32_t r2 = sub(s12, d12 >> 1), r1 = add(d12, r2);
+  const int32_t r3 = sub(s03, d03 >> 1), r0 = add(d03, r3);
   x0 = r0;
   x1 = r1;
   x2 = r2;
   x3 = r3;
 }
 
-inline void pre4(int64_t& a, int64_t& b, int64_t& c, int64_t& d) {
-  const int64_t t3 = a - d, t0 = d + (t3 >> 1);
-  int64_t t2 = b - c;
-  const int64_t t1 = c + (t2 >> 1);
-  t2 += (t3 + 2) >> 2;
-  c = t1 - (t2 >> 1);
-  b = t2 + c;
-  d = t0 - (t3 >> 1);
-  a = t3 + d;
+// Pre- and post-filter differ only in the sign of the middle shear.
+template <int Sign>
+CODEC_INLINE void overlap4(int32_t& a, int32_t& b, int32_t& c, int32_t& d) {
+  const int32_t t3 = sub(a, d), t0 = add(d, t3 >> 1);
+  int32_t t2 = sub(b, c);
+  const int32_t t1 = add(c, t2 >> 1);
+  const int32_t widen = add(t3, 2) >> 2;
+  t2 = Sign > 0 ? add(t2, widen) : sub(t2, widen);
+  c = sub(t1, t2 >> 1);
+  b = add(t2, c);
+  d = sub(t0, t3 >> 1);
+  a = add(t3, d);
 }
+CODEC_INLINE void pre4(int32_t& a, int32_t& b, int32_t& c, int32_t& d) { overlap4<1>(a, b, c, d); }
+CODEC_INLINE void post4(int32_t& a, int32_t& b, int32_t& c, int32_t& d) { overlap4<-1>(a, b, c, d); }
 
-inline void post4(int64_t& a, int64_t& b, int64_t& c, int64_t& d) {
-  const int64_t t3 = a - d, t0 = d + (t3 >> 1);
-  int64_t t2 = b - c;
-  const int64_t t1 = c + (t2 >> 1);
-  t2 -= (t3 + 2) >> 2;
-  c = t1 - (t2 >> 1);
-  b = t2 + c;
-  d = t0 - (t3 >> 1);
-  a = t3 + d;
-}
-
-template <void (*Op)(int64_t&, int64_t&, int64_t&, int64_t&)>
-inline void apply4(int32_t* p, ptrdiff_t step) {
-  int64_t a = p[0], b = p[step], c = p[2 * step], d = p[3 * step];
+// Op on four consecutive samples of a row.
+template <void (*Op)(int32_t&, int32_t&, int32_t&, int32_t&)>
+CODEC_INLINE void along_row(int32_t* p) {
+  int32_t a = p[0], b = p[1], c = p[2], d = p[3];
   Op(a, b, c, d);
-  p[0] = saturate(a);
-  p[step] = saturate(b);
-  p[2 * step] = saturate(c);
-  p[3 * step] = saturate(d);
+  p[0] = a;
+  p[1] = b;
+  p[2] = c;
+  p[3] = d;
 }
 
-// 4x4 block whose element (row r, column c) is p[r * row_step + c * col_step].
-inline void forward_block(int32_t* p, ptrdiff_t col_step, ptrdiff_t row_step) {
-  for (int r = 0; r < 4; ++r) apply4<fwd4>(p + r * row_step, col_step);
-  for (int c = 0; c < 4; ++c) apply4<fwd4>(p + c * col_step, row_step);
-}
-
-inline void inverse_block(int32_t* p, ptrdiff_t col_step, ptrdiff_t row_step) {
-  for (int c = 0; c < 4; ++c) apply4<inv4>(p + c * col_step, row_step);
-  for (int r = 0; r < 4; ++r) apply4<inv4>(p + r * row_step, col_step);
-}
-
-template <void (*Op)(int64_t&, int64_t&, int64_t&, int64_t&)>
-void filter_rows(int32_t* tile, int width, int height) {
-  for (int y = 0; y < height; ++y) {
-    int32_t* row = tile + ptrdiff_t(y) * width;
-    for (int edge = 4; edge < width; edge += 4) apply4<Op>(row + edge - 2, 1);
-  }
-}
-
-template <void (*Op)(int64_t&, int64_t&, int64_t&, int64_t&)>
-void filter_columns(int32_t* tile, int width, int height) {
-  for (int edge = 4; edge < height; edge += 4) {
-    int32_t* top = tile + ptrdiff_t(edge - 2) * width;
-    for (int x = 0; x < width; ++x) apply4<Op>(top + x, width);
+// Op down four rows (r0..r3 apart by `stride`) for `count` columns spaced `step` apart; contiguous
+// columns (step 1) vectorise.
+template <void (*Op)(int32_t&, int32_t&, int32_t&, int32_t&)>
+CODEC_INLINE void down_rows(int32_t* top, ptrdiff_t stride, int count, int step) {
+  int32_t* r0 = top;
+  int32_t* r1 = top + stride;
+  int32_t* r2 = top + 2 * stride;
+  int32_t* r3 = top + 3 * stride;
+  for (int i = 0; i < count; ++i) {
+    const ptrdiff_t x = ptrdiff_t(i) * step;
+    int32_t a = r0[x], b = r1[x], c = r2[x], d = r3[x];
+    Op(a, b, c, d);
+    r0[x] = a;
+    r1[x] = b;
+    r2[x] = c;
+    r3[x] = d;
   }
 }
 
 }  // namespace
 
 void forward_lapped(int32_t* tile, int width, int height) {
-  filter_rows<pre4>(tile, width, height);
-  filter_columns<pre4>(tile, width, height);
-  for (int by = 0; by < height; by += 4)
-    for (int bx = 0; bx < width; bx += 4) forward_block(tile + ptrdiff_t(by) * width + bx, 1, width);
-  for (int my = 0; my < height; my += 16)
-    for (int mx = 0; mx < width; mx += 16)
-      forward_block(tile + ptrdiff_t(my) * width + mx, 4, ptrdiff_t(4) * width);
+  for (int y = 0; y < height; ++y) {
+    int32_t* row = tile + ptrdiff_t(y) * width;
+    for (int edge = 4; edge < width; edge += 4) along_row<pre4>(row + edge - 2);
+  }
+  for (int edge = 4; edge < height; edge += 4) down_rows<pre4>(tile + ptrdiff_t(edge - 2) * width, width, width, 1);
+  // Stage 1: rows of every block, then columns of every block.
+  for (int y = 0; y < height; ++y) {
+    int32_t* row = tile + ptrdiff_t(y) * width;
+    for (int x = 0; x < width; x += 4) along_row<fwd4>(row + x);
+  }
+  for (int y = 0; y < height; y += 4) down_rows<fwd4>(tile + ptrdiff_t(y) * width, width, width, 1);
+  // Stage 2 on the block DCs (every 4th sample of every 4th row).
+  for (int y = 0; y < height; y += 4) {
+    int32_t* row = tile + ptrdiff_t(y) * width;
+    for (int x = 0; x < width; x += 16) {
+      int32_t a = row[x], b = row[x + 4], c = row[x + 8], d = row[x + 12];
+      fwd4(a, b, c, d);
+      row[x] = a;
+      row[x + 4] = b;
+      row[x + 8] = c;
+      row[x + 12] = d;
+    }
+  }
+  for (int y = 0; y < height; y += 16) down_rows<fwd4>(tile + ptrdiff_t(y) * width, ptrdiff_t(4) * width, width / 4, 4);
 }
 
 void inverse_lapped(int32_t* tile, int width, int height) {
-  for (int my = 0; my < height; my += 16)
-    for (int mx = 0; mx < width; mx += 16)
-      inverse_block(tile + ptrdiff_t(my) * width + mx, 4, ptrdiff_t(4) * width);
-  for (int by = 0; by < height; by += 4)
-    for (int bx = 0; bx < width; bx += 4) inverse_block(tile + ptrdiff_t(by) * width + bx, 1, width);
-  filter_columns<post4>(tile, width, height);
-  filter_rows<post4>(tile, width, height);
+  for (int y = 0; y < height; y += 16) down_rows<inv4>(tile + ptrdiff_t(y) * width, ptrdiff_t(4) * width, width / 4, 4);
+  for (int y = 0; y < height; y += 4) {
+    int32_t* row = tile + ptrdiff_t(y) * width;
+    for (int x = 0; x < width; x += 16) {
+      int32_t a = row[x], b = row[x + 4], c = row[x + 8], d = row[x + 12];
+      inv4(a, b, c, d);
+      row[x] = a;
+      row[x + 4] = b;
+      row[x + 8] = c;
+      row[x + 12] = d;
+    }
+  }
+  for (int y = 0; y < height; y += 4) down_rows<inv4>(tile + ptrdiff_t(y) * width, width, width, 1);
+  for (int y = 0; y < height; ++y) {
+    int32_t* row = tile + ptrdiff_t(y) * width;
+    for (int x = 0; x < width; x += 4) along_row<inv4>(row + x);
+  }
+  for (int edge = 4; edge < height; edge += 4) down_rows<post4>(tile + ptrdiff_t(edge - 2) * width, width, width, 1);
+  for (int y = 0; y < height; ++y) {
+    int32_t* row = tile + ptrdiff_t(y) * width;
+    for (int edge = 4; edge < width; edge += 4) along_row<post4>(row + edge - 2);
+  }
 }
 
 }  // namespace codec::detail

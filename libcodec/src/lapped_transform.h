@@ -5,8 +5,9 @@
 //  3. stage 2: the same 4x4 transform on the 16 block DCs of every 16x16 macroblock.
 // Coefficients stay in place: HP at (4bx+u, 4by+v) with (u,v) != (0,0), LP at (16mx+4u, 16my+4v) with
 // (u,v) != (0,0), macroblock DC at (16mx, 16my). Every step is integer lifting, so inverse(forward(x))
-// == x exactly. Values are computed in 64 bits and stored saturated to int32: for inputs within
-// +-2^20 nothing saturates (coefficients stay below 2^25); garbage coefficients cannot cause overflow.
+// == x exactly. Arithmetic is 32-bit with wrapping adds (shear products cannot overflow): for
+// inputs within +-2^22 (samples +-2^20 with 2 fraction bits) every intermediate value stays below
+// 2^28, so nothing wraps; garbage coefficients from a corrupt stream give garbage, never UB.
 #pragma once
 
 #include <cstddef>

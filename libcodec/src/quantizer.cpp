@@ -44,14 +44,11 @@ const double* band_synthesis_norms() {
   return norms.data();
 }
 
-BandSteps band_steps_for(uint32_t step_q8) {
-  // Some bands have norms below 1 (the odd lifting outputs grow), so S / g_b > 1 there even at S = 1;
-  // step 1 is defined as lossless instead.
-  if (step_q8 <= kStepOne) return unit_band_steps();
+BandSteps band_steps_for(uint32_t step_q8, int fraction_bits) {
   const double* norms = band_synthesis_norms();
   BandSteps steps{};
   for (int b = 0; b < kBandCount; ++b) {
-    const double s = std::round(double(step_q8) / norms[b]);
+    const double s = std::round(std::ldexp(double(step_q8), fraction_bits) / norms[b]);
     steps.q8[b] = s < kStepOne ? kStepOne : s > kMaxBandStep ? kMaxBandStep : uint32_t(s);
   }
   return steps;

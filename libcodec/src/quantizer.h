@@ -12,10 +12,13 @@ namespace codec::detail {
 inline constexpr int kBandCount = 31;
 inline constexpr uint32_t kStepOne = 256;
 inline constexpr uint32_t kMaxBandStep = 1u << 30;
-inline constexpr int64_t kMaxCoefficient = int64_t(1) << 27;  // decoder rejects larger coefficients
+inline constexpr int64_t kMaxCoefficient = int64_t(1) << 29;  // decoder rejects larger coefficients
+// Lossy tiles carry kLossyFractionBits extra bits of sample precision through the transform, so the
+// rounding inside the integer lifting steps adds little error at small steps (lossless tiles: 0).
+inline constexpr int kLossyFractionBits = 2;
 
-inline int lp_band(int position) { return position; }
-inline int hp_band(int position) { return 15 + position; }
+constexpr int lp_band(int position) { return position; }
+constexpr int hp_band(int position) { return 15 + position; }
 
 struct BandSteps {
   uint32_t q8[kBandCount];
@@ -23,9 +26,9 @@ struct BandSteps {
 
 // Synthesis norm of each band's basis function (measured once on the integer inverse transform).
 const double* band_synthesis_norms();
-// Per-band steps for global step step_q8 (step * 256): max(1, step / norm) in 1/256 units; all 1
-// (lossless) when step_q8 == 256.
-BandSteps band_steps_for(uint32_t step_q8);
+// Per-band steps for global step step_q8 (step * 256) in the transform's units (samples scaled by
+// 2^fraction_bits): max(1, step * 2^fraction_bits / norm) in 1/256 units.
+BandSteps band_steps_for(uint32_t step_q8, int fraction_bits);
 // All bands at step 1 (lossless).
 BandSteps unit_band_steps();
 

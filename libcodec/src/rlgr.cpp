@@ -19,9 +19,11 @@ constexpr int kEscapeBits = 31;
 
 inline int clamp_kp(int kp) { return std::clamp(kp, 0, kKpMax); }
 
+// quotient 0: krp -= 2; 1: unchanged; > 1: krp += quotient. Written without branches because the
+// quotient is data-dependent and unpredictable.
 inline void adapt_rice(RlgrState& s, int quotient) {
-  if (quotient == 0) s.krp = clamp_kp(s.krp - 2);
-  else if (quotient > 1) s.krp = clamp_kp(s.krp + quotient);
+  const int delta = quotient - 2 * int(quotient == 0) - int(quotient == 1);
+  s.krp = clamp_kp(s.krp + delta);
 }
 
 inline void put_rice(BitWriter& out, uint32_t u, RlgrState& s) {
@@ -37,16 +39,6 @@ inline void put_rice(BitWriter& out, uint32_t u, RlgrState& s) {
     out.put(u, kEscapeBits);
     adapt_rice(s, kUnaryCap);
   }
-}
-
-inline uint32_t get_rice(BitReader& in, RlgrState& s) {
-  const int kr = s.krp >> 3;
-  const int quotient = in.get_ones_capped(kUnaryCap);
-  uint32_t u;
-  if (quotient < kUnaryCap) u = (uint32_t(quotient) << kr) | in.get(kr);
-  else u = in.get(kEscapeBits);
-  adapt_rice(s, quotient);
-  return u;
 }
 
 }  // namespace
@@ -81,36 +73,65 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
   }
 }
 
-bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& s) {
+bool rlgr_decode(BitReader& reader, int32_t* values, size_t count, RlgrState& state) {
+  // Local copies: stores into `values` could otherwise alias the state and the reader's counters,
+  // forcing reloads on every symbol.
+  BitReader in = reader;
+  RlgrState s = state;
+  std::fill(values, values + count, 0);  // runs then only advance the index
   size_t i = 0;
+  bool ok = true;
+  // One refill per symbol: a symbol without escape needs at most 1 + 10 + 1 + 21 + 10 = 43 bits.
+  const auto rice = [&](int kr) -> uint32_t {
+    const int ones = in.leading_ones();
+    if (ones < kUnaryCap) {
+      in.skip(ones + 1);
+      adapt_rice(s, ones);
+      return (uint32_t(ones) << kr) | in.take(kr);
+    }
+    in.skip(kUnaryCap);
+    in.refill();
+    adapt_rice(s, kUnaryCap);
+    return in.take(kEscapeBits);
+  };
   while (i < count) {
+    in.refill();
     const int k = s.kp >> 3;
     if (k == 0) {
-      const uint32_t mapped = get_rice(in, s);
-      if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) return false;
-      values[i++] = (mapped & 1) ? -int32_t((mapped + 1) >> 1) : int32_t(mapped >> 1);
-      s.kp = clamp_kp(mapped == 0 ? s.kp + kUpZero : s.kp - kDownZero);
+      const uint32_t mapped = rice(s.krp >> 3);
+      if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) {
+        ok = false;
+        break;
+      }
+      const int32_t half = int32_t((mapped + 1) >> 1);
+      values[i++] = (mapped & 1) ? -half : half;
+      s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
       continue;
     }
-    if (in.get_bit() == 0) {
-      const size_t zeros = std::min(size_t(1) << k, count - i);
-      std::fill(values + i, values + i + zeros, 0);
-      i += zeros;
+    if (in.take(1) == 0) {
+      i += std::min(size_t(1) << k, count - i);
       s.kp = clamp_kp(s.kp + kUpRun);
       continue;
     }
-    const size_t run = in.get(k);
-    if (run >= count - i) return false;
-    std::fill(values + i, values + i + run, 0);
+    const size_t run = in.take(k);
+    if (run >= count - i) {
+      ok = false;
+      break;
+    }
     i += run;
-    const uint32_t negative = in.get_bit();
-    const uint32_t magnitude_minus_1 = get_rice(in, s);
-    if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) return false;
+    const uint32_t negative = in.take(1);
+    const uint32_t magnitude_minus_1 = rice(s.krp >> 3);
+    if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) {
+      ok = false;
+      break;
+    }
     const int32_t magnitude = int32_t(magnitude_minus_1) + 1;
     values[i++] = negative ? -magnitude : magnitude;
     s.kp = clamp_kp(s.kp - kDownRun);
   }
-  return true;
+  reader = in;
+  state = s;
+  return ok;
 }
 
 }  // namespace codec::detail

@@ -116,8 +116,14 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   *bytes_written = 0;
   StreamLayout layout;
   if (!layout_for(width, height, options.tile_size, &layout)) return Status::InvalidArgument;
-  if (!(options.step >= 1.0 && options.step <= double(kMaxAbsSample))) return Status::InvalidArgument;
   if (options.bound_max_error && options.max_error > uint32_t(kMaxAbsSample)) return Status::InvalidArgument;
+  // Measured on SRTM tiles (docs/codec.md): transform + corrections is smallest near S = 2E. A step
+  // of 1 (the default) would make the transform lossless, which never beats spatial quantisation, so
+  // it selects the automatic step too.
+  const double step = options.bound_max_error && options.step <= 1.0 && options.step >= 0.0
+                          ? std::clamp(2.0 * options.max_error, 1.0, double(kMaxAbsSample))
+                          : options.step;
+  if (!(step >= 1.0 && step <= double(kMaxAbsSample))) return Status::InvalidArgument;
   for (int64_t y = 0; y < height; ++y) {
     const int32_t* row = src + y * src_stride;
     for (int64_t x = 0; x < width; ++x)
@@ -125,9 +131,11 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   }
   if (dst_capacity < layout.data_offset) return Status::BufferTooSmall;
 
-  const uint32_t step_q8 = uint32_t(std::lround(options.step * 256.0));
+  const uint32_t step_q8 = uint32_t(std::lround(step * 256.0));
   detail::TileParams params;
-  params.steps = detail::band_steps_for(step_q8);
+  const bool lossless = step_q8 <= detail::kStepOne;
+  params.fraction_bits = lossless ? 0 : detail::kLossyFractionBits;
+  params.steps = lossless ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
 
@@ -143,6 +151,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   put_u32(h + 32, step_q8);
   put_u32(h + 36, params.max_error);
   for (int b = 0; b < detail::kBandCount; ++b) put_u32(h + 40 + 4 * b, params.steps.q8[b]);
+  put_u32(h + 164, uint32_t(params.fraction_bits));
   put_u32(h + kHeaderCrcOffset, crc32c(h, kHeaderCrcOffset));
 
   detail::TileWork& work = scratch.impl().work;
@@ -154,7 +163,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
       const int32_t* tile_src = src + ty * t * src_stride + tx * t;
       const size_t size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, dst + pos,
-                                              dst_capacity - pos);
+                                              dst_capacity - pos, recon != nullptr);
       if (size == 0) return Status::BufferTooSmall;
       uint8_t* entry = index + size_t(ty * layout.tiles_x + tx) * kIndexEntrySize;
       put_u64(entry, pos);
@@ -203,6 +212,7 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
     const uint32_t s = get_u32(data + 40 + 4 * b);
     if (s < detail::kStepOne || s > detail::kMaxBandStep) return Status::Corrupt;
   }
+  if (get_u32(data + 164) > uint32_t(detail::kLossyFractionBits)) return Status::Corrupt;
   info.step = step_q8 / 256.0;
   info.tiles_x = layout.tiles_x;
   info.tiles_y = layout.tiles_y;
@@ -261,6 +271,7 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
     return Status::InvalidArgument;
   detail::TileParams params;
   for (int b = 0; b < detail::kBandCount; ++b) params.steps.q8[b] = get_u32(data_ + 40 + 4 * b);
+  params.fraction_bits = int(get_u32(data_ + 164));
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
   detail::TileWork& work = scratch.impl().work;

@@ -23,6 +23,21 @@ struct Position {
 constexpr Position kScan[15] = {{1, 0}, {0, 1}, {0, 2}, {1, 1}, {2, 0}, {3, 0}, {2, 1}, {1, 2},
                                 {0, 3}, {1, 3}, {2, 2}, {3, 1}, {3, 2}, {2, 3}, {3, 3}};
 
+// Band of each position in a 16x16 macroblock (row, column).
+struct BandMap {
+  uint8_t band[16][16];
+};
+constexpr BandMap make_band_map() {
+  BandMap m{};
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) {
+      const int p = (y & 3) * 4 + (x & 3), q = (y >> 2) * 4 + (x >> 2);
+      m.band[y][x] = uint8_t(p != 0 ? hp_band(p) : q != 0 ? lp_band(q) : 0);
+    }
+  return m;
+}
+constexpr BandMap kBandMap = make_band_map();
+
 inline int32_t saturate(int64_t v) { return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX)); }
 
 inline int64_t med_predict(int64_t left, int64_t top, int64_t top_left) {
@@ -54,17 +69,11 @@ void code_bands(BitWriter& out, int32_t* tile, int pw, int ph, const BandSteps& 
   double inverse[kBandCount];
   for (int b = 0; b < kBandCount; ++b) inverse[b] = double(kStepOne) / double(steps.q8[b]);
   const int mbx = pw / 16, mby = ph / 16, bx_count = pw / 4, by_count = ph / 4;
-  for (int y = 0; y < ph; ++y)
-    for (int x = 0; x < pw; ++x) {
-      const int p = (y & 3) * 4 + (x & 3);
-      int band = hp_band(p);
-      if (p == 0) {
-        const int q = ((y >> 2) & 3) * 4 + ((x >> 2) & 3);
-        band = q == 0 ? 0 : lp_band(q);
-      }
-      int32_t& c = tile[size_t(y) * pw + x];
-      c = quantize(c, inverse[band]);
-    }
+  for (int y = 0; y < ph; ++y) {
+    const uint8_t* bands = kBandMap.band[y & 15];
+    int32_t* row = tile + size_t(y) * pw;
+    for (int x = 0; x < pw; ++x) row[x] = quantize(row[x], inverse[bands[x & 15]]);
+  }
 
   size_t n = 0;
   for (int my = 0; my < mby; ++my)
@@ -89,17 +98,24 @@ void code_bands(BitWriter& out, int32_t* tile, int pw, int ph, const BandSteps& 
 }
 
 void dequantize_tile(int32_t* tile, int pw, int ph, const BandSteps& steps) {
-  for (int y = 0; y < ph; ++y)
-    for (int x = 0; x < pw; ++x) {
-      const int p = (y & 3) * 4 + (x & 3);
-      int band = hp_band(p);
-      if (p == 0) {
-        const int q = ((y >> 2) & 3) * 4 + ((x >> 2) & 3);
-        band = q == 0 ? 0 : lp_band(q);
-      }
-      int32_t& c = tile[size_t(y) * pw + x];
-      c = saturate(dequantize(c, steps.q8[band]));
-    }
+  for (int y = 0; y < ph; ++y) {
+    const uint8_t* bands = kBandMap.band[y & 15];
+    int32_t* row = tile + size_t(y) * pw;
+    for (int x = 0; x < pw; ++x) row[x] = saturate(dequantize(row[x], steps.q8[bands[x & 15]]));
+  }
+}
+
+// Dequantises n values in place; false if any leaves the range valid streams produce. Branch-free
+// so that it vectorises (RLGR already bounds |q| < 2^30, so the 64-bit product cannot overflow).
+bool dequantize_run(int32_t* values, size_t n, uint32_t step_q8) {
+  if (step_q8 == kStepOne) return true;
+  bool bad = false;
+  for (size_t j = 0; j < n; ++j) {
+    const int64_t v = dequantize(values[j], step_q8);
+    bad |= (v > kMaxCoefficient) | (v < -kMaxCoefficient);
+    values[j] = int32_t(v);
+  }
+  return !bad;
 }
 
 // Reads the three bands and writes dequantised coefficients into the tile.
@@ -130,13 +146,9 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
   i = 0;
   for (int s = 0; s < 15; ++s) {
     const Position pos = kScan[s];
-    const uint32_t step = steps.q8[lp_band(pos.v * 4 + pos.u)];
+    if (!dequantize_run(seq + i, size_t(mbx) * mby, steps.q8[lp_band(pos.v * 4 + pos.u)])) return false;
     for (int my = 0; my < mby; ++my)
-      for (int mx = 0; mx < mbx; ++mx) {
-        const int64_t value = dequantize(seq[i++], step);
-        if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
-        tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u] = int32_t(value);
-      }
+      for (int mx = 0; mx < mbx; ++mx) tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u] = seq[i++];
   }
 
   n = size_t(bx_count) * by_count * 15;
@@ -145,21 +157,10 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
   i = 0;
   for (int s = 0; s < 15; ++s) {
     const Position pos = kScan[s];
-    const uint32_t step = steps.q8[hp_band(pos.v * 4 + pos.u)];
-    if (step == kStepOne) {
-      for (int by = 0; by < by_count; ++by) {
-        int32_t* row = tile + size_t(4 * by + pos.v) * pw + pos.u;
-        for (int bx = 0; bx < bx_count; ++bx) row[4 * bx] = seq[i++];  // RLGR bounds |v| < 2^30
-      }
-      continue;
-    }
+    if (!dequantize_run(seq + i, size_t(bx_count) * by_count, steps.q8[hp_band(pos.v * 4 + pos.u)])) return false;
     for (int by = 0; by < by_count; ++by) {
       int32_t* row = tile + size_t(4 * by + pos.v) * pw + pos.u;
-      for (int bx = 0; bx < bx_count; ++bx) {
-        const int64_t value = dequantize(seq[i++], step);
-        if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
-        row[4 * bx] = int32_t(value);
-      }
+      for (int bx = 0; bx < bx_count; ++bx) row[4 * bx] = seq[i++];
     }
   }
   return true;
@@ -169,6 +170,19 @@ void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {
   for (int y = 0; y < h; ++y) std::memcpy(dst + size_t(y) * w, tile + size_t(y) * pw, size_t(w) * sizeof(int32_t));
 }
 
+// Inputs are within +-2^20 and fraction_bits <= 2, so the scaled samples fit easily.
+void scale_up(int32_t* v, size_t n, int bits) {
+  if (bits == 0) return;
+  for (size_t i = 0; i < n; ++i) v[i] = int32_t(uint32_t(v[i]) << bits);
+}
+
+// Rounds to the nearest integer sample, halves up.
+void scale_down(int32_t* v, size_t n, int bits) {
+  if (bits == 0) return;
+  const int64_t half = int64_t(1) << (bits - 1);
+  for (size_t i = 0; i < n; ++i) v[i] = int32_t((int64_t(v[i]) + half) >> bits);
+}
+
 inline int64_t floor_div(int64_t a, int64_t b) {
   const int64_t q = a / b;
   return (a % b != 0 && ((a < 0) != (b < 0))) ? q - 1 : q;
@@ -176,19 +190,25 @@ inline int64_t floor_div(int64_t a, int64_t b) {
 
 // Transform-mode payload; leaves the decoder's output in work.reconstruction.
 size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, const TileParams& params,
-                        TileWork& work, uint8_t* out, size_t capacity) {
+                        TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
   if (capacity < 1) return 0;
   const int pw = padded_side(w), ph = padded_side(h);
   int32_t* tile = work.coefficients.data();
   out[0] = uint8_t(TileMode::Transform);
   BitWriter bits(out + 1, capacity - 1);
   load_padded(src, stride, w, h, pw, ph, tile);
+  scale_up(tile, size_t(pw) * ph, params.fraction_bits);
   forward_lapped(tile, pw, ph);
   code_bands(bits, tile, pw, ph, params.steps, work.sequence.data());
+  if (!want_reconstruction && !params.bound_max_error) {
+    const size_t size = bits.finish();
+    return bits.overflow() ? 0 : size + 1;
+  }
   dequantize_tile(tile, pw, ph, params.steps);
   inverse_lapped(tile, pw, ph);
   int32_t* recon = work.reconstruction.data();
   crop(tile, pw, w, h, recon);
+  scale_down(recon, size_t(w) * h, params.fraction_bits);
   if (params.bound_max_error) {
     const int64_t e = params.max_error;
     int32_t* corrections = work.sequence.data();
@@ -243,15 +263,16 @@ size_t tile_payload_bound(int width, int height) {
 }
 
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const TileParams& params,
-                   TileWork& work, uint8_t* out, size_t capacity) {
+                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
   work.reserve(padded_side(w), padded_side(h), w, h, params.bound_max_error ? tile_payload_bound(w, h) : 0);
-  if (!params.bound_max_error) return encode_transform(src, src_stride, w, h, params, work, out, capacity);
+  if (!params.bound_max_error)
+    return encode_transform(src, src_stride, w, h, params, work, out, capacity, want_reconstruction);
   // Max-error mode: try spatial quantisation first (into the side buffer), then the transform with
   // corrections (into out, leaving its reconstruction in work); keep the smaller.
   const size_t spatial = encode_spatial(src, src_stride, w, h, params, work, work.alternative.data(),
                                         work.alternative.size());
   assert(spatial > 0);
-  const size_t transform = encode_transform(src, src_stride, w, h, params, work, out, capacity);
+  const size_t transform = encode_transform(src, src_stride, w, h, params, work, out, capacity, true);
   if (transform > 0 && transform <= spatial) return transform;
   if (spatial > capacity) return 0;
   std::memcpy(out, work.alternative.data(), spatial);
@@ -277,8 +298,19 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
     return TileResult::Corrupt;
   inverse_lapped(tile, pw, ph);
   int32_t* recon = work.reconstruction.data();
-  crop(tile, pw, w, h, recon);
   const size_t n = size_t(w) * h;
+  if (spatial || params.fraction_bits == 0) {
+    crop(tile, pw, w, h, recon);
+  } else {
+    const int shift = params.fraction_bits;
+    const int32_t half = int32_t(1) << (shift - 1);
+    for (int y = 0; y < h; ++y) {
+      const int32_t* from = tile + size_t(y) * pw;
+      int32_t* to = recon + size_t(y) * w;
+      // Wrapping add: garbage from a corrupt stream must not be undefined behaviour.
+      for (int x = 0; x < w; ++x) to[x] = int32_t(uint32_t(from[x]) + uint32_t(half)) >> shift;
+    }
+  }
   if (spatial) {
     const int64_t bin = 2 * int64_t(params.max_error) + 1;
     for (size_t i = 0; i < n; ++i) recon[i] = saturate(int64_t(recon[i]) * bin);

@@ -16,7 +16,8 @@ enum class TileMode : uint8_t {
 };
 
 struct TileParams {
-  BandSteps steps;
+  BandSteps steps;        // for transform-mode tiles
+  int fraction_bits = 0;  // extra sample precision of transform-mode tiles (0 = lossless)
   bool bound_max_error = false;
   uint32_t max_error = 0;
 };
@@ -35,10 +36,11 @@ inline int padded_side(int side) { return (side + 15) & ~15; }
 size_t tile_payload_bound(int width, int height);
 
 // Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
-// the payload size, or 0 when it does not fit. On return work.reconstruction holds the decoder's
-// output (row stride = width).
+// the payload size, or 0 when it does not fit. With want_reconstruction, work.reconstruction then
+// holds the decoder's output (row stride = width).
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height,
-                   const TileParams& params, TileWork& work, uint8_t* out, size_t capacity);
+                   const TileParams& params, TileWork& work, uint8_t* out, size_t capacity,
+                   bool want_reconstruction);
 
 enum class TileResult { Ok, Corrupt };
 // Decodes a payload into work.reconstruction (width x height, row stride = width).

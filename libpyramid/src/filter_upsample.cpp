@@ -97,15 +97,17 @@ template <class In, class Acc, class Out, class Finish>
 void upsample_generic(const In* data, int64_t stride, const Rect& have, GridSize clevel, GridSize flevel,
                       const Rect& fine, Out* out, int64_t out_stride, std::vector<Acc>& scratch) {
   if (fine.width <= 0 || fine.height <= 0) return;
-  int64_t ely0, ely1;
+  int64_t ely0, ely1, rly0, rly1;
   extended_span(fine.y0, fine.y0 + fine.height, &ely0, &ely1);
-  const int64_t nrows = ely1 - ely0 + 1;
+  real_span(fine.y0, fine.y0 + fine.height, clevel.height, &rly0, &rly1);
+  // Extended rows near an edge combine real rows that may lie outside the extended span itself.
+  const int64_t row_lo = std::min(ely0, rly0), row_hi = std::max(ely1, rly1);
   const int64_t fw = fine.width;
-  scratch.resize(size_t(nrows * fw));
-  auto hrow = [&](int64_t e) { return scratch.data() + (e - ely0) * fw; };
+  scratch.resize(size_t((row_hi - row_lo + 1) * fw));
+  auto hrow = [&](int64_t e) { return scratch.data() + (e - row_lo) * fw; };
   (void)flevel;
   // Real rows first, then extended rows as combinations of real ones (U is linear).
-  for (int64_t e = ely0; e <= ely1; ++e) {
+  for (int64_t e = row_lo; e <= row_hi; ++e) {
     if (e < 0 || e >= clevel.height) continue;
     const In* row = data + (e - have.y0) * stride;
     horizontal_row<In, Acc>(row, have.x0, clevel.width, fine.x0, fw, hrow(e));

@@ -302,7 +302,7 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
   return layout;
 }
 
-void write_raw(const std::string& path, const Heightmap& map, bool big_endian) {
+void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool big_endian) {
   const GridInfo& g = map.info;
   if (g.width <= 0 || g.height <= 0 || map.values.size() != size_t(g.width * g.height))
     fail(IoErrorCode::WriteFailed, path, "heightmap dimensions do not match its sample count");
@@ -388,5 +388,5 @@ void write_raw(const std::string& path, const Heightmap& map, bool big_endian) {
 }  // namespace terrain::io
 
 namespace terrain {
-void write_raw(const std::string& path, const Heightmap& map, bool big_endian) { io::write_raw(path, map, big_endian); }
+void write_raw(const std::string& path, const Heightmap& map, bool big_endian) { io::write_raw_with_sidecar(path, map, big_endian); }
 }  // namespace terrain

@@ -1,23 +1,28 @@
-// The closed-loop residual pyramid, built streamed out of core in one pass over the input.
+// The closed-loop residual pyramid, built in one streaming pass over the input, without spilling
+// the levels to disk (disk writes are the bottleneck of out-of-core builds).
 //
-// Pass A (the only pass over the input): rows -> int32 -> push-pull void fill per band -> finest level
-//   T_m and its validity mask spilled to temp files; the filter-fit windows are copied on the way.
-// Fit D on those windows (the same windows whatever the input's band sizes, so memory and streamed
-//   builds agree).
-// Pass B: T_m streamed back through a cascade of D row engines; level l's rows feed level l-1 as soon
-//   as it has enough of them; every level is spilled.
-// Pass C (closed loop, coarse to fine): level l is cut into coder bands; each band is predicted by U
-//   from the decoded coarser level T^_{l-1} (a sliding window of its rows), R = T - U(T^), coded, and
-//   T^_l = U(T^) + R^ is spilled for the next level. Only the coarser level's decoded rows are needed,
-//   so bands are independent and run in parallel.
+// Every level is a stream of rows. The input rows (converted to int32, voids filled) are the finest
+// level T_m; a cascade of D row engines turns rows of T_l into rows of T_{l-1} as soon as enough of
+// them exist. The D filter is fitted first, on windows in the top fit_rows rows (the same rows
+// whatever the input's chunking, so in-memory and streamed builds agree).
+//
+// The closed loop runs behind the cascade: a band of level l is coded once its own rows exist and
+// the decoded coarser level T^_{l-1} covers the rows U needs there. D has finite support, so T_0 row j
+// depends only on T_m rows near 2^m j: each level lags the input by a bounded number of rows
+// (about 8 * 2^l rows of level l), and every level holds only that lag in a ring of rows. Memory is
+// therefore independent of the input height, O(width * 2^m) for m+1 levels.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 #include "filter_downsample.h"
 #include "pyramid/pyramid.h"
@@ -44,6 +49,7 @@ void validate(const BuildOptions& o, const GridInfo& info) {
   if (!(o.value_scale > 0) || !std::isfinite(o.value_scale))
     throw std::invalid_argument("pyramid: value_scale must be finite and > 0");
   if (o.fill_band_rows < 1) throw std::invalid_argument("pyramid: fill_band_rows must be >= 1");
+  if (o.fit_rows < 1) throw std::invalid_argument("pyramid: fit_rows must be >= 1");
   if (o.level_count < 0) throw std::invalid_argument("pyramid: level_count must be >= 0");
   if (o.use_fixed_filter && !(std::abs(o.fixed_filter.sum() - 1.0) < 1e-9))
     throw std::invalid_argument("pyramid: the fixed filter must sum to 1");
@@ -90,7 +96,7 @@ class InputConverter {
   detail::PushPullScratch scratch_;
 };
 
-// Per-band state of pass C, reused across band groups.
+// Per-band state of the closed loop, reused across band groups.
 struct BandWork {
   int64_t y0 = 0, rows = 0;
   std::vector<int32_t> t, pred, res, rhat;
@@ -100,253 +106,556 @@ struct BandWork {
   int64_t res_max = 0, err_max = 0, counted = 0;
 };
 
+// Rows [first, end) of one level. Each row is its own buffer, recycled through a free list: the
+// store never copies rows to grow and holds no slack (these rows are most of the builder's memory).
+template <class T>
+class RowRing {
+ public:
+  void reset(int64_t width) {
+    width_ = width;
+    first_ = end_ = peak_ = 0;
+    rows_.clear();
+    free_.clear();
+  }
+  int64_t first() const { return first_; }
+  int64_t end() const { return end_; }
+  int64_t peak() const { return peak_; }
+  const T* row(int64_t r) const { return rows_[size_t(r - first_)].data(); }
+  template <class In>
+  void append(const In* rows, int64_t n) {
+    for (int64_t k = 0; k < n; ++k) {
+      std::vector<T> buf;
+      if (!free_.empty()) {
+        buf = std::move(free_.back());
+        free_.pop_back();
+      }
+      buf.resize(size_t(width_));
+      for (int64_t x = 0; x < width_; ++x) buf[size_t(x)] = static_cast<T>(rows[k * width_ + x]);
+      rows_.push_back(std::move(buf));
+    }
+    end_ += n;
+    peak_ = std::max(peak_, end_ - first_);
+  }
+  void drop_before(int64_t r) {
+    r = std::clamp(r, first_, end_);
+    for (; first_ < r; ++first_) {
+      free_.push_back(std::move(rows_.front()));
+      rows_.pop_front();
+    }
+    // A few spare rows cover the steady state; more would only be memory held for nothing.
+    while (free_.size() > 64) free_.pop_back();
+  }
+  template <class Out>
+  void copy_rows(int64_t r0, int64_t n, Out* out) const {
+    for (int64_t k = 0; k < n; ++k) std::copy(row(r0 + k), row(r0 + k) + width_, out + k * width_);
+  }
+
+ private:
+  std::deque<std::vector<T>> rows_;
+  std::vector<std::vector<T>> free_;
+  int64_t width_ = 0, first_ = 0, end_ = 0, peak_ = 0;
+};
+
+// A level's rows; 16-bit input keeps its finest level as int16 (the finest level's lag is most of
+// the builder's memory).
+class LevelRows {
+ public:
+  void reset(int64_t width, bool narrow) {
+    narrow_ = narrow;
+    r16_.reset(width);
+    r32_.reset(width);
+  }
+  void append(const int32_t* rows, int64_t n) { narrow_ ? r16_.append(rows, n) : r32_.append(rows, n); }
+  void copy_rows(int64_t r0, int64_t n, int32_t* out) const {
+    narrow_ ? r16_.copy_rows(r0, n, out) : r32_.copy_rows(r0, n, out);
+  }
+  int64_t first() const { return narrow_ ? r16_.first() : r32_.first(); }
+  int64_t end() const { return narrow_ ? r16_.end() : r32_.end(); }
+  int64_t peak() const { return narrow_ ? r16_.peak() : r32_.peak(); }
+  void drop_before(int64_t r) { narrow_ ? r16_.drop_before(r) : r32_.drop_before(r); }
+
+ private:
+  bool narrow_ = false;
+  RowRing<int16_t> r16_;
+  RowRing<int32_t> r32_;
+};
+
+// Validity rows held run-length coded (all-valid rows cost nothing).
+class MaskRows {
+ public:
+  void reset(int64_t width) {
+    width_ = width;
+    first_ = 0;
+    rows_.clear();
+  }
+  void append(const uint8_t* valid, int64_t n) {
+    for (int64_t k = 0; k < n; ++k) {
+      const uint8_t* row = valid + k * width_;
+      const bool all = std::all_of(row, row + width_, [](uint8_t v) { return v != 0; });
+      rows_.push_back(all ? std::vector<uint8_t>{} : encode_mask_rows(row, width_, 1));
+    }
+  }
+  void copy_rows(int64_t r0, int64_t n, uint8_t* out) const {
+    for (int64_t k = 0; k < n; ++k) {
+      const std::vector<uint8_t>& rle = rows_[size_t(r0 + k - first_)];
+      if (rle.empty())
+        std::fill(out + k * width_, out + (k + 1) * width_, uint8_t(1));
+      else if (!decode_mask_rows(rle.data(), rle.size(), width_, 1, out + k * width_))
+        throw std::logic_error("pyramid: mask row store corrupt");
+    }
+  }
+  void drop_before(int64_t r) {
+    while (first_ < r && !rows_.empty()) {
+      rows_.pop_front();
+      ++first_;
+    }
+  }
+
+ private:
+  int64_t width_ = 0, first_ = 0;
+  std::deque<std::vector<uint8_t>> rows_;
+};
+
+// Coded bands held back so the sink sees levels coarsest first (bands of different levels are
+// produced interleaved). Spilled to temp files: they are compressed, hence small.
+class LevelOrderBuffer {
+ public:
+  LevelOrderBuffer(const std::string& base, int levels) {
+    for (int l = 0; l < levels; ++l)
+      files_.push_back(std::make_unique<detail::SpillFile>(base + "bands" + std::to_string(l)));
+    mask_ = std::make_unique<detail::SpillFile>(base + "maskbands");
+  }
+  void band(int level, int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
+    record(*files_[size_t(level)], y0, rows, bytes);
+  }
+  void mask_band(int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) { record(*mask_, y0, rows, bytes); }
+  void replay(PyramidSink& sink, const PyramidHeader& header, const std::vector<int64_t>& band_counts) {
+    sink.begin(header);
+    mask_->rewind_for_reading();
+    const int finest = int(files_.size()) - 1;
+    for (int l = 0; l <= finest; ++l) {
+      detail::SpillFile& f = *files_[size_t(l)];
+      f.rewind_for_reading();
+      for (int64_t b = 0; b < band_counts[size_t(l)]; ++b) {
+        int64_t y0, rows;
+        std::vector<uint8_t> bytes = read_record(f, &y0, &rows);
+        if (l == finest) {
+          int64_t my0, mrows;
+          std::vector<uint8_t> mask = read_record(*mask_, &my0, &mrows);
+          if (header.has_voids) sink.mask_band(my0, mrows, std::move(mask));
+        }
+        sink.band(l, y0, rows, std::move(bytes));
+      }
+      files_[size_t(l)].reset();
+    }
+  }
+
+ private:
+  static void record(detail::SpillFile& f, int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
+    uint8_t head[30];
+    uint8_t* p = detail::put_varint(head, uint64_t(y0));
+    p = detail::put_varint(p, uint64_t(rows));
+    p = detail::put_varint(p, bytes.size());
+    f.write(head, size_t(p - head));
+    f.write(bytes.data(), bytes.size());
+  }
+  static uint64_t read_varint(detail::SpillFile& f) {
+    uint64_t v = 0;
+    uint8_t b;
+    for (int shift = 0;; shift += 7) {
+      if (shift > 63 || !f.read_byte(&b)) throw IoError(IoErrorCode::Truncated, f.path() + ": band spill truncated");
+      v |= uint64_t(b & 0x7f) << shift;
+      if (!(b & 0x80)) return v;
+    }
+  }
+  static std::vector<uint8_t> read_record(detail::SpillFile& f, int64_t* y0, int64_t* rows) {
+    *y0 = int64_t(read_varint(f));
+    *rows = int64_t(read_varint(f));
+    std::vector<uint8_t> bytes(size_t(read_varint(f)));
+    f.read(bytes.data(), bytes.size());
+    return bytes;
+  }
+  std::vector<std::unique_ptr<detail::SpillFile>> files_;
+  std::unique_ptr<detail::SpillFile> mask_;
+};
+
+class StreamingBuilder {
+ public:
+  StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink)
+      : info_(info), opt_(opt), coder_(coder), sink_(sink) {
+    validate(opt, info);
+    sizes_ = pyramid_level_sizes({info.width, info.height}, opt.level_count, opt.min_coarsest_side);
+    L_ = int(sizes_.size());
+    m_ = L_ - 1;
+    S_ = coder.band_rows();
+    if (S_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
+    // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
+    // until it is: halving the band height per coarser level keeps every level's lag near band_rows
+    // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)).
+    level_band_rows_.resize(size_t(L_));
+    for (int l = 0; l < L_; ++l) level_band_rows_[size_t(l)] = std::max<int64_t>(1, S_ >> std::min(62, m_ - l));
+    T_.resize(size_t(L_));
+    That_.resize(size_t(L_));
+    for (int l = 0; l < L_; ++l) {
+      const bool narrow = l == m_ && info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
+      T_[size_t(l)].reset(sizes_[size_t(l)].width, narrow);
+      That_[size_t(l)].reset(sizes_[size_t(l)].width);
+    }
+    mask_.reset(info.width);
+    row_scratch_.resize(size_t(info.width));
+    next_band_.assign(size_t(L_), 0);
+    band_count_.assign(size_t(L_), 0);
+    acc_.resize(size_t(L_));
+    work_.resize(size_t(opt.threads));
+    const std::string base = opt.temp_dir + "/" + opt.temp_name + ".pyr.tmp.";
+    if (opt.level_ordered_output) ordered_ = std::make_unique<LevelOrderBuffer>(base, L_);
+    result_.levels.resize(size_t(L_));
+    header_.levels = sizes_;
+    header_.band_rows = S_;
+    header_.value_scale = opt.value_scale;
+    header_.input = info;
+    std::ostringstream s;
+    s << "levels " << L_ << ":";
+    for (auto& g : sizes_) s << " " << g.width << "x" << g.height;
+    result_.log.push_back(s.str());
+  }
+
+  BuildResult run(BandReader& input) {
+    const auto t_start = Clock::now();
+    const int64_t W = info_.width, H = info_.height;
+    const int64_t B = std::min(opt_.fill_band_rows, H);
+    fit_rows_ = std::min(H, opt_.fit_rows);
+    InputConverter converter(opt_, info_);
+    // Reading and converting band k+1 overlaps with processing band k (with threads > 1); the reader
+    // and the converter are only ever used by one thread at a time, in band order.
+    struct InputBand {
+      std::vector<double> values;
+      std::vector<uint8_t> valid;
+      std::vector<int32_t> ints;
+      int64_t y = 0, rows = 0, voids = 0;
+    };
+    InputBand bands[2];
+    for (InputBand& b : bands) {
+      b.values.resize(size_t(B * W));
+      b.valid.resize(size_t(B * W));
+      b.ints.resize(size_t(B * W));
+    }
+    auto produce = [&](InputBand& b, int64_t y) {
+      b.y = y;
+      b.rows = std::min(B, H - y);
+      for (int64_t got = 0; got < b.rows;) {
+        const int64_t n = input.read_rows(b.rows - got, b.values.data() + got * W, b.valid.data() + got * W);
+        if (n <= 0 || n > b.rows - got)
+          throw IoError(IoErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) + " of " +
+                                                    std::to_string(H) + " rows");
+        got += n;
+      }
+      b.voids = converter.convert(b.values.data(), b.valid.data(), y, b.rows, b.ints.data());
+    };
+    produce(bands[0], 0);
+    for (int64_t k = 0; bands[k & 1].y < H && bands[k & 1].rows > 0; ++k) {
+      InputBand& cur = bands[k & 1];
+      InputBand& next = bands[(k + 1) & 1];
+      const int64_t next_y = cur.y + cur.rows;
+      next.rows = 0;
+      std::exception_ptr producer_error;
+      std::thread producer;
+      if (next_y < H) {
+        if (opt_.threads > 1)
+          producer = std::thread([&] {
+            try {
+              produce(next, next_y);
+            } catch (...) {
+              producer_error = std::current_exception();
+            }
+          });
+        else
+          produce(next, next_y);
+      }
+      struct Joiner {
+        std::thread& t;
+        ~Joiner() {
+          if (t.joinable()) t.join();
+        }
+      } joiner{producer};
+      result_.void_count += cur.voids;
+      T_[size_t(m_)].append(cur.ints.data(), cur.rows);
+      mask_.append(cur.valid.data(), cur.rows);
+      if (!filter_ready_) {
+        if (T_[size_t(m_)].end() >= fit_rows_) start_cascade();
+      } else if (m_ > 0) {
+        engines_[size_t(m_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(m_)]);
+      }
+      if (filter_ready_) pump(false);
+      if (producer.joinable()) producer.join();
+      if (producer_error) std::rethrow_exception(producer_error);
+      if (next_y >= H) break;
+    }
+    if (!filter_ready_) start_cascade();
+    for (int l = m_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
+    pump(true);
+    for (int l = 0; l < L_; ++l)
+      if (next_band_[size_t(l)] != sizes_[size_t(l)].height) throw std::logic_error("pyramid: level not completed");
+
+    for (int l = 0; l < L_; ++l) {
+      LevelStats& st = result_.levels[size_t(l)];
+      const Acc& a = acc_[size_t(l)];
+      st.size = sizes_[size_t(l)];
+      st.residual_rms = a.counted ? std::sqrt(a.res_sq / double(a.counted)) : 0.0;
+      st.error_rms = a.counted ? std::sqrt(a.err_sq / double(a.counted)) : 0.0;
+    }
+    header_.has_voids = result_.void_count > 0;
+    result_.header = header_;
+    std::ostringstream held;
+    held << "rows held at most (level rows / decoded rows), coarsest first:";
+    for (int l = 0; l < L_; ++l) held << " " << T_[size_t(l)].peak() << "/" << That_[size_t(l)].peak();
+    result_.log.push_back(held.str());
+    if (result_.void_count)
+      result_.log.push_back("nodata: " + std::to_string(result_.void_count) + " void samples filled by push-pull");
+    result_.seconds_pass_residual = seconds_since(t_start) - result_.seconds_pass_input;
+    if (ordered_) {
+      const auto t = Clock::now();
+      ordered_->replay(sink_, header_, band_count_);
+      result_.seconds_pass_filter = seconds_since(t);
+    }
+    return std::move(result_);
+  }
+
+ private:
+  struct Acc {
+    double res_sq = 0, err_sq = 0;
+    int64_t counted = 0;
+  };
+
+  void begin_sink(bool has_voids) {
+    header_.levels = sizes_;
+    header_.filter = filter_;
+    header_.band_rows = S_;
+    header_.has_voids = has_voids;
+    header_.value_scale = opt_.value_scale;
+    header_.input = info_;
+    sink_.begin(header_);
+  }
+
+  // Fits D on the top fit_rows rows (all still held: nothing is coded before the filter exists),
+  // then starts the D cascade with every row received so far.
+  void start_cascade() {
+    const auto t = Clock::now();
+    const int64_t W = info_.width;
+    if (opt_.use_fixed_filter) {
+      filter_ = opt_.fixed_filter;
+      result_.filter_report.reason = "fixed filter given by the caller";
+      result_.log.push_back("D: fixed filter given by the caller");
+    } else {
+      const std::vector<Rect> windows = filter_fit_windows({W, fit_rows_}, opt_.fit);
+      std::vector<std::vector<int32_t>> data;
+      for (const Rect& r : windows) {
+        std::vector<int32_t> d(size_t(r.width * r.height));
+        for (int64_t yy = 0; yy < r.height; ++yy) {
+          T_[size_t(m_)].copy_rows(r.y0 + yy, 1, row_scratch_.data());
+          std::copy(row_scratch_.data() + r.x0, row_scratch_.data() + r.x0 + r.width, d.begin() + yy * r.width);
+        }
+        data.push_back(std::move(d));
+      }
+      filter_ = fit_optimal_filter(windows, data, opt_.fit, &result_.filter_report);
+      result_.log.push_back(result_.filter_report.summary() + " (fitted on the top " + std::to_string(fit_rows_) +
+                            " rows)");
+    }
+    header_.filter = filter_;
+    // Interleaved output starts now: nothing is coded before the filter exists, and voids further
+    // down are not known yet, so every finest band will carry its mask.
+    if (!opt_.level_ordered_output) begin_sink(/*has_voids=*/true);
+    engines_.resize(size_t(L_));
+    emit_.resize(size_t(L_));
+    emitted_.resize(size_t(L_));
+    for (int l = m_; l >= 1; --l) {
+      // Coarse engines emit in small batches for the same reason as the band heights.
+      const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, m_ - l));
+      engines_[size_t(l)] =
+          std::make_unique<detail::DownsampleEngine>(filter_, sizes_[size_t(l)], opt_.threads, batch);
+      emit_[size_t(l)] = [this, l](int64_t, int64_t n, const double* rows) {
+        const int64_t cw = sizes_[size_t(l - 1)].width;
+        std::vector<int32_t>& out = emitted_[size_t(l - 1)];
+        out.resize(size_t(n * cw));
+        for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = detail::round_to_int32(rows[k]);
+        T_[size_t(l - 1)].append(out.data(), n);
+        if (l - 1 >= 1) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
+      };
+    }
+    filter_ready_ = true;
+    result_.seconds_pass_input += seconds_since(t);
+    if (m_ > 0) {
+      const LevelRows& tm = T_[size_t(m_)];
+      for (int64_t r = tm.first(); r < tm.end(); ++r) {
+        tm.copy_rows(r, 1, row_scratch_.data());
+        engines_[size_t(m_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(m_)]);
+      }
+    }
+  }
+
+  // Last row of T^_{l-1} that U needs for fine rows [y0, y1) of level l, plus one.
+  int64_t coarse_rows_needed(int l, int64_t y0, int64_t y1) const {
+    const Rect need = upsample_required_window(Rect{0, y0, sizes_[size_t(l)].width, y1 - y0}, sizes_[size_t(l)]);
+    return need.y0 + need.height;
+  }
+
+  bool band_ready(int l, int64_t y0, int64_t rows) const {
+    if (T_[size_t(l)].end() < y0 + rows) return false;
+    return l == 0 || That_[size_t(l - 1)].end() >= coarse_rows_needed(l, y0, y0 + rows);
+  }
+
+  // Codes every band that can be coded now, coarse levels first (they unlock the finer ones). Bands
+  // go in groups of `threads`; before the end a partial group waits for more rows.
+  void pump(bool final) {
+    for (int l = 0; l < L_; ++l) {
+      const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
+      // Only the finest level waits to fill a group: waiting at coarse levels would delay all finer ones.
+      const int group = l == m_ ? opt_.threads : 1;
+      for (;;) {
+        const int64_t y0 = next_band_[size_t(l)];
+        if (y0 >= h) break;
+        int64_t nb = 0;
+        while (nb < group && y0 + nb * S < h && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S)))) ++nb;
+        const bool more_after = y0 + nb * S < h;
+        if (nb == 0 || (!final && nb < group && more_after)) break;
+        code_group(l, y0, std::min(h, y0 + nb * S));
+      }
+    }
+  }
+
+  void code_group(int l, int64_t gy0, int64_t gy1) {
+    const GridSize fs = sizes_[size_t(l)];
+    const int64_t fw = fs.width;
+    const bool finest = l == m_;
+    const int64_t S = level_band_rows_[size_t(l)];
+    const int64_t nb = (gy1 - gy0 + S - 1) / S;
+    GridSize cs{0, 0};
+    Rect need{0, 0, 0, 0};
+    if (l > 0) {
+      cs = sizes_[size_t(l - 1)];
+      need = upsample_required_window(Rect{0, gy0, fw, gy1 - gy0}, fs);
+      coarse_window_.resize(size_t(need.height * cs.width));
+      That_[size_t(l - 1)].copy_rows(need.y0, need.height, coarse_window_.data());
+    }
+    const CoarseWindow cwin{coarse_window_.data(), cs.width, need, cs};
+    const LevelRows& tin = T_[size_t(l)];
+    detail::parallel_chunks(opt_.threads, nb, [&](int, int64_t b0, int64_t b1) {
+      for (int64_t b = b0; b < b1; ++b) {
+        BandWork& bw = work_[size_t(b)];
+        bw.y0 = gy0 + b * S;
+        bw.rows = std::min(S, gy1 - bw.y0);
+        const int64_t n = bw.rows * fw;
+        bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
+        tin.copy_rows(bw.y0, bw.rows, bw.t.data());
+        bw.valid.resize(finest ? size_t(n) : 0);
+        if (finest) mask_.copy_rows(bw.y0, bw.rows, bw.valid.data());
+        code_band(l, cwin, bw);
+      }
+    });
+    for (int64_t b = 0; b < nb; ++b) {
+      BandWork& bw = work_[size_t(b)];
+      if (finest) {
+        std::vector<uint8_t> mb = encode_mask_rows(bw.valid.data(), fw, bw.rows);
+        result_.mask_bytes += mb.size();
+        if (ordered_)
+          ordered_->mask_band(bw.y0, bw.rows, mb);
+        else
+          sink_.mask_band(bw.y0, bw.rows, std::move(mb));
+      }
+      LevelStats& st = result_.levels[size_t(l)];
+      st.bytes += bw.bytes.size();
+      st.residual_max_abs = std::max(st.residual_max_abs, bw.res_max);
+      st.error_max_abs = std::max(st.error_max_abs, bw.err_max);
+      Acc& a = acc_[size_t(l)];
+      a.res_sq += bw.res_sq, a.err_sq += bw.err_sq, a.counted += bw.counted;
+      if (ordered_)
+        ordered_->band(l, bw.y0, bw.rows, bw.bytes);
+      else
+        sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
+      bw.bytes = {};
+      ++band_count_[size_t(l)];
+      if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
+      if (!finest) That_[size_t(l)].append(bw.rhat.data(), bw.rows);
+    }
+    next_band_[size_t(l)] = gy1;
+    T_[size_t(l)].drop_before(gy1);
+    if (finest) mask_.drop_before(gy1);
+    if (l > 0) {
+      const int64_t keep = gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0 : That_[size_t(l - 1)].end();
+      That_[size_t(l - 1)].drop_before(keep);
+    }
+  }
+
+  void code_band(int l, const CoarseWindow& cwin, BandWork& bw) {
+    const GridSize fs = sizes_[size_t(l)];
+    const int64_t n = bw.rows * fs.width;
+    const bool with_mask = l == m_;
+    if (l > 0)
+      upsample_region(cwin, fs, Rect{0, bw.y0, fs.width, bw.rows}, bw.pred.data(), fs.width, bw.scratch);
+    else
+      std::fill(bw.pred.begin(), bw.pred.end(), 0);
+    for (int64_t k = 0; k < n; ++k) bw.res[size_t(k)] = saturate(int64_t(bw.t[size_t(k)]) - bw.pred[size_t(k)]);
+    // Voids are restored from the mask, so their residual carries no information.
+    if (with_mask)
+      for (int64_t k = 0; k < n; ++k)
+        if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
+    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data());
+    // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
+    double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
+    int64_t res_max = 0, err_max = 0, counted = 0;
+    const int32_t* t = bw.t.data();
+    const int32_t* pred = bw.pred.data();
+    const int32_t* res = bw.res.data();
+    int32_t* rhat = bw.rhat.data();
+    const bool any_void = with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
+    for (int64_t k = 0; k < n; ++k) {
+      const int32_t rec = saturate(int64_t(pred[k]) + rhat[k]);
+      if (!any_void || bw.valid[size_t(k)]) {
+        const int64_t r = res[k], e = int64_t(t[k]) - rec;
+        res_sq[k & 3] += double(r) * double(r);
+        err_sq[k & 3] += double(e) * double(e);
+        res_max = std::max(res_max, r < 0 ? -r : r);
+        err_max = std::max(err_max, e < 0 ? -e : e);
+        ++counted;
+      }
+      rhat[k] = rec;  // now T^ of this band
+    }
+    bw.res_sq = (res_sq[0] + res_sq[1]) + (res_sq[2] + res_sq[3]);
+    bw.err_sq = (err_sq[0] + err_sq[1]) + (err_sq[2] + err_sq[3]);
+    bw.res_max = res_max, bw.err_max = err_max, bw.counted = counted;
+  }
+
+  const GridInfo info_;
+  const BuildOptions& opt_;
+  ResidualCoder& coder_;
+  PyramidSink& sink_;
+  std::vector<GridSize> sizes_;
+  int L_ = 0, m_ = 0;
+  int64_t S_ = 0, fit_rows_ = 0;
+  std::vector<int64_t> level_band_rows_;
+  DownsampleFilter filter_;
+  bool filter_ready_ = false;
+  PyramidHeader header_;
+  std::vector<LevelRows> T_;
+  std::vector<RowRing<int32_t>> That_;
+  MaskRows mask_;
+  std::vector<int32_t> row_scratch_;
+  std::vector<std::unique_ptr<detail::DownsampleEngine>> engines_;
+  std::vector<detail::DownsampleEngine::Emit> emit_;
+  std::vector<std::vector<int32_t>> emitted_;
+  std::vector<int64_t> next_band_, band_count_;
+  std::vector<Acc> acc_;
+  std::vector<BandWork> work_;
+  std::vector<int32_t> coarse_window_;
+  std::unique_ptr<LevelOrderBuffer> ordered_;
+  BuildResult result_;
+};
+
 }  // namespace
 
 BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink) {
-  const GridInfo info = input.info();
-  validate(opt, info);
-  const GridSize finest{info.width, info.height};
-  const std::vector<GridSize> sizes = pyramid_level_sizes(finest, opt.level_count, opt.min_coarsest_side);
-  const int L = int(sizes.size()), m = L - 1;
-  const int64_t W = finest.width, H = finest.height;
-  const std::string base = opt.temp_dir + "/" + opt.temp_name + ".pyr.tmp.";
-
-  BuildResult result;
-  {
-    std::ostringstream s;
-    s << "levels " << L << ":";
-    for (auto& g : sizes) s << " " << g.width << "x" << g.height;
-    result.log.push_back(s.str());
-  }
-
-  std::vector<std::unique_ptr<detail::SpillFile>> level_spill(static_cast<size_t>(L));
-  level_spill[size_t(m)] = std::make_unique<detail::SpillFile>(base + "level" + std::to_string(m));
-  detail::SpillFile mask_spill(base + "mask");
-
-  // ---- Pass A: the input, once.
-  auto t0 = Clock::now();
-  const std::vector<Rect> windows =
-      opt.use_fixed_filter ? std::vector<Rect>{} : filter_fit_windows(finest, opt.fit);
-  std::vector<std::vector<int32_t>> window_data(windows.size());
-  for (size_t k = 0; k < windows.size(); ++k) window_data[k].resize(size_t(windows[k].width * windows[k].height));
-
-  const int64_t B = std::min(opt.fill_band_rows, H);
-  std::vector<double> values(size_t(B * W));
-  std::vector<uint8_t> valid(size_t(B * W));
-  std::vector<int32_t> ints(size_t(B * W));
-  std::vector<uint8_t> mask_bytes;
-  InputConverter converter(opt, info);
-  for (int64_t y = 0; y < H; y += B) {
-    const int64_t rows = std::min(B, H - y);
-    for (int64_t got = 0; got < rows;) {
-      const int64_t n = input.read_rows(rows - got, values.data() + got * W, valid.data() + got * W);
-      if (n <= 0 || n > rows - got)
-        throw IoError(IoErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) + " of " +
-                                                  std::to_string(H) + " rows");
-      got += n;
-    }
-    result.void_count += converter.convert(values.data(), valid.data(), y, rows, ints.data());
-    level_spill[size_t(m)]->write(ints.data(), size_t(rows * W) * sizeof(int32_t));
-    for (int64_t r = 0; r < rows; ++r) {
-      mask_bytes = encode_mask_rows(valid.data() + r * W, W, 1);
-      uint8_t len[10];
-      mask_spill.write(len, size_t(detail::put_varint(len, mask_bytes.size()) - len));
-      mask_spill.write(mask_bytes.data(), mask_bytes.size());
-    }
-    for (size_t k = 0; k < windows.size(); ++k) {
-      const Rect& wr = windows[k];
-      for (int64_t yy = std::max(y, wr.y0); yy < std::min(y + rows, wr.y0 + wr.height); ++yy)
-        std::copy(ints.begin() + (yy - y) * W + wr.x0, ints.begin() + (yy - y) * W + wr.x0 + wr.width,
-                  window_data[k].begin() + (yy - wr.y0) * wr.width);
-    }
-  }
-  result.seconds_pass_input = seconds_since(t0);
-
-  DownsampleFilter filter = opt.fixed_filter;
-  if (opt.use_fixed_filter) {
-    result.filter_report.reason = "fixed filter given by the caller";
-    result.log.push_back("D: fixed filter given by the caller");
-  } else {
-    filter = fit_optimal_filter(windows, window_data, opt.fit, &result.filter_report);
-    result.log.push_back(result.filter_report.summary());
-  }
-  window_data.clear();
-  if (result.void_count)
-    result.log.push_back("nodata: " + std::to_string(result.void_count) + " void samples filled by push-pull");
-
-  // ---- Pass B: Gaussian levels through a cascade of D engines.
-  t0 = Clock::now();
-  if (m > 0) {
-    std::vector<std::unique_ptr<detail::DownsampleEngine>> engines(static_cast<size_t>(L));
-    std::vector<std::vector<int32_t>> emitted(static_cast<size_t>(L));
-    std::vector<detail::DownsampleEngine::Emit> emit(static_cast<size_t>(L));
-    for (int l = m; l >= 1; --l) {
-      engines[size_t(l)] = std::make_unique<detail::DownsampleEngine>(filter, sizes[size_t(l)], opt.threads);
-      level_spill[size_t(l - 1)] = std::make_unique<detail::SpillFile>(base + "level" + std::to_string(l - 1));
-    }
-    for (int l = m; l >= 1; --l) {
-      emit[size_t(l)] = [&, l](int64_t, int64_t n, const double* rows) {
-        const int64_t cw = sizes[size_t(l - 1)].width;
-        std::vector<int32_t>& out = emitted[size_t(l - 1)];
-        out.resize(size_t(n * cw));
-        for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = detail::round_to_int32(rows[k]);
-        level_spill[size_t(l - 1)]->write(out.data(), out.size() * sizeof(int32_t));
-        if (l - 1 >= 1) engines[size_t(l - 1)]->push_rows(out.data(), n, emit[size_t(l - 1)]);
-      };
-    }
-    level_spill[size_t(m)]->rewind_for_reading();
-    const int64_t chunk = 64;
-    std::vector<int32_t> rows_in(size_t(chunk * W));
-    for (int64_t y = 0; y < H; y += chunk) {
-      const int64_t n = std::min(chunk, H - y);
-      level_spill[size_t(m)]->read(rows_in.data(), size_t(n * W) * sizeof(int32_t));
-      engines[size_t(m)]->push_rows(rows_in.data(), n, emit[size_t(m)]);
-    }
-    for (int l = m; l >= 1; --l) engines[size_t(l)]->finish(emit[size_t(l)]);
-  }
-  result.seconds_pass_filter = seconds_since(t0);
-
-  // ---- Pass C: closed-loop residuals, coarse to fine.
-  t0 = Clock::now();
-  PyramidHeader& hdr = result.header;
-  hdr.levels = sizes;
-  hdr.filter = filter;
-  hdr.band_rows = coder.band_rows();
-  hdr.has_voids = result.void_count > 0;
-  hdr.value_scale = opt.value_scale;
-  hdr.input = info;
-  sink.begin(hdr);
-  const int64_t S = hdr.band_rows;
-  if (S < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
-  mask_spill.rewind_for_reading();
-
-  std::vector<BandWork> work(static_cast<size_t>(opt.threads));
-  std::unique_ptr<detail::SpillFile> prev_rec;
-  std::vector<int32_t> cbuf;
-  result.levels.resize(size_t(L));
-  for (int l = 0; l <= m; ++l) {
-    const GridSize fs = sizes[size_t(l)];
-    const int64_t fw = fs.width, fh = fs.height;
-    const bool finest_level = l == m;
-    const bool with_mask = finest_level && hdr.has_voids;
-    detail::SpillFile& tin = *level_spill[size_t(l)];
-    tin.rewind_for_reading();
-    std::unique_ptr<detail::SpillFile> rec_out;
-    if (!finest_level) rec_out = std::make_unique<detail::SpillFile>(base + "decoded" + std::to_string(l));
-    GridSize cs{0, 0};
-    int64_t cbase = 0, ccount = 0, cread = 0;
-    if (l > 0) {
-      cs = sizes[size_t(l - 1)];
-      prev_rec->rewind_for_reading();
-    }
-    LevelStats& st = result.levels[size_t(l)];
-    st.size = fs;
-    double res_sq = 0, err_sq = 0;
-    int64_t counted = 0;
-    const int64_t group_rows = S * opt.threads;
-    for (int64_t gy0 = 0; gy0 < fh; gy0 += group_rows) {
-      const int64_t gy1 = std::min(fh, gy0 + group_rows);
-      const int64_t nb = (gy1 - gy0 + S - 1) / S;
-      if (int64_t(work.size()) < nb) work.resize(size_t(nb));
-      for (int64_t b = 0; b < nb; ++b) {
-        BandWork& bw = work[size_t(b)];
-        bw.y0 = gy0 + b * S;
-        bw.rows = std::min(S, gy1 - bw.y0);
-        const size_t n = size_t(bw.rows * fw);
-        bw.t.resize(n), bw.pred.resize(n), bw.res.resize(n), bw.rhat.resize(n);
-        tin.read(bw.t.data(), n * sizeof(int32_t));
-        bw.valid.assign(with_mask ? n : 0, 1);
-        if (with_mask) {
-          for (int64_t r = 0; r < bw.rows; ++r) {
-            uint64_t len = 0;
-            uint8_t byte;
-            for (int shift = 0;; shift += 7) {
-              if (shift > 63 || !mask_spill.read_byte(&byte))
-                throw IoError(IoErrorCode::Truncated, mask_spill.path() + ": mask spill truncated");
-              len |= uint64_t(byte & 0x7f) << shift;
-              if (!(byte & 0x80)) break;
-            }
-            mask_bytes.resize(size_t(len));
-            mask_spill.read(mask_bytes.data(), mask_bytes.size());
-            if (!decode_mask_rows(mask_bytes.data(), mask_bytes.size(), fw, 1, bw.valid.data() + r * fw))
-              throw std::logic_error("pyramid: mask spill corrupt");
-          }
-        }
-      }
-      if (l > 0) {
-        const Rect need = upsample_required_window(Rect{0, gy0, fw, gy1 - gy0}, fs);
-        const int64_t drop = std::clamp<int64_t>(need.y0 - cbase, 0, ccount);
-        if (drop > 0) {
-          std::memmove(cbuf.data(), cbuf.data() + drop * cs.width, size_t((ccount - drop) * cs.width) * sizeof(int32_t));
-          cbase += drop, ccount -= drop;
-        }
-        const int64_t want_end = need.y0 + need.height;
-        if (cbase + ccount < want_end) {
-          const int64_t more = want_end - (cbase + ccount);
-          cbuf.resize(size_t((ccount + more) * cs.width));
-          prev_rec->read(cbuf.data() + ccount * cs.width, size_t(more * cs.width) * sizeof(int32_t));
-          ccount += more;
-          cread += more;
-        }
-      }
-      const CoarseWindow cwin{cbuf.data(), cs.width, Rect{0, cbase, cs.width, ccount}, cs};
-      detail::parallel_chunks(opt.threads, nb, [&](int, int64_t b0, int64_t b1) {
-        for (int64_t b = b0; b < b1; ++b) {
-          BandWork& bw = work[size_t(b)];
-          const int64_t n = bw.rows * fw;
-          if (l > 0)
-            upsample_region(cwin, fs, Rect{0, bw.y0, fw, bw.rows}, bw.pred.data(), fw, bw.scratch);
-          else
-            std::fill(bw.pred.begin(), bw.pred.end(), 0);
-          for (int64_t k = 0; k < n; ++k) bw.res[size_t(k)] = saturate(int64_t(bw.t[size_t(k)]) - bw.pred[size_t(k)]);
-          // Voids are restored from the mask, so their residual carries no information.
-          if (with_mask)
-            for (int64_t k = 0; k < n; ++k)
-              if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
-          bw.bytes = coder.encode(bw.res.data(), fw, bw.rows, bw.rhat.data());
-          bw.res_sq = bw.err_sq = 0;
-          bw.res_max = bw.err_max = bw.counted = 0;
-          for (int64_t k = 0; k < n; ++k) {
-            const int32_t rec = saturate(int64_t(bw.pred[size_t(k)]) + bw.rhat[size_t(k)]);
-            if (!with_mask || bw.valid[size_t(k)]) {
-              const int64_t r = bw.res[size_t(k)], e = int64_t(bw.t[size_t(k)]) - rec;
-              bw.res_sq += double(r) * double(r);
-              bw.err_sq += double(e) * double(e);
-              bw.res_max = std::max(bw.res_max, r < 0 ? -r : r);
-              bw.err_max = std::max(bw.err_max, e < 0 ? -e : e);
-              ++bw.counted;
-            }
-            bw.rhat[size_t(k)] = rec;  // now T^ for this band
-          }
-        }
-      });
-      for (int64_t b = 0; b < nb; ++b) {
-        BandWork& bw = work[size_t(b)];
-        const size_t n = size_t(bw.rows * fw);
-        if (with_mask) {
-          std::vector<uint8_t> mb = encode_mask_rows(bw.valid.data(), fw, bw.rows);
-          result.mask_bytes += mb.size();
-          sink.mask_band(bw.y0, bw.rows, std::move(mb));
-        }
-        st.bytes += bw.bytes.size();
-        sink.band(l, bw.y0, bw.rows, std::move(bw.bytes));
-        bw.bytes = {};
-        if (sink.wants_reconstruction(l)) sink.reconstructed_rows(l, bw.y0, bw.rows, bw.rhat.data());
-        if (rec_out) rec_out->write(bw.rhat.data(), n * sizeof(int32_t));
-        res_sq += bw.res_sq, err_sq += bw.err_sq, counted += bw.counted;
-        st.residual_max_abs = std::max(st.residual_max_abs, bw.res_max);
-        st.error_max_abs = std::max(st.error_max_abs, bw.err_max);
-      }
-    }
-    (void)cread;
-    st.residual_rms = counted ? std::sqrt(res_sq / double(counted)) : 0.0;
-    st.error_rms = counted ? std::sqrt(err_sq / double(counted)) : 0.0;
-    prev_rec = std::move(rec_out);
-    // Level l's Gaussian samples are no longer needed.
-    if (!finest_level) level_spill[size_t(l)].reset();
-  }
-  result.seconds_pass_residual = seconds_since(t0);
-  return result;
+  StreamingBuilder builder(input.info(), opt, coder, sink);
+  return builder.run(input);
 }
 
 namespace {

@@ -11,22 +11,22 @@ void MemoryPyramid::begin(const PyramidHeader& h) {
   header = h;
   bands.assign(h.levels.size(), {});
   mask.clear();
-  recon.assign(h.levels.size(), {});
 }
 
 void MemoryPyramid::band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
-  bands.at(size_t(level)).push_back({y0, rows, std::move(bytes)});
+  if (size_t(level) >= bands.size()) bands.resize(size_t(level) + 1);
+  bands[size_t(level)].push_back({y0, rows, std::move(bytes)});
 }
 
 void MemoryPyramid::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
   mask.push_back({y0, rows, std::move(bytes)});
 }
 
-void MemoryPyramid::reconstructed_rows(int level, int64_t y0, int64_t rows, const int32_t* data) {
-  const int64_t w = header.levels.at(size_t(level)).width;
+void MemoryPyramid::reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) {
+  if (size_t(level) >= recon.size()) recon.resize(size_t(level) + 1);
   auto& r = recon[size_t(level)];
-  r.resize(size_t((y0 + rows) * w));
-  std::copy(data, data + rows * w, r.begin() + y0 * w);
+  r.resize(size_t((y0 + rows) * width));
+  std::copy(data, data + rows * width, r.begin() + y0 * width);
 }
 
 uint64_t MemoryPyramid::total_bytes() const {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace terrain {
 namespace {
@@ -74,7 +75,7 @@ Heightmap synthesize_terrain(const SynthOptions& options) {
   int64_t ridge_norm = 0;
   for (int k = 0; k < ridge_octaves; ++k) ridge_norm += kOne >> k;
 
-  int64_t h_min = INT64_MAX, h_max = INT64_MIN;
+  int64_t h_max = INT64_MIN;
   for (int64_t y = 0; y < g.height; ++y) {
     for (int64_t x = 0; x < g.width; ++x) {
       int64_t c = (4 * value_noise(continent_keys[0], x, y, continent_cell) +
@@ -82,28 +83,32 @@ Heightmap synthesize_terrain(const SynthOptions& options) {
                    value_noise(continent_keys[2], x, y, continent_cell / 4)) / 7;
       int64_t base = c + 32768;  // [0, kOne)
       // Mountains rise where the continent is high; lowlands stay gentle.
-      int64_t mask = smooth(clamp_unit((base - kOne * 45 / 100) * 100 / 35));
-      int64_t ridges = 0, weight = kOne;
+      int64_t mask = smooth(clamp_unit((base - kOne * 30 / 100) * 100 / 30));
+      int64_t ridges = 0, weight = kOne, hills = 0;
       int64_t cell = continent_cell / 2;
       for (int k = 0; k < ridge_octaves; ++k, cell /= 2) {
         int64_t n = value_noise(ridge_keys[k], x, y, cell);
         int64_t r = clamp_unit(kOne - 2 * (n < 0 ? -n : n));
-        r = (r * r) >> 16;                       // sharpen the crests
-        r = (r * weight) >> 16;                  // fine ridges only on top of coarse ones
-        weight = clamp_unit(r * 2);
+        r = (r * r) >> 16;       // sharpen the crests
+        r = (r * weight) >> 16;  // fine ridges grow on coarse crests, not in the valleys
+        weight = clamp_unit(r * 3 / 2);
         ridges += r >> k;
+        hills += n >> (k + 1);   // plain fBm: rolling relief everywhere
       }
       ridges = ridges * kOne / ridge_norm;
-      int64_t h = base * 3 / 10 + ((mask * ridges) >> 16) * 7 / 10;  // [0, kOne]
-      h_min = std::min(h_min, h);
+      int64_t h = base * 35 / 100 + ((mask * ridges) >> 16) * 65 / 100 + hills / 6;
       h_max = std::max(h_max, h);
       map.values[size_t(y * g.width + x)] = double(h);  // exact: |h| < 2^17
     }
   }
-  // Stretch to the full relief whatever the seed drew, then flood the bottom into a flat sea at 0,
-  // like coastal SRTM tiles.
-  const int64_t range = std::max<int64_t>(1, h_max - h_min);
-  for (double& v : map.values) v = double(std::max<int64_t>(0, (int64_t(v) - h_min) * 3600 / range - 500));
+  // A quarter of the area (the lowest samples) becomes flat sea at 0, like coastal SRTM tiles; the
+  // rest is stretched so that the highest sample is 3100 m, whatever relief the seed drew.
+  std::vector<double> sorted = map.values;
+  auto quartile = sorted.begin() + std::ptrdiff_t(sorted.size() / 4);
+  std::nth_element(sorted.begin(), quartile, sorted.end());
+  const int64_t sea = int64_t(*quartile);
+  const int64_t range = std::max<int64_t>(1, h_max - sea);
+  for (double& v : map.values) v = double(std::max<int64_t>(0, (int64_t(v) - sea) * 3100 / range));
   return map;
 }
 

@@ -119,16 +119,28 @@ void ContainerWriter::end_level() {
 }
 
 void ContainerWriter::append_mask(const uint8_t* valid, size_t count) {
-  for (size_t i = 0; i < count; ++i) {
-    const bool v = valid[i] != 0;
-    if (v == current_run_valid_) {
-      ++current_run_;
+  // Scans whole runs at a time (memchr for the end of a data run, 8 bytes at a time through a
+  // void run): masks of large grids are mostly long runs.
+  size_t i = 0;
+  while (i < count) {
+    size_t stop;
+    if (current_run_valid_) {
+      const void* zero = std::memchr(valid + i, 0, count - i);
+      stop = zero ? size_t(static_cast<const uint8_t*>(zero) - valid) : count;
     } else {
-      mask_runs::put_varint(mask_runs_, current_run_);
-      current_run_valid_ = v;
-      current_run_ = 1;
+      stop = i;
+      uint64_t word = 0;
+      while (stop + 8 <= count && (std::memcpy(&word, valid + stop, 8), word == 0)) stop += 8;
+      while (stop < count && valid[stop] == 0) ++stop;
+      mask_voids_ += stop - i;
     }
-    mask_voids_ += v ? 0 : 1;
+    current_run_ += stop - i;
+    i = stop;
+    if (i < count) {  // the run ends inside this call: the next sample starts the other kind
+      mask_runs::put_varint(mask_runs_, current_run_);
+      current_run_valid_ = !current_run_valid_;
+      current_run_ = 0;
+    }
   }
   mask_samples_ += count;
 }
@@ -136,7 +148,7 @@ void ContainerWriter::append_mask(const uint8_t* valid, size_t count) {
 void ContainerWriter::set_metadata_json(std::string json) { metadata_json_ = std::move(json); }
 
 void ContainerWriter::finish() {
-  if (finished_) throw std::logic_error("finish() called twice");
+  if (finished_ || finish_started_) throw std::logic_error("finish() called again after it finished or failed");
   if (open_level_) throw std::logic_error("finish: level " + std::to_string(*open_level_) + " is still open");
   if (!info_) throw std::invalid_argument("finish: set_info() was never called");
   const ContainerInfo& info = *info_;
@@ -156,7 +168,9 @@ void ContainerWriter::finish() {
                                 std::to_string(samples));
   }
 
-  // Mask region (only when there are voids), then metadata, then the index.
+  // Mask region (only when there are voids), then metadata, then the index. From here on a
+  // failure leaves the writer unusable: the destructor removes the temporary file.
+  finish_started_ = true;
   const bool has_mask = mask_voids_ > 0;
   if (has_mask) mask_runs::put_varint(mask_runs_, current_run_);
   pad_to_alignment();

@@ -197,6 +197,14 @@ void add_read_options(ArgParser& p, terrain::ReadOptions& o) {
   p.flag("--terrain-rgb", "decode an 8-bit RGB(A) image as Mapbox Terrain-RGB (automatic for RGB PNGs)", &o.terrain_rgb);
 }
 
+std::string shortest(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  char buf[64];
+  auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
 int run_tool(const std::string& program, const std::function<int()>& body) {
   try {
     return body();

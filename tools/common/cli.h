@@ -77,6 +77,9 @@ double parse_double(const std::string& option, const std::string& text);
 // Adds --vscale --voffset --spacing --width --height --type --endian --nodata --terrain-rgb.
 void add_read_options(ArgParser& parser, terrain::ReadOptions& options);
 
+// Shortest decimal text that reads back as exactly `v` (locale independent), e.g. "0.1" not "0.10000000000000001".
+std::string shortest(double v);
+
 // Runs a tool body, turning exceptions into "<program>: error: <message>" on stderr and the documented
 // exit status (IoError -> its code, UsageError -> 1, anything else -> 70).
 int run_tool(const std::string& program, const std::function<int()>& body);

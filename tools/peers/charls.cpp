@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstring>
 
 namespace peers {
@@ -29,12 +30,14 @@ class CharlsPeer final : public Peer {
            "(4-byte offset prefix), default thresholds, no SPIFF header; NEAR sweep";
   }
   bool lossless_capable() const override { return true; }
-  std::vector<Setting> sweep(bool quick) const override {
-    std::vector<int> nears = quick ? std::vector<int>{0, 2} : std::vector<int>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
-    std::vector<Setting> out;
-    for (int near : nears)
-      out.push_back({near == 0 ? "near=0 lossless" : "near=" + std::to_string(near), double(near), 0,
-                     double(near)});
+  std::vector<Setting> sweep(bool quick, double unit_m) const override {
+    const std::vector<double> metres = quick ? std::vector<double>{2} : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    std::vector<Setting> out{{"near=0 lossless", 0, 0, 0}};
+    for (double m : metres) {
+      const int near = std::max(1, int(std::lround(m / unit_m)));
+      if (near == int(out.back().param)) continue;
+      out.push_back({"near=" + std::to_string(near), double(near), 0, double(near)});
+    }
     return out;
   }
 

@@ -5,6 +5,7 @@
 #include "peers.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 
@@ -93,9 +94,14 @@ class JpegXrPeer final : public Peer {
            "1 tile, all subbands, QP index q for DC/LP/HP alike (q = 1 lossless)";
   }
   bool lossless_capable() const override { return true; }
-  std::vector<Setting> sweep(bool quick) const override {
+  std::vector<Setting> sweep(bool quick, double unit_m) const override {
     std::vector<int> qps = quick ? std::vector<int>{1, 40}
                                  : std::vector<int>{1, 2, 4, 8, 12, 16, 24, 32, 40, 48, 56, 64, 72, 80, 88, 96, 112, 128};
+    // Above QP 16 the quantiser step doubles every 16 QP indices: shift the lossy QPs so that the
+    // steps in metres stay about the same for finer sample units.
+    const int shift = 16 * int(std::lround(std::log2(1.0 / unit_m)));
+    for (int& qp : qps)
+      if (qp > 16) qp = std::clamp(qp + shift, 17, 255);
     std::vector<Setting> out;
     for (int qp : qps) {
       char label[32];

@@ -5,6 +5,8 @@
 
 #include <Lerc_c_api.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -21,11 +23,14 @@ class LercPeer final : public Peer {
            "maxZErr = declared max error (0 = lossless), latest codec version";
   }
   bool lossless_capable() const override { return true; }
-  std::vector<Setting> sweep(bool quick) const override {
-    std::vector<double> errs = quick ? std::vector<double>{0, 2}
-                                     : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+  std::vector<Setting> sweep(bool quick, double unit_m) const override {
+    const std::vector<double> metres = quick ? std::vector<double>{0, 2}
+                                             : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out;
-    for (double e : errs) {
+    for (double m : metres) {
+      // Whole sample units, so the declared bound is exactly the parameter.
+      const double e = m == 0 ? 0.0 : std::max(1.0, std::round(m / unit_m));
+      if (!out.empty() && out.back().param == e) continue;
       char label[40];
       std::snprintf(label, sizeof label, e == 0 ? "maxerr=0 lossless" : "maxerr=%g", e);
       out.push_back({label, e, 0, e});

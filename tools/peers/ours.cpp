@@ -4,6 +4,8 @@
 
 #include <codec/codec.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -22,18 +24,25 @@ class OursPeer final : public Peer {
            "bound_max_error off, and max-error sweep (bound_max_error on, max_error = E)";
   }
   bool lossless_capable() const override { return true; }
-  std::vector<Setting> sweep(bool quick) const override {
-    std::vector<double> steps = quick ? std::vector<double>{1, 8}
-                                      : std::vector<double>{1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64};
-    std::vector<double> errors = quick ? std::vector<double>{2} : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
-    std::vector<Setting> out;
-    for (double s : steps) {
+  std::vector<Setting> sweep(bool quick, double unit_m) const override {
+    const std::vector<double> step_metres = quick ? std::vector<double>{8}
+                                                  : std::vector<double>{1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64};
+    const std::vector<double> error_metres = quick ? std::vector<double>{2}
+                                                   : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    std::vector<Setting> out{{"step=1 lossless", 1, kStep, 0}};
+    for (double m : step_metres) {
+      const double s = std::max(1.0, m / unit_m);
+      if (s == out.back().param) continue;
       char label[40];
-      std::snprintf(label, sizeof label, s == 1 ? "step=1 lossless" : "step=%g", s);
-      out.push_back({label, s, kStep, s == 1 ? 0.0 : -1.0});
+      std::snprintf(label, sizeof label, "step=%g", s);
+      out.push_back({label, s, kStep, -1});
     }
-    for (double e : errors)
-      out.push_back({e == 0 ? "maxerr=0 lossless" : "maxerr=" + std::to_string(int(e)), e, kMaxError, e});
+    out.push_back({"maxerr=0 lossless", 0, kMaxError, 0});
+    for (double m : error_metres) {
+      const double e = std::max(1.0, std::round(m / unit_m));
+      if (e == out.back().param) continue;
+      out.push_back({"maxerr=" + std::to_string(int(e)), e, kMaxError, e});
+    }
     return out;
   }
 

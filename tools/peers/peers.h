@@ -48,8 +48,10 @@ class Peer {
   virtual std::string name() const = 0;
   // Library version and every fixed coding parameter, for the report.
   virtual std::string configuration() const = 0;
-  // The settings to benchmark; `quick` gives a shorter sweep for smoke runs.
-  virtual std::vector<Setting> sweep(bool quick) const = 0;
+  // The settings to benchmark for a grid whose sample unit is unit_m metres: error-type parameters
+  // (NEAR, max error, tolerance, step) are chosen in metres and converted to sample units, so every
+  // grid gets a sweep over the same metre range. `quick` gives a shorter sweep for smoke runs.
+  virtual std::vector<Setting> sweep(bool quick, double unit_m) const = 0;
   virtual bool lossless_capable() const = 0;
   // Encodes img into out; on return out.size() is the complete stream size in bytes (everything a
   // decoder needs besides width and height). Reuses out's capacity. Throws PeerError.
@@ -74,16 +76,20 @@ ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded);
 struct Result {
   size_t bytes = 0;
   double bits_per_sample = 0;
-  double encode_seconds = 0;   // best of encode_reps
-  double decode_seconds = 0;   // best of decode_reps
+  double encode_seconds = 0;   // best wall-clock time of encode_reps
+  double decode_seconds = 0;   // best wall-clock time of decode_reps
+  // Best process CPU time (all threads) of the same repetitions: on a machine shared with other
+  // work, wall-clock time includes waiting for a core and CPU time does not.
+  double encode_cpu_seconds = 0, decode_cpu_seconds = 0;
   int encode_reps = 0, decode_reps = 0;
   ErrorStats error;
   std::vector<int32_t> decoded;
 };
 
 // Encodes and decodes img with one setting, timing encode and decode separately with
-// std::chrono::steady_clock: each is repeated until its repetitions total at least min_total_seconds
-// (at least once, at most max_reps times) and the fastest repetition is kept.
+// std::chrono::steady_clock (and process CPU time): each is repeated until its repetitions total at
+// least min_total_seconds of wall time (at least once, at most max_reps times) and the fastest
+// repetition is kept.
 Result measure(Peer& peer, const Image16& img, const Setting& setting, double min_total_seconds,
                int max_reps);
 

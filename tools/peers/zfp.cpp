@@ -43,10 +43,11 @@ class ZfpPeer final : public Peer {
            "(decoded rounded to integers), and reversible mode";
   }
   bool lossless_capable() const override { return true; }
-  std::vector<Setting> sweep(bool quick) const override {
-    std::vector<double> tols = quick ? std::vector<double>{2} : std::vector<double>{0.5, 1, 2, 4, 8, 16, 32, 64};
+  std::vector<Setting> sweep(bool quick, double unit_m) const override {
+    const std::vector<double> metres = quick ? std::vector<double>{2} : std::vector<double>{0.5, 1, 2, 4, 8, 16, 32, 64};
     std::vector<Setting> out;
-    for (double t : tols) {
+    for (double m : metres) {
+      const double t = std::exp2(std::round(std::log2(m / unit_m)));  // zfp uses powers of two anyway
       char label[40];
       std::snprintf(label, sizeof label, "tol=%g", t);
       out.push_back({label, t, kAccuracy, std::floor(t + 0.5)});

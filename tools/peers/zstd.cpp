@@ -27,7 +27,7 @@ class ZstdPeer final : public Peer {
            ": raw int16 little-endian samples, ZSTD_compressCCtx at level L, single thread";
   }
   bool lossless_capable() const override { return true; }
-  std::vector<Setting> sweep(bool quick) const override {
+  std::vector<Setting> sweep(bool quick, double) const override {
     if (quick) return {{"level=3", 3, 0, 0}};
     return {{"level=3", 3, 0, 0}, {"level=19", 19, 0, 0}};
   }

@@ -48,7 +48,9 @@ enum class Status {
 const char* status_name(Status status);
 
 struct EncodeOptions {
-  double step = 1.0;            // absolute quantiser step in sample units (>= 1; 1 = lossless)
+  double step = 1.0;            // absolute quantiser step in sample units (>= 1; 1 = lossless);
+                                // in max-error mode a step of 0 or 1 (the default) picks
+                                // 2 * max_error, the measured best for the transform tiles
   bool bound_max_error = false; // guarantee |error| <= max_error at every sample
   uint32_t max_error = 0;       // E for max-error mode (0 = lossless); at most kMaxAbsSample
   uint32_t tile_size = 64;      // tile side in samples: multiple of 16 in [16, 4096]

@@ -176,8 +176,9 @@ double prediction_rms(const DownsampleFilter& filter, const int32_t* grid, GridS
 class ResidualCoder {
  public:
   virtual ~ResidualCoder() = default;
-  // Rows per band the coder wants: the builder codes each level as consecutive, independent bands
-  // of this many rows (the last one shorter). Each band is a whole image to the coder.
+  // Rows per band the coder wants at the finest level: the builder codes each level as consecutive,
+  // independent bands (the last one shorter), level l of m+1 with max(1, band_rows >> (m - l)) rows
+  // so that coarse bands do not hold back the finer levels. Each band is a whole image to the coder.
   virtual int64_t band_rows() const = 0;
   // encode/decode may be called concurrently from several threads (one band each).
   // Codes one band of integer residuals (w x h, row-major) and writes into `reconstructed` the exact
@@ -214,16 +215,21 @@ struct BuildOptions {
   DownsampleFilter fixed_filter = DownsampleFilter::default_filter();
   FilterFitOptions fit;
   int threads = 2;                   // results are bit-identical for every thread count
-  std::string temp_dir = ".";        // spill files (<temp_dir>/<name>.pyr.tmp.*), removed afterwards
+  std::string temp_dir = ".";        // temp files (<temp_dir>/<name>.pyr.tmp.*), removed afterwards
   std::string temp_name = "pyramid";
-  int64_t fill_band_rows = 256;      // nodata push-pull works on bands of this many input rows
+  int64_t fill_band_rows = 64;       // nodata push-pull works on bands of this many input rows
+  int64_t fit_rows = 512;            // D is fitted on windows within the top fit_rows input rows
+  // true: the sink sees begin(), then level 0's bands, level 1's, ... (coded bands are held in temp
+  // files until the input ends). false: begin() first (has_voids = true: a mask band precedes every
+  // finest band), then bands as produced, levels interleaved (each level top to bottom).
+  bool level_ordered_output = true;
 };
 
 // Everything a decoder needs besides the per-band bytes.
 struct PyramidHeader {
   std::vector<GridSize> levels;      // coarsest first
   DownsampleFilter filter;           // the D used (informative: decoding needs only U)
-  int64_t band_rows = 0;             // coder band height (same for every level)
+  int64_t band_rows = 0;             // coder band height at the finest level (halved per coarser level)
   bool has_voids = false;            // finest level carries a validity mask
   double value_scale = 1.0;
   GridInfo input;                    // the input's description
@@ -244,12 +250,16 @@ struct BuildResult {
   std::vector<LevelStats> levels;    // coarsest first
   int64_t void_count = 0;
   uint64_t mask_bytes = 0;
-  double seconds_pass_input = 0, seconds_pass_filter = 0, seconds_pass_residual = 0;
+  // Wall time: seconds_pass_input = fitting D; seconds_pass_residual = the rest of the streaming build
+  // (read, D cascade, closed loop); seconds_pass_filter = replaying coded bands in level order.
+  double seconds_pass_input = 0, seconds_pass_residual = 0, seconds_pass_filter = 0;
   std::vector<std::string> log;      // human-readable build log (filter choice, fallbacks)
 };
 
-// Receives the output in order: begin(), then for each level coarsest first, its bands top to
-// bottom (band(), and with the finest level also mask_band() before each band when has_voids).
+// Receives the output: begin(), then the bands of each level top to bottom (with the finest level,
+// mask_band() before each band when has_voids). With BuildOptions::level_ordered_output (default)
+// levels come coarsest first; otherwise they interleave. reconstructed_rows() calls may come at any
+// time (before begin() in ordered mode), each level top to bottom.
 class PyramidSink {
  public:
   virtual ~PyramidSink() = default;
@@ -261,13 +271,14 @@ class PyramidSink {
   }
   // The decoder-exact reconstruction T^_level of rows y0.. (only called when wants_reconstruction()).
   virtual bool wants_reconstruction(int level) const { (void)level; return false; }
-  virtual void reconstructed_rows(int level, int64_t y0, int64_t rows, const int32_t* data) {
-    (void)level, (void)y0, (void)rows, (void)data;
+  virtual void reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) {
+    (void)level, (void)y0, (void)rows, (void)width, (void)data;
   }
 };
 
-// Builds the pyramid from the input streamed through `input` (one pass over the input; memory is
-// O(width x band) per level; spill files in options.temp_dir). Throws IoError for I/O problems
+// Builds the pyramid from the input streamed through `input`: one pass, nothing spilled but the coded
+// bands (ordered output). Level l lags the input by about 8 * 2^l of its rows, so memory is
+// O(width * 2^levels), independent of the input height. Throws IoError for I/O problems
 // (naming the file) and std::invalid_argument for unusable input or options.
 BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder, PyramidSink& sink);
 
@@ -305,7 +316,7 @@ class MemoryPyramid final : public PyramidSink {
   void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
   void mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
   bool wants_reconstruction(int) const override { return keep_reconstruction; }
-  void reconstructed_rows(int level, int64_t y0, int64_t rows, const int32_t* data) override;
+  void reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) override;
   uint64_t total_bytes() const;
 };
 

@@ -126,9 +126,11 @@ void validate_info(const ContainerInfo& info);
 // ---------------------------------------------------------------------------------------------
 // Writer
 
+// Not thread-safe: one producer thread drives a writer.
 class ContainerWriter {
  public:
-  // Creates `path + ".tmp.<pid>"`; throws FormatError(WriteFailed) if it cannot.
+  // Creates `path + ".tmp.<pid>"` (with a further ".N" if another writer of this process holds
+  // that name); throws FormatError(WriteFailed) if it cannot.
   explicit ContainerWriter(std::string path);
   // Removes the temporary file unless finish() succeeded.
   ~ContainerWriter();
@@ -148,7 +150,7 @@ class ContainerWriter {
   void append_level(const uint8_t* data, size_t size);
   void end_level();
 
-  // Appends `count` further mask samples in row-major order (1 = data, 0 = void). Call it for all
+  // Appends `count` further mask samples in row-major order (non-zero = data, 0 = void). Call it for all
   // width*height samples or not at all (no call: no voids). Encoded on the fly, O(runs) memory.
   void append_mask(const uint8_t* valid, size_t count);
   // Opaque UTF-8 string (tool version, options, source file, timings ...).
@@ -173,7 +175,7 @@ class ContainerWriter {
 
   std::string path_, temp_path_;
   int fd_ = -1;
-  bool finished_ = false;
+  bool finished_ = false, finish_started_ = false;
   uint64_t position_ = 0;  // bytes written so far (the file is written sequentially)
   std::optional<ContainerInfo> info_;
   std::vector<LevelRecord> records_;  // indexed by level
@@ -203,6 +205,7 @@ class MappedFile;
 class Container {
  public:
   // Maps and validates the file; throws FormatError whose message names the file and the problem.
+  // The file must not be modified in place while open (the writer only ever renames over it).
   static Container open(const std::string& path);
   Container(Container&&) noexcept;
   Container& operator=(Container&&) noexcept;

@@ -1,0 +1,204 @@
+// The geometry clipmap of Losasso & Hoppe 2004 (sections 3-6), CPU side: L nested levels of n x n
+// height samples centred on the viewer, stored toroidally and refilled incrementally as it moves.
+//
+// Coordinates. Clipmap level 0 is the coarsest, level L-1 the finest; level l holds pyramid level
+// source_level(l) = P - L + l of a HeightSource with P levels. Each level has its own integer grid:
+// level l sample (i, j) sits on level l+1 sample (2i, 2j), and at world position (i, j) * spacing(l)
+// metres (x along columns, y along rows; the finest level's spacing is the source's). Heights are
+// metres.
+//
+// Regions (all in the level's own grid): the clip region is the n x n block of samples stored;
+// the desired region is the n x n square of vertices centred on the viewer, its corners on even
+// coordinates (so its perimeter lies on vertices of the coarser level); the active region is the
+// desired region cropped to the clip region and to the coarser active region eroded by 2 of the
+// coarser level's units (paper §5 constraints 2-4, §6.1). render region(l) = active(l) - active(l+1).
+//
+// Update (paper §5): levels are refilled coarse to fine, only the newly exposed L-shaped part of
+// each clip region. Filling from RegionDecoderSource is the paper's "upsample the coarser level with
+// U and add the decoded residual": decode_units(level, rect) computes exactly U(T^_{level-1}) + R^.
+// A per-frame budget of samples stops the update; finer levels then keep their old clip regions and
+// their active regions are cropped to them (they shrink until empty while the viewer outruns them).
+// Levels whose grid spacing is too fine for the viewer's height above the terrain are switched off
+// (paper §4: active region empty when height > 0.4 n g_l).
+//
+// Each level also keeps, per sample: zc, the coarser level's surface at that vertex (for the
+// transition morph), the surface slope (dz/dx, dz/dy; the normal map, at the geometry's
+// resolution), and per 8 x 8 tile the z range of z and zc (for view-frustum culling).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "pyramid/pyramid.h"
+
+namespace terrain::runtime {
+
+class RegionDecoder;
+
+// Where the clipmap gets its heights from: one grid per pyramid level, level 0 coarsest, level l
+// sample i on level l+1 sample 2i.
+class HeightSource {
+ public:
+  virtual ~HeightSource() = default;
+  virtual int level_count() const = 0;
+  virtual GridSize level_size(int level) const = 0;
+  // Horizontal spacing of the finest level, metres.
+  virtual double spacing_m() const = 0;
+  // Heights (metres) of `level` on `rect`, which may reach beyond the level: such samples repeat
+  // the nearest edge sample (a bounded terrain seen from outside is a flat apron). Not thread-safe.
+  virtual void fill(int level, const Rect& rect, float* out, int64_t out_stride) = 0;
+};
+
+// A compressed pyramid file through the region decoder. Voids (NaN) come out as 0 m.
+class RegionDecoderSource final : public HeightSource {
+ public:
+  // spacing_m: finest-level horizontal spacing in metres (arc-second data: the caller converts).
+  RegionDecoderSource(std::shared_ptr<const RegionDecoder> decoder, double spacing_m);
+  int level_count() const override;
+  GridSize level_size(int level) const override;
+  double spacing_m() const override { return spacing_m_; }
+  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
+
+ private:
+  std::shared_ptr<const RegionDecoder> decoder_;
+  double spacing_m_;
+  std::vector<float> scratch_;
+};
+
+// Heights from a function of (level, x, y); `unbounded` lets the function be evaluated anywhere
+// (tests, synthetic worlds), otherwise samples outside level_size repeat the edge like any source.
+class FunctionHeightSource final : public HeightSource {
+ public:
+  using Function = std::function<float(int level, int64_t x, int64_t y)>;
+  FunctionHeightSource(int levels, GridSize finest, double spacing_m, Function f, bool unbounded);
+  int level_count() const override { return levels_; }
+  GridSize level_size(int level) const override;
+  double spacing_m() const override { return spacing_m_; }
+  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
+  int64_t calls() const { return samples_; }  // samples evaluated so far
+
+ private:
+  int levels_;
+  GridSize finest_;
+  double spacing_m_;
+  Function f_;
+  bool unbounded_;
+  int64_t samples_ = 0;
+};
+
+// Inclusive vertex bounds on a level's grid; empty when x1 < x0 or y1 < y0.
+struct LevelRegion {
+  int64_t x0 = 0, y0 = 0, x1 = -1, y1 = -1;
+  bool empty() const { return x1 < x0 || y1 < y0; }
+  bool operator==(const LevelRegion&) const = default;
+};
+
+struct ZRange {
+  float lo = 0, hi = 0;
+};
+
+struct ClipmapOptions {
+  int n = 255;                    // samples per level side, 2^k - 1, 15..1023
+  int levels = 0;                 // 0: as many as the source has
+  int64_t budget = 0;             // samples refilled per update; 0: n * n
+  bool deactivate_by_height = true;
+  double height_factor = 0.4;     // level l off when viewer height above terrain > factor * n * spacing(l)
+};
+
+struct ClipmapUpdateStats {
+  double seconds_fill = 0;        // height source: region decode (U + residual inside decode_units)
+  double seconds_coarse = 0;      // zc: the coarser level's surface at each new vertex
+  double seconds_normals = 0;     // slopes of the new samples and their neighbours
+  double seconds_bounds = 0;      // per-tile z ranges
+  int64_t samples_filled = 0;     // samples taken from the source this update
+  int levels_updated = 0;         // levels whose clip region moved
+  int levels_behind = 0;          // enabled levels whose clip region still differs from the desired one
+  int enabled_levels = 0;         // levels not switched off by height (0 .. L)
+  int active_levels = 0;          // levels with a non-empty active region
+  double viewer_height = 0;       // viewer height above the terrain used for switching levels, metres
+};
+
+class Clipmap {
+ public:
+  static constexpr int kTile = 8;  // z-range tiles are kTile x kTile samples, aligned to the level grid
+
+  // Throws std::invalid_argument for an unusable n (not 2^k - 1 in 15..1023) or level count.
+  // The source must outlive the clipmap.
+  Clipmap(HeightSource& source, const ClipmapOptions& options);
+
+  // Moves the clipmap to a viewer at (x, y, z) metres: desired regions, budgeted coarse-to-fine
+  // refill, level switching by height, cropping of the active regions.
+  ClipmapUpdateStats update(double x_m, double y_m, double z_m);
+
+  int n() const { return n_; }
+  int level_count() const { return int(levels_.size()); }
+  int source_level(int level) const { return first_source_level_ + level; }
+  double spacing(int level) const;               // metres between samples of `level`
+  int64_t budget() const { return budget_; }
+  void set_budget(int64_t samples) { budget_ = samples > 0 ? samples : int64_t(n_) * n_; }
+
+  bool has_data(int level) const { return lv(level).has_data; }
+  bool enabled(int level) const { return lv(level).enabled; }
+  Rect clip_region(int level) const { return Rect{lv(level).clip_x0, lv(level).clip_y0, n_, n_}; }
+  LevelRegion desired_region(int level) const { return lv(level).desired; }
+  LevelRegion active_region(int level) const { return lv(level).active; }
+  // Transition width (level units) for the morph of `level`: min(n/10, room to the finer active
+  // region - 2), at least 1, so that alpha is 0 on the finer level's perimeter.
+  double transition_width(int level) const { return lv(level).transition_width; }
+  // The viewer in the level's grid units (continuous).
+  std::array<double, 2> viewer_grid(int level) const;
+
+  // Toroidal storage: sample (x, y) of the clip region lives at index wrap(y) * n + wrap(x).
+  int64_t wrap(int64_t v) const { return ((v % n_) + n_) % n_; }
+  size_t index(int64_t x, int64_t y) const { return size_t(wrap(y) * n_ + wrap(x)); }
+  const float* heights(int level) const { return lv(level).z.data(); }         // n*n toroidal
+  const float* coarse_heights(int level) const { return lv(level).zc.data(); } // n*n toroidal
+  const float* slopes(int level) const { return lv(level).slope.data(); }      // 2*n*n: dz/dx, dz/dy
+  // Samples (level grid) written by the last update, as rectangles inside the clip region.
+  const std::vector<Rect>& dirty_rects(int level) const { return lv(level).dirty; }
+
+  // Range of z and zc over the vertices of `r` (within the clip region), from the tile ranges
+  // (conservative: whole tiles). Empty r gives {0, 0}.
+  ZRange z_bounds(int level, const LevelRegion& r) const;
+  // Terrain height under (x, y) metres from the finest level with data there (bilinear); NaN when
+  // no level holds the point.
+  float terrain_height_at(double x_m, double y_m) const;
+
+ private:
+  struct Level {
+    bool has_data = false;
+    bool enabled = false;
+    int64_t clip_x0 = 0, clip_y0 = 0;
+    LevelRegion desired, active;
+    double transition_width = 1;
+    std::vector<float> z, zc, slope;
+    // Toroidal tile table: tile (tx, ty) at wrap_tile(ty) * tiles + wrap_tile(tx).
+    std::vector<ZRange> tile_range;
+    std::vector<Rect> dirty;
+  };
+  const Level& lv(int level) const { return levels_.at(size_t(level)); }
+  LevelRegion desired_for(int level, double x_m, double y_m) const;
+  int64_t exposed_samples(const Level& L, int64_t x0, int64_t y0) const;
+  void refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stats);
+  void fill_rect(int level, const Rect& r);
+  void compute_coarse(int level, const Rect& r);
+  void compute_slopes(int level, const Rect& r);
+  void compute_tiles(int level, const Rect& r);
+  float level_height_at(int level, double gx, double gy) const;  // bilinear, inside clip region
+  void crop_active_regions();
+
+  HeightSource& source_;
+  int n_;
+  int first_source_level_;
+  int64_t budget_;
+  ClipmapOptions options_;
+  double viewer_[3] = {0, 0, 0};
+  int tiles_;  // tile table side
+  std::vector<Level> levels_;
+  std::vector<float> scratch_;  // fill buffer, reused
+};
+
+}  // namespace terrain::runtime

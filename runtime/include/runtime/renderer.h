@@ -1,0 +1,107 @@
+// Headless OpenGL 4.5 core renderer of a geometry clipmap (Asirvatham & Hoppe 2005, §2.3).
+//
+// The context comes from EGL without any window system: the Mesa surfaceless platform when
+// present (llvmpipe on a machine without GPU), otherwise the default EGL display (a GPU driver);
+// drawing goes to an RGBA8 + depth framebuffer object that is read back for PNG frames.
+//
+// Heights live in per-level layers of texture arrays (z, zc, slopes), addressed toroidally in the
+// vertex shader exactly like the CPU clipmap; only the samples an update wrote are uploaded.
+// Geometry has no vertex buffers: every footprint is a grid of quads generated from gl_VertexID
+// (block origin and size as uniforms), so one shader draws the m x m blocks, the leftover fix-up
+// and trim strips, the finest level's filled square and the zero-area triangles on each ring's
+// outer edge that stitch the T-junctions against the coarser level.
+//
+// World frame: x = column * spacing, y = row * spacing (metres), z up (metres). A viewer looking
+// along +y therefore looks "south" on a north-up map.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "runtime/clipmap.h"
+
+namespace terrain::runtime {
+
+struct Camera {
+  double position[3] = {0, 0, 1000};  // metres
+  double yaw = 0;                     // radians; 0 looks along +x, pi/2 along +y
+  double pitch = -0.3;                // radians; negative looks down
+  double fov_y_deg = 60;              // vertical field of view
+  double near_m = 0;                  // 0: from the height above the terrain
+  double far_m = 0;                   // 0: the coarsest level's extent
+};
+
+struct RenderOptions {
+  bool transitions = true;            // geometry and normal morph near each ring's outer edge
+  bool culling = true;                // per-block view-frustum culling against the z bounds
+  bool stitch = true;                 // zero-area triangles along each ring's outer edge
+  bool snap_perimeter = true;         // with transitions off, still put the ring's outer vertices on
+                                      // the coarser level; false leaves cracks (tests show they are caught)
+  bool flat_colour = false;           // every terrain pixel gets `terrain_rgb` (crack tests)
+  float terrain_rgb[3] = {1, 1, 1};
+  float background_rgb[3] = {0.55f, 0.70f, 0.90f};
+  float light_dir[3] = {-0.4f, -0.3f, 0.87f};   // towards the light, world frame
+  float z_lo = 0, z_hi = 0;           // height colour ramp range, metres; z_hi <= z_lo: level 0's range
+};
+
+struct RenderStats {
+  int64_t triangles = 0;              // submitted, zero-area stitching triangles included
+  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;
+  int levels_drawn = 0;
+  double seconds_upload = 0;          // texture uploads of the last upload()
+  double seconds_render = 0;          // draw + glFinish
+  int64_t samples_uploaded = 0;
+};
+
+// An EGL display + OpenGL 4.5 core context, current on the calling thread. Throws
+// std::runtime_error (naming the EGL/GL step that failed) when no such context can be made.
+class HeadlessGL {
+ public:
+  HeadlessGL();
+  ~HeadlessGL();
+  HeadlessGL(const HeadlessGL&) = delete;
+  HeadlessGL& operator=(const HeadlessGL&) = delete;
+  std::string renderer_name() const;   // GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
+  std::string platform() const { return platform_; }
+
+ private:
+  void* display_ = nullptr;
+  void* context_ = nullptr;
+  std::string platform_;
+};
+
+class ClipmapRenderer {
+ public:
+  // Needs a current context (HeadlessGL); allocates textures for a clipmap of n x n x levels and a
+  // width x height framebuffer. Throws std::runtime_error on GL errors (shader log included).
+  ClipmapRenderer(int n, int levels, int width, int height);
+  ~ClipmapRenderer();
+  ClipmapRenderer(const ClipmapRenderer&) = delete;
+  ClipmapRenderer& operator=(const ClipmapRenderer&) = delete;
+
+  // Uploads what the clipmap's last update wrote (dirty rectangles). Call after every update.
+  // `everything` uploads all levels with data (after creating the renderer on a filled clipmap).
+  void upload(const Clipmap& clipmap, bool everything = false);
+  // Draws the clipmap's active regions into the framebuffer and waits for the GPU.
+  RenderStats render(const Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
+  // Frame as RGBA8, top row first (width*height*4).
+  void read_rgba(std::vector<uint8_t>& out) const;
+  int width() const { return width_; }
+  int height() const { return height_; }
+  double last_upload_seconds() const { return upload_seconds_; }
+  int64_t last_upload_samples() const { return upload_samples_; }
+
+ private:
+  struct Gl;
+  std::unique_ptr<Gl> gl_;
+  int n_, levels_, width_, height_;
+  double upload_seconds_ = 0;
+  int64_t upload_samples_ = 0;
+};
+
+// Writes RGBA8 (top row first) as a PNG; throws std::runtime_error naming the path on failure.
+void write_png_rgba(const std::string& path, int width, int height, const std::vector<uint8_t>& rgba);
+
+}  // namespace terrain::runtime

@@ -1,0 +1,294 @@
+// clipmap-view: plays a camera flight over a compressed pyramid through the geometry clipmap and
+// the headless OpenGL renderer; writes PNG frames and per-frame statistics (CSV and JSON).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "cli.h"
+#include "json_writer.h"
+#include "runtime/clipmap.h"
+#include "runtime/container.h"
+#include "runtime/region_decoder.h"
+#include "runtime/renderer.h"
+
+using namespace terrain;
+using namespace terrain::runtime;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// One keyframe: position in metres (x east along columns, y along rows), height above the ground,
+// heading and pitch in degrees.
+struct Key {
+  double frame, x, y, above, yaw_deg, pitch_deg;
+};
+
+std::vector<Key> read_path(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw IoError(IoErrorCode::NotFound, "cannot open camera path " + path);
+  std::vector<Key> keys;
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream s(line);
+    Key k{};
+    if (!(s >> k.frame)) continue;  // blank or comment line
+    if (!(s >> k.x >> k.y >> k.above >> k.yaw_deg >> k.pitch_deg) || !std::isfinite(k.x + k.y + k.above + k.yaw_deg + k.pitch_deg))
+      throw IoError(IoErrorCode::MissingField, path + ":" + std::to_string(number) +
+                                                   ": expected 'frame x_m y_m above_m yaw_deg pitch_deg'");
+    if (!keys.empty() && k.frame <= keys.back().frame)
+      throw IoError(IoErrorCode::MissingField, path + ":" + std::to_string(number) + ": frame numbers must increase");
+    keys.push_back(k);
+  }
+  if (keys.empty()) throw IoError(IoErrorCode::MissingField, path + ": no keyframes");
+  return keys;
+}
+
+// The built-in flight: towards the highest point of the coarsest level (so the default shows relief
+// rather than sea), past it, then a climbing turn. Distances scale with the terrain's extent.
+std::vector<Key> default_path(HeightSource& source, double spacing, int frames) {
+  const GridSize c = source.level_size(0);
+  std::vector<float> coarse(size_t(c.width * c.height));
+  source.fill(0, Rect{0, 0, c.width, c.height}, coarse.data(), c.width);
+  const size_t peak = size_t(std::max_element(coarse.begin(), coarse.end()) - coarse.begin());
+  const double cs = std::ldexp(spacing, source.level_count() - 1);  // metres per coarsest sample
+  // Kept in the middle of the terrain: beyond its edges the clipmap shows the repeated edge samples.
+  const double wm = double(c.width) * cs, hm = double(c.height) * cs;
+  const double px = std::clamp(double(int64_t(peak) % c.width) * cs, 0.45 * wm, 0.7 * wm);
+  const double py = std::clamp(double(int64_t(peak) / c.width) * cs, 0.4 * hm, 0.55 * hm);
+  const double ext = std::max(wm, hm), f = std::max(frames - 1, 1);
+  return {{0, px - 0.25 * ext, py - 0.10 * ext, 0.008 * ext, 20, -14},
+          {0.6 * f, px - 0.06 * ext, py - 0.03 * ext, 0.008 * ext, 25, -16},
+          {0.8 * f, px + 0.01 * ext, py + 0.02 * ext, 0.015 * ext, 90, -22},
+          {f, px, py + 0.08 * ext, 0.04 * ext, 180, -35}};
+}
+
+Key interpolate(const std::vector<Key>& keys, double frame) {
+  if (frame <= keys.front().frame) return keys.front();
+  if (frame >= keys.back().frame) return keys.back();
+  size_t i = 1;
+  while (keys[i].frame < frame) ++i;
+  const Key &a = keys[i - 1], &b = keys[i];
+  const double t = (frame - a.frame) / (b.frame - a.frame);
+  auto mix = [t](double u, double v) { return u + (v - u) * t; };
+  return Key{frame, mix(a.x, b.x), mix(a.y, b.y), mix(a.above, b.above), mix(a.yaw_deg, b.yaw_deg), mix(a.pitch_deg, b.pitch_deg)};
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t i = size_t(std::min(double(v.size() - 1), std::ceil(p * double(v.size())) - 1));
+  return v[std::max<size_t>(i, 0)];
+}
+
+int format_exit(const FormatError& e) {
+  switch (e.code()) {
+    case FormatErrorCode::NotFound: return 2;
+    case FormatErrorCode::Truncated: return 3;
+    case FormatErrorCode::WriteFailed: return 9;
+    default: return 10;
+  }
+}
+
+int run(int argc, char** argv) {
+  std::string pyramid, out_dir = "clipmap-frames", path_file, reference;
+  int width = 640, height = 480, n = 255, levels = 0, frames = 300, png_every = 1;
+  int64_t budget = 0;
+  double fov = 60;
+  bool no_transitions = false, no_culling = false;
+  cli::CommonFlags common;
+  cli::ArgParser p("clipmap-view", "clipmap-view PYRAMID [options]",
+                   "Flies a camera over a compressed pyramid (.pyr) with the geometry clipmap, renders each frame\n"
+                   "off-screen with OpenGL 4.5 core through EGL (Mesa llvmpipe when there is no GPU), and writes\n"
+                   "PNG frames, stats.csv (one row per frame) and stats.json (summary) into --out.");
+  p.positional("PYRAMID", "compressed pyramid file written by pyramid-build", &pyramid);
+  p.option("--out", "DIR", "output directory (default clipmap-frames)", [&](const std::string& v) { out_dir = v; });
+  p.option("--path", "FILE",
+           "camera keyframes, one per line: frame x_m y_m above_ground_m yaw_deg pitch_deg (# comments);\n"
+           "linear in between. Default: a built-in pass over the terrain",
+           [&](const std::string& v) { path_file = v; });
+  p.option("--width", "PX", "frame width (default 640)", [&](const std::string& v) { width = int(cli::parse_int("--width", v, 16, 8192)); });
+  p.option("--height", "PX", "frame height (default 480)", [&](const std::string& v) { height = int(cli::parse_int("--height", v, 16, 8192)); });
+  p.option("--n", "N", "clipmap level size, 2^k-1 in 15..1023 (default 255)", [&](const std::string& v) {
+    n = int(cli::parse_int("--n", v, 15, 1023));
+    if (((n + 1) & n) != 0) throw cli::UsageError("--n must be 2^k - 1, got " + v);
+  });
+  p.option("--levels", "L", "clipmap levels (default: all pyramid levels)", [&](const std::string& v) { levels = int(cli::parse_int("--levels", v, 1, 30)); });
+  p.option("--budget", "SAMPLES", "samples refilled per frame (default n*n)", [&](const std::string& v) { budget = cli::parse_int("--budget", v, 1, int64_t(1) << 40); });
+  p.option("--fov", "DEG", "vertical field of view (default 60)", [&](const std::string& v) {
+    fov = cli::parse_double("--fov", v);
+    if (!(fov > 1 && fov < 179)) throw cli::UsageError("--fov must be in (1, 179) degrees");
+  });
+  p.option("--frames", "N", "frames to play (default 300)", [&](const std::string& v) { frames = int(cli::parse_int("--frames", v, 1, 1000000)); });
+  p.option("--png-every", "K", "write every K-th frame as PNG, 0 = none (default 1)", [&](const std::string& v) { png_every = int(cli::parse_int("--png-every", v, 0, 1000000)); });
+  p.option("--reference", "PYR",
+           "also render the flight from this pyramid (e.g. a --lossless build of the original input) and\n"
+           "report per-frame image PSNR of PYRAMID's frames against it",
+           [&](const std::string& v) { reference = v; });
+  p.flag("--no-transitions", "disable the transition morph (to see popping)", &no_transitions);
+  p.flag("--no-culling", "disable view-frustum culling", &no_culling);
+  p.add_common(common, false);
+  p.epilog("Times in stats: update = region decode (fill; U + residual happen inside the decoder) + zc + normals +\n"
+           "z bounds; upload = texture uploads; render = draw + glFinish. The summary line gives the median and\n"
+           "99th percentile of update + upload + render per frame.");
+  if (auto status = p.parse(argc, argv)) return *status;
+
+  std::shared_ptr<const PyramidFile> file, ref_file;
+  try {
+    file = PyramidFile::open(pyramid);
+    if (!reference.empty()) ref_file = PyramidFile::open(reference);
+  } catch (const FormatError& e) {
+    std::cerr << "clipmap-view: error: " << e.what() << "\n";
+    return format_exit(e);
+  }
+  const ContainerInfo& info = file->info();
+  // Arc-second grids: about 30.87 m per arc-second (the terrain is rendered flat, as in the paper).
+  const double spacing = info.horizontal_units == "arc-second" ? info.spacing_x * 30.87 : info.spacing_x;
+  auto decoder = std::make_shared<const RegionDecoder>(file);
+  RegionDecoderSource source(decoder, spacing);
+  if (levels > source.level_count())
+    throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the pyramid's " + std::to_string(source.level_count()));
+  ClipmapOptions copt;
+  copt.n = n;
+  copt.levels = levels;
+  copt.budget = budget;
+  Clipmap clipmap(source, copt);
+  // The reference flight: same clipmap options over the reference pyramid.
+  std::unique_ptr<RegionDecoderSource> ref_source;
+  std::unique_ptr<Clipmap> ref_clipmap;
+  if (ref_file) {
+    if (ref_file->level_count() != file->level_count() || !(ref_file->level_size(ref_file->level_count() - 1) ==
+                                                            file->level_size(file->level_count() - 1))) {
+      std::cerr << "clipmap-view: error: " << reference << ": levels or size differ from " << pyramid << "\n";
+      return 5;
+    }
+    ref_source = std::make_unique<RegionDecoderSource>(std::make_shared<const RegionDecoder>(ref_file), spacing);
+    ref_clipmap = std::make_unique<Clipmap>(*ref_source, copt);
+  }
+
+  std::vector<Key> keys;
+  keys = path_file.empty() ? default_path(source, spacing, frames) : read_path(path_file);
+
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  std::ofstream csv(out_dir + "/stats.csv");
+  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + out_dir + "/stats.csv");
+  csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,zc_ms,normals_ms,bounds_ms,upload_ms,render_ms,frame_ms,"
+         "triangles,blocks_drawn,blocks_culled,active_levels,levels_behind,samples_decoded,samples_uploaded,psnr_db\n";
+
+  HeadlessGL gl;
+  ClipmapRenderer renderer(n, clipmap.level_count(), width, height);
+  std::unique_ptr<ClipmapRenderer> ref_renderer;
+  if (ref_clipmap) ref_renderer = std::make_unique<ClipmapRenderer>(n, clipmap.level_count(), width, height);
+  std::vector<uint8_t> ref_pixels;
+  std::vector<double> psnr;
+  if (!common.quiet)
+    std::cerr << "clipmap-view: " << gl.renderer_name() << " (EGL " << gl.platform() << "), n=" << n << ", "
+              << clipmap.level_count() << " levels, " << width << "x" << height << ", spacing " << spacing << " m\n";
+  RenderOptions ropt;
+  ropt.transitions = !no_transitions;
+  ropt.culling = !no_culling;
+  std::vector<uint8_t> pixels;
+  std::vector<double> frame_ms, update_ms, render_ms;
+  int64_t triangles_total = 0;
+  float ground_scratch = 0;
+  const int finest_level = source.level_count() - 1;
+  for (int f = 0; f < frames; ++f) {
+    const Key k = interpolate(keys, double(f));
+    // Ground under the camera from the finest level (one sample, decoded through the tile cache).
+    const GridSize fs = source.level_size(finest_level);
+    const int64_t gx = std::clamp<int64_t>(int64_t(std::llround(k.x / spacing)), 0, fs.width - 1);
+    const int64_t gy = std::clamp<int64_t>(int64_t(std::llround(k.y / spacing)), 0, fs.height - 1);
+    source.fill(finest_level, Rect{gx, gy, 1, 1}, &ground_scratch, 1);
+    Camera cam;
+    cam.position[0] = k.x;
+    cam.position[1] = k.y;
+    cam.position[2] = double(ground_scratch) + k.above;
+    cam.yaw = k.yaw_deg * M_PI / 180.0;
+    cam.pitch = k.pitch_deg * M_PI / 180.0;
+    cam.fov_y_deg = fov;
+    const auto t0 = Clock::now();
+    const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
+    const double upd = since(t0);
+    renderer.upload(clipmap);
+    const RenderStats rs = renderer.render(clipmap, cam, ropt);
+    const double total = since(t0);
+    double frame_psnr = std::nan("");
+    if (ref_clipmap) {
+      ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
+      ref_renderer->upload(*ref_clipmap);
+      ref_renderer->render(*ref_clipmap, cam, ropt);
+      ref_renderer->read_rgba(ref_pixels);
+      renderer.read_rgba(pixels);
+      double sq = 0;
+      for (size_t i = 0; i < pixels.size(); ++i)
+        if (i % 4 != 3) sq += double((int(pixels[i]) - int(ref_pixels[i])) * (int(pixels[i]) - int(ref_pixels[i])));
+      const double mse = sq / double(pixels.size() / 4 * 3);
+      frame_psnr = mse > 0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : 99.0;  // 99 dB: identical frames
+      psnr.push_back(frame_psnr);
+    }
+    if (png_every > 0 && f % png_every == 0) {
+      renderer.read_rgba(pixels);
+      char name[64];
+      std::snprintf(name, sizeof name, "/frame_%05d.png", f);
+      write_png_rgba(out_dir + name, width, height, pixels);
+    }
+    frame_ms.push_back(total * 1e3);
+    update_ms.push_back(upd * 1e3);
+    render_ms.push_back(rs.seconds_render * 1e3);
+    triangles_total += rs.triangles;
+    csv << f << ',' << cam.position[0] << ',' << cam.position[1] << ',' << cam.position[2] << ',' << upd * 1e3 << ','
+        << us.seconds_fill * 1e3 << ",0," << us.seconds_coarse * 1e3 << ',' << us.seconds_normals * 1e3 << ','
+        << us.seconds_bounds * 1e3 << ',' << rs.seconds_upload * 1e3 << ',' << rs.seconds_render * 1e3 << ','
+        << total * 1e3 << ',' << rs.triangles << ',' << rs.blocks_drawn << ',' << rs.blocks_culled << ','
+        << us.active_levels << ',' << us.levels_behind << ',' << us.samples_filled << ',' << rs.samples_uploaded << ',';
+    if (std::isnan(frame_psnr)) csv << '\n';
+    else csv << frame_psnr << '\n';
+  }
+  csv.close();
+  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + out_dir + "/stats.csv");
+
+  const double med = percentile(frame_ms, 0.5), p99 = percentile(frame_ms, 0.99);
+  std::ofstream js(out_dir + "/stats.json");
+  cli::JsonWriter j(js);
+  j.begin_object();
+  j.field("pyramid", pyramid).field("renderer", gl.renderer_name()).field("n", n).field("levels", clipmap.level_count());
+  j.field("width", width).field("height", height).field("frames", frames).field("budget", clipmap.budget());
+  j.field("frame_ms_median", med).field("frame_ms_p99", p99);
+  j.field("update_ms_median", percentile(update_ms, 0.5)).field("update_ms_p99", percentile(update_ms, 0.99));
+  j.field("render_ms_median", percentile(render_ms, 0.5)).field("render_ms_p99", percentile(render_ms, 0.99));
+  j.field("triangles_mean", double(triangles_total) / frames);
+  if (!psnr.empty()) {
+    double sum = 0;
+    for (double v : psnr) sum += v;
+    j.field("reference", reference).field("psnr_db_mean", sum / double(psnr.size()));
+    j.field("psnr_db_min", *std::min_element(psnr.begin(), psnr.end()));
+    j.field("psnr_db_median", percentile(psnr, 0.5));
+  }
+  j.end_object();
+  j.finish();
+  if (!js) throw IoError(IoErrorCode::WriteFailed, "cannot write " + out_dir + "/stats.json");
+  std::cout << "frames " << frames << ": frame time median " << med << " ms, p99 " << p99 << " ms (update median "
+            << percentile(update_ms, 0.5) << " ms, render median " << percentile(render_ms, 0.5) << " ms), "
+            << double(triangles_total) / frames << " triangles/frame; stats in " << out_dir << "\n";
+  if (!psnr.empty())
+    std::cout << "image PSNR against " << reference << ": median " << percentile(psnr, 0.5) << " dB, min "
+              << *std::min_element(psnr.begin(), psnr.end()) << " dB (99 = identical)\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return cli::run_tool("clipmap-view", [&] { return run(argc, argv); });
+}
