@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <sstream>
 
 #include "cli.h"
@@ -15,6 +16,8 @@
 #include "runtime/container.h"
 #include "runtime/region_decoder.h"
 #include "runtime/renderer.h"
+#include "codec/codec.h"
+#include "pyramid/pyramid.h"
 
 using namespace terrain;
 using namespace terrain::runtime;
@@ -100,8 +103,78 @@ int format_exit(const FormatError& e) {
   }
 }
 
+// --bench: full refills of every clipmap level, one core, a fresh decoder (empty tile cache) for
+// every repetition, at positions spread over the terrain; then the two halves of the region
+// decode of one n x n window of the finest level measured apart: U of the coarser level and the
+// entropy decode of the residual.
+int run_bench(const std::shared_ptr<const PyramidFile>& file, double spacing, ClipmapOptions copt, int reps, bool quiet) {
+  copt.budget = int64_t(1) << 40;
+  copt.deactivate_by_height = false;
+  const int levels = copt.levels > 0 ? copt.levels : file->level_count();
+  const GridSize fs = file->level_size(file->level_count() - 1);
+  std::vector<std::array<std::vector<double>, 5>> t(static_cast<size_t>(levels));  // fill, zc, normals, bounds, total
+  for (int r = 0; r < reps; ++r) {
+    auto decoder = std::make_shared<const RegionDecoder>(file);
+    RegionDecoderSource source(decoder, spacing);
+    Clipmap cm(source, copt);
+    const double fx = 0.3 + 0.4 * double(r % 5) / 4.0, fy = 0.3 + 0.4 * double((r * 3) % 5) / 4.0;
+    const ClipmapUpdateStats s = cm.update(fx * double(fs.width) * spacing, fy * double(fs.height) * spacing, 0.0);
+    for (int l = 0; l < levels; ++l) {
+      const auto& p = s.per_level[size_t(l)];
+      const double v[5] = {p.seconds_fill, p.seconds_coarse, p.seconds_normals, p.seconds_bounds,
+                           p.seconds_fill + p.seconds_coarse + p.seconds_normals + p.seconds_bounds};
+      for (int k = 0; k < 5; ++k) t[size_t(l)][size_t(k)].push_back(v[k] * 1e3);
+    }
+  }
+  std::printf("full %dx%d level refill, one core, median of %d (ms): decode = region decoder (U + residual), zc, normals "
+              "(2x normal map), z bounds\n",
+              copt.n, copt.n, reps);
+  std::printf("%6s %8s %10s %8s %10s %8s %10s\n", "level", "source", "decode", "zc", "normals", "bounds", "total");
+  const int first = file->level_count() - levels;
+  for (int l = 0; l < levels; ++l)
+    std::printf("%6d %8d %10.3f %8.3f %10.3f %8.3f %10.3f\n", l, first + l, percentile(t[size_t(l)][0], 0.5),
+                percentile(t[size_t(l)][1], 0.5), percentile(t[size_t(l)][2], 0.5), percentile(t[size_t(l)][3], 0.5),
+                percentile(t[size_t(l)][4], 0.5));
+
+  // The finest level's window, split: U (coarse window decoded beforehand, untimed) and residual.
+  const int fl = file->level_count() - 1;
+  if (fl > 0) {
+    const int64_t w = std::min<int64_t>(copt.n, fs.width), h = std::min<int64_t>(copt.n, fs.height);
+    const Rect win{(fs.width - w) / 2, (fs.height - h) / 2, w, h};
+    RegionDecoder dec(file);
+    const Rect need = upsample_required_window(win, fs);
+    std::vector<int32_t> coarse(size_t(need.width * need.height)), out(size_t(w * h)), residual(size_t(w * h));
+    dec.decode_units(fl - 1, need, coarse.data(), need.width);
+    const CoarseWindow cw{coarse.data(), need.width, need, file->level_size(fl - 1)};
+    UpsampleScratch us;
+    codec::Scratch cs;
+    std::vector<double> tu, tr;
+    for (int r = 0; r < std::max(reps, 5); ++r) {
+      auto t0 = Clock::now();
+      upsample_region(cw, fs, win, out.data(), w, us);
+      tu.push_back(since(t0) * 1e3);
+      t0 = Clock::now();
+      const auto& bands = file->bands(fl);
+      for (size_t b = file->band_of_row(fl, win.y0); b < bands.size() && bands[b].y0 < win.y0 + h; ++b) {
+        const int64_t y0 = std::max(win.y0, bands[b].y0), y1 = std::min(win.y0 + h, bands[b].y0 + bands[b].rows);
+        codec::Decoder d;
+        if (d.open(bands[b].data, bands[b].size) != codec::Status::Ok ||
+            d.decode_region(codec::Rect{win.x0, y0 - bands[b].y0, w, y1 - y0}, residual.data(), w, cs) != codec::Status::Ok)
+          throw IoError(IoErrorCode::CorruptData, file->path() + ": residual band " + std::to_string(b) + " does not decode");
+      }
+      tr.push_back(since(t0) * 1e3);
+    }
+    std::printf("finest level %lldx%lld window, median: U (upsample_region) %.3f ms, residual entropy decode %.3f ms\n",
+                (long long)w, (long long)h, percentile(tu, 0.5), percentile(tr, 0.5));
+  }
+  if (!quiet) std::fflush(stdout);
+  return 0;
+}
+
 int run(int argc, char** argv) {
-  std::string pyramid, out_dir = "clipmap-frames", path_file, reference;
+  std::string pyramid, out_dir = "clipmap-frames", path_file, reference, original;
+  std::optional<double> original_vscale;
+  int bench = 0;
   int width = 640, height = 480, n = 255, levels = 0, frames = 300, png_every = 1;
   int64_t budget = 0;
   double fov = 60;
@@ -135,6 +208,20 @@ int run(int argc, char** argv) {
            "also render the flight from this pyramid (e.g. a --lossless build of the original input) and\n"
            "report per-frame image PSNR of PYRAMID's frames against it",
            [&](const std::string& v) { reference = v; });
+  p.option("--original", "FILE",
+           "the original, uncompressed input (any format pyramid-build reads): render the flight from its\n"
+           "lossless pyramid too and report per-frame image PSNR against it, and the screen-space geometric\n"
+           "error per level (L&H 2004 Table 2: rms, 99.9th percentile, max pixels) of PYRAMID's levels\n"
+           "against the original's finest level",
+           [&](const std::string& v) { original = v; });
+  p.option("--original-vscale", "S",
+           "metres per stored unit of --original (default: the pyramid's for integer inputs)",
+           [&](const std::string& v) { original_vscale = cli::parse_double("--original-vscale", v); });
+  p.option("--bench", "K",
+           "benchmark instead of a flight: K full n x n refills of each clipmap level on one core (fresh\n"
+           "decoder cache each time), timing region decode, zc, normal map and z bounds; then U and the\n"
+           "residual decode of one n x n window separately",
+           [&](const std::string& v) { bench = int(cli::parse_int("--bench", v, 1, 1000)); });
   p.flag("--no-transitions", "disable the transition morph (to see popping)", &no_transitions);
   p.flag("--no-culling", "disable view-frustum culling", &no_culling);
   p.add_common(common, false);
@@ -143,6 +230,7 @@ int run(int argc, char** argv) {
            "99th percentile of update + upload + render per frame.");
   if (auto status = p.parse(argc, argv)) return *status;
 
+  if (!reference.empty() && !original.empty()) throw cli::UsageError("give --reference or --original, not both");
   std::shared_ptr<const PyramidFile> file, ref_file;
   try {
     file = PyramidFile::open(pyramid);
@@ -162,29 +250,68 @@ int run(int argc, char** argv) {
   copt.n = n;
   copt.levels = levels;
   copt.budget = budget;
+  if (bench > 0) return run_bench(file, spacing, copt, bench, common.quiet);
   Clipmap clipmap(source, copt);
-  // The reference flight: same clipmap options over the reference pyramid.
-  std::unique_ptr<RegionDecoderSource> ref_source;
-  std::unique_ptr<Clipmap> ref_clipmap;
+  const int finest_level = source.level_count() - 1;
+
+  // The reference flight: same clipmap options over another pyramid or the original input.
+  std::unique_ptr<HeightSource> ref_source;
+  const GridHeightSource* original_grid = nullptr;
   if (ref_file) {
-    if (ref_file->level_count() != file->level_count() || !(ref_file->level_size(ref_file->level_count() - 1) ==
-                                                            file->level_size(file->level_count() - 1))) {
+    if (ref_file->level_count() != file->level_count() || !(ref_file->level_size(finest_level) == file->level_size(finest_level))) {
       std::cerr << "clipmap-view: error: " << reference << ": levels or size differ from " << pyramid << "\n";
       return 5;
     }
     ref_source = std::make_unique<RegionDecoderSource>(std::make_shared<const RegionDecoder>(ref_file), spacing);
-    ref_clipmap = std::make_unique<Clipmap>(*ref_source, copt);
+  } else if (!original.empty()) {
+    ReadOptions ro;
+    const GridInfo gi = probe(original);
+    // An integer input is stored in its own unit: the pyramid's scale is the input's (e.g. 0.1 m for
+    // the Puget Sound PNG, which the file itself does not say).
+    if (original_vscale) ro.vertical_scale = *original_vscale;
+    else if (gi.integer_valued()) ro.vertical_scale = info.vertical_scale, ro.vertical_offset = info.vertical_offset;
+    const auto t0 = Clock::now();
+    try {
+      auto grid = std::make_unique<GridHeightSource>(original_source(original, ro, file->level_size(finest_level),
+                                                                     file->level_count(), info.filter, spacing));
+      original_grid = grid.get();
+      ref_source = std::move(grid);
+    } catch (const std::invalid_argument& e) {
+      std::cerr << "clipmap-view: error: " << e.what() << "\n";
+      return 5;
+    }
+    if (!common.quiet) std::cerr << "clipmap-view: lossless pyramid of " << original << " in " << since(t0) << " s\n";
   }
+  std::unique_ptr<Clipmap> ref_clipmap;
+  if (ref_source) ref_clipmap = std::make_unique<Clipmap>(*ref_source, copt);
 
   std::vector<Key> keys;
   keys = path_file.empty() ? default_path(source, spacing, frames) : read_path(path_file);
 
   std::error_code ec;
   std::filesystem::create_directories(out_dir, ec);
-  std::ofstream csv(out_dir + "/stats.csv");
-  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + out_dir + "/stats.csv");
-  csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,zc_ms,normals_ms,bounds_ms,upload_ms,render_ms,frame_ms,"
-         "triangles,blocks_drawn,blocks_culled,active_levels,levels_behind,samples_decoded,samples_uploaded,psnr_db\n";
+  const std::string csv_path = out_dir + "/stats.csv", json_path = out_dir + "/stats.json";
+  std::ofstream csv(csv_path + ".tmp");
+  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + csv_path);
+  csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,zc_ms,normals_ms,bounds_ms,upload_ms,render_ms,frame_ms,"
+         "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
+         "samples_reconstructed,residual_samples_decoded,samples_uploaded,psnr_db\n";
+
+  // Screen-space geometric error of the levels this clipmap renders (L&H 2004 Table 2).
+  const double s_px = triangle_size_px(width, height, fov, n);
+  std::vector<LevelScreenError> sse;
+  if (original_grid) {
+    RegionDecoderSource table_source(std::make_shared<const RegionDecoder>(file), spacing);
+    sse = screen_space_error(table_source, *original_grid, clipmap.source_level(0), s_px);
+    std::printf("screen-space geometric error, %dx%d, vertical fov %g deg, n=%d: s = %.2f px per grid cell\n", width,
+                height, fov, n, s_px);
+    std::printf("%6s %12s %10s %10s %10s %12s %10s\n", "level", "spacing_m", "rms_m", "max_m", "rms_px", "p99.9_px",
+                "max_px");
+    for (const LevelScreenError& e : sse)
+      std::printf("%6d %12.1f %10.3f %10.3f %10.4f %12.4f %10.4f\n", e.level, e.spacing_m, e.rms_m, e.max_m, e.rms_px,
+                  e.p999_px, e.max_px);
+    std::fflush(stdout);
+  }
 
   HeadlessGL gl;
   ClipmapRenderer renderer(n, clipmap.level_count(), width, height);
@@ -199,10 +326,10 @@ int run(int argc, char** argv) {
   ropt.transitions = !no_transitions;
   ropt.culling = !no_culling;
   std::vector<uint8_t> pixels;
-  std::vector<double> frame_ms, update_ms, render_ms;
+  std::vector<double> frame_ms, update_ms, render_ms, upload_ms;
   int64_t triangles_total = 0;
   float ground_scratch = 0;
-  const int finest_level = source.level_count() - 1;
+  std::vector<std::string> written;
   for (int f = 0; f < frames; ++f) {
     const Key k = interpolate(keys, double(f));
     // Ground under the camera from the finest level (one sample, decoded through the tile cache).
@@ -217,12 +344,14 @@ int run(int argc, char** argv) {
     cam.yaw = k.yaw_deg * M_PI / 180.0;
     cam.pitch = k.pitch_deg * M_PI / 180.0;
     cam.fov_y_deg = fov;
+    const RegionStats before = decoder->stats();
     const auto t0 = Clock::now();
     const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
     const double upd = since(t0);
     renderer.upload(clipmap);
     const RenderStats rs = renderer.render(clipmap, cam, ropt);
     const double total = since(t0);
+    const RegionStats after = decoder->stats();
     double frame_psnr = std::nan("");
     if (ref_clipmap) {
       ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
@@ -242,48 +371,78 @@ int run(int argc, char** argv) {
       char name[64];
       std::snprintf(name, sizeof name, "/frame_%05d.png", f);
       write_png_rgba(out_dir + name, width, height, pixels);
+      written.push_back(out_dir + name);
+      if (ref_renderer) {
+        std::snprintf(name, sizeof name, "/reference_%05d.png", f);
+        write_png_rgba(out_dir + name, width, height, ref_pixels);
+      }
     }
     frame_ms.push_back(total * 1e3);
     update_ms.push_back(upd * 1e3);
     render_ms.push_back(rs.seconds_render * 1e3);
+    upload_ms.push_back(rs.seconds_upload * 1e3);
     triangles_total += rs.triangles;
     csv << f << ',' << cam.position[0] << ',' << cam.position[1] << ',' << cam.position[2] << ',' << upd * 1e3 << ','
-        << us.seconds_fill * 1e3 << ",0," << us.seconds_coarse * 1e3 << ',' << us.seconds_normals * 1e3 << ','
+        << us.seconds_fill * 1e3 << ',' << us.seconds_coarse * 1e3 << ',' << us.seconds_normals * 1e3 << ','
         << us.seconds_bounds * 1e3 << ',' << rs.seconds_upload * 1e3 << ',' << rs.seconds_render * 1e3 << ','
         << total * 1e3 << ',' << rs.triangles << ',' << rs.blocks_drawn << ',' << rs.blocks_culled << ','
-        << us.active_levels << ',' << us.levels_behind << ',' << us.samples_filled << ',' << rs.samples_uploaded << ',';
+        << rs.draw_calls << ',' << us.active_levels << ',' << us.levels_behind << ',' << us.samples_filled << ','
+        << after.samples_reconstructed - before.samples_reconstructed << ','
+        << after.residual_samples_decoded - before.residual_samples_decoded << ',' << rs.samples_uploaded << ',';
     if (std::isnan(frame_psnr)) csv << '\n';
     else csv << frame_psnr << '\n';
   }
   csv.close();
-  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + out_dir + "/stats.csv");
+  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + csv_path);
+  std::filesystem::rename(csv_path + ".tmp", csv_path);
 
   const double med = percentile(frame_ms, 0.5), p99 = percentile(frame_ms, 0.99);
-  std::ofstream js(out_dir + "/stats.json");
-  cli::JsonWriter j(js);
-  j.begin_object();
-  j.field("pyramid", pyramid).field("renderer", gl.renderer_name()).field("n", n).field("levels", clipmap.level_count());
-  j.field("width", width).field("height", height).field("frames", frames).field("budget", clipmap.budget());
-  j.field("frame_ms_median", med).field("frame_ms_p99", p99);
-  j.field("update_ms_median", percentile(update_ms, 0.5)).field("update_ms_p99", percentile(update_ms, 0.99));
-  j.field("render_ms_median", percentile(render_ms, 0.5)).field("render_ms_p99", percentile(render_ms, 0.99));
-  j.field("triangles_mean", double(triangles_total) / frames);
-  if (!psnr.empty()) {
-    double sum = 0;
-    for (double v : psnr) sum += v;
-    j.field("reference", reference).field("psnr_db_mean", sum / double(psnr.size()));
-    j.field("psnr_db_min", *std::min_element(psnr.begin(), psnr.end()));
-    j.field("psnr_db_median", percentile(psnr, 0.5));
+  {
+    std::ofstream js(json_path + ".tmp");
+    cli::JsonWriter j(js);
+    j.begin_object();
+    j.field("pyramid", pyramid).field("renderer", gl.renderer_name()).field("n", n).field("levels", clipmap.level_count());
+    j.field("width", width).field("height", height).field("fov_y_deg", fov).field("frames", frames);
+    j.field("budget", clipmap.budget()).field("transitions", !no_transitions).field("culling", !no_culling);
+    j.field("frame_ms_median", med).field("frame_ms_p99", p99);
+    j.field("fps_median", med > 0 ? 1e3 / med : 0.0);
+    j.field("update_ms_median", percentile(update_ms, 0.5)).field("update_ms_p99", percentile(update_ms, 0.99));
+    j.field("upload_ms_median", percentile(upload_ms, 0.5)).field("upload_ms_p99", percentile(upload_ms, 0.99));
+    j.field("render_ms_median", percentile(render_ms, 0.5)).field("render_ms_p99", percentile(render_ms, 0.99));
+    j.field("triangles_mean", double(triangles_total) / frames);
+    if (!psnr.empty()) {
+      double sum = 0;
+      for (double v : psnr) sum += v;
+      j.field("reference", ref_file ? reference : original).field("psnr_db_mean", sum / double(psnr.size()));
+      j.field("psnr_db_min", *std::min_element(psnr.begin(), psnr.end()));
+      j.field("psnr_db_median", percentile(psnr, 0.5));
+    }
+    if (!sse.empty()) {
+      j.field("triangle_size_px", s_px);
+      j.key("screen_space_error").begin_array();
+      for (const LevelScreenError& e : sse) {
+        j.begin_object();
+        j.field("level", e.level).field("spacing_m", e.spacing_m).field("rms_m", e.rms_m).field("max_m", e.max_m);
+        j.field("rms_px", e.rms_px).field("p999_px", e.p999_px).field("max_px", e.max_px);
+        j.end_object();
+      }
+      j.end_array();
+    }
+    j.end_object();
+    j.finish();
+    js.close();
+    if (!js) throw IoError(IoErrorCode::WriteFailed, "cannot write " + json_path);
   }
-  j.end_object();
-  j.finish();
-  if (!js) throw IoError(IoErrorCode::WriteFailed, "cannot write " + out_dir + "/stats.json");
-  std::cout << "frames " << frames << ": frame time median " << med << " ms, p99 " << p99 << " ms (update median "
-            << percentile(update_ms, 0.5) << " ms, render median " << percentile(render_ms, 0.5) << " ms), "
-            << double(triangles_total) / frames << " triangles/frame; stats in " << out_dir << "\n";
+  std::filesystem::rename(json_path + ".tmp", json_path);
+  std::printf("frames %d at %dx%d: frame time median %.2f ms (%.1f fps), p99 %.2f ms; update median %.3f ms, p99 %.3f ms; "
+              "upload median %.3f ms; render median %.2f ms; %.0f triangles/frame; stats in %s\n",
+              frames, width, height, med, med > 0 ? 1e3 / med : 0.0, p99, percentile(update_ms, 0.5),
+              percentile(update_ms, 0.99), percentile(upload_ms, 0.5), percentile(render_ms, 0.5),
+              double(triangles_total) / frames, out_dir.c_str());
   if (!psnr.empty())
-    std::cout << "image PSNR against " << reference << ": median " << percentile(psnr, 0.5) << " dB, min "
-              << *std::min_element(psnr.begin(), psnr.end()) << " dB (99 = identical)\n";
+    std::printf("image PSNR against %s: median %.2f dB, min %.2f dB (99 = identical)\n",
+                (ref_file ? reference : original).c_str(), percentile(psnr, 0.5), *std::min_element(psnr.begin(), psnr.end()));
+  if (!written.empty() && !common.quiet) std::cerr << "clipmap-view: " << written.size() << " PNG frames in " << out_dir << "\n";
   return 0;
 }
 

@@ -42,7 +42,7 @@ Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(
   const int source_levels = source.level_count();
   if (source_levels < 1) throw std::invalid_argument("clipmap: the height source has no levels");
   const int levels = options.levels == 0 ? source_levels : options.levels;
-  if (levels < 1 || levels > source_levels)
+  if (levels < 1 || levels > source_levels || levels > kMaxLevels)
     throw std::invalid_argument("clipmap: level count must be 1.." + std::to_string(source_levels) + " (the source's), got " +
                                 std::to_string(options.levels));
   if (!(source.spacing_m() > 0)) throw std::invalid_argument("clipmap: the height source's spacing must be positive");
@@ -54,7 +54,7 @@ Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(
   for (Level& L : levels_) {
     L.z.assign(nn, 0.0f);
     L.zc.assign(nn, 0.0f);
-    L.slope.assign(2 * nn, 0.0f);
+    L.normal.assign(8 * nn, 0.0f);
     L.tile_range.assign(size_t(tiles_) * size_t(tiles_), ZRange{});
   }
   scratch_.resize(nn);
@@ -128,18 +128,53 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
   }
 }
 
-void Clipmap::compute_slopes(int level, const Rect& r) {
+void Clipmap::compute_normals(int level, const Rect& r) {
+  if (r.width <= 0 || r.height <= 0) return;
   Level& L = levels_[size_t(level)];
-  const double g = spacing(level);
+  const double inv_g = 1.0 / spacing(level);
   const int64_t cx0 = L.clip_x0, cx1 = L.clip_x0 + n_ - 1, cy0 = L.clip_y0, cy1 = L.clip_y0 + n_ - 1;
-  // Central differences inside the clip region, one-sided on its border.
-  for (int64_t y = r.y0; y < r.y0 + r.height; ++y) {
-    const int64_t ya = std::max(y - 1, cy0), yb = std::min(y + 1, cy1);
-    for (int64_t x = r.x0; x < r.x0 + r.width; ++x) {
-      const int64_t xa = std::max(x - 1, cx0), xb = std::min(x + 1, cx1);
-      const size_t i = index(x, y);
-      L.slope[2 * i] = float((double(L.z[index(xb, y)]) - L.z[index(xa, y)]) / (double(xb - xa) * g));
-      L.slope[2 * i + 1] = float((double(L.z[index(x, yb)]) - L.z[index(x, ya)]) / (double(yb - ya) * g));
+  // The level on the half-sample grid: U's four-point rule (-1, 9, 9, -1) / 16 between samples,
+  // samples clamped to the clip region. Texel (X, Y) needs half positions X +- 1 and Y +- 1, so the
+  // buffer covers half coordinates 2 x0 - 1 .. 2 (x0 + w), likewise in y: z samples x0 - 2 .. x0 + w + 1.
+  const int64_t hw = 2 * r.width + 2, hh = 2 * r.height + 2;
+  const int64_t hx0 = 2 * r.x0 - 1, hy0 = 2 * r.y0 - 1;
+  up_rows_.resize(size_t(hw * (r.height + 4)));
+  up_.resize(size_t(hw * hh));
+  auto zs = [&](int64_t x, int64_t y) { return L.z[index(std::clamp(x, cx0, cx1), std::clamp(y, cy0, cy1))]; };
+  for (int64_t j = 0; j < r.height + 4; ++j) {  // sample rows y0 - 2 .. y0 + h + 1, upsampled in x
+    const int64_t y = r.y0 - 2 + j;
+    float* row = up_rows_.data() + j * hw;
+    for (int64_t i = 0; i < hw; ++i) {
+      const int64_t X = hx0 + i;
+      if ((X & 1) == 0) {
+        row[i] = zs(X >> 1, y);
+      } else {
+        const int64_t x = X >> 1;  // between x and x + 1
+        row[i] = (9.0f * (zs(x, y) + zs(x + 1, y)) - (zs(x - 1, y) + zs(x + 2, y))) * (1.0f / 16.0f);
+      }
+    }
+  }
+  for (int64_t k = 0; k < hh; ++k) {  // then in y
+    const int64_t Y = hy0 + k;
+    float* out = up_.data() + k * hw;
+    const int64_t j = (Y >> 1) - (r.y0 - 2);  // row of sample Y >> 1 in up_rows_
+    const float* a = up_rows_.data() + j * hw;
+    if ((Y & 1) == 0) {
+      std::copy_n(a, hw, out);
+    } else {
+      const float *m1 = a - hw, *p1 = a + hw, *p2 = a + 2 * hw;
+      for (int64_t i = 0; i < hw; ++i) out[i] = (9.0f * (a[i] + p1[i]) - (m1[i] + p2[i])) * (1.0f / 16.0f);
+    }
+  }
+  // Central differences one sample apart (two half steps), texels 2 x0 .. 2 (x0 + w) - 1.
+  const float s = float(inv_g);
+  for (int64_t k = 1; k < hh - 1; ++k) {
+    const float *c = up_.data() + k * hw, *above = c - hw, *below = c + hw;
+    const int64_t Y = hy0 + k;
+    for (int64_t i = 1; i < hw - 1; ++i) {
+      const size_t t = normal_index(hx0 + i, Y);
+      L.normal[2 * t] = (c[i + 1] - c[i - 1]) * s;
+      L.normal[2 * t + 1] = (below[i] - above[i]) * s;
     }
   }
 }
@@ -192,21 +227,27 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
     fill_rect(level, r);
     stats.samples_filled += r.width * r.height;
   }
-  stats.seconds_fill += since(t0);
+  ClipmapUpdateStats::Level& mine = stats.per_level[size_t(level)];
+  mine.seconds_fill = since(t0);
+  stats.seconds_fill += mine.seconds_fill;
+  for (const Rect& r : rects) mine.samples_filled += r.width * r.height;
   t0 = Clock::now();
   for (const Rect& r : rects) compute_coarse(level, r);
-  stats.seconds_coarse += since(t0);
+  mine.seconds_coarse = since(t0);
+  stats.seconds_coarse += mine.seconds_coarse;
   t0 = Clock::now();
-  // Old border samples that became interior get central differences now: recompute a 1-sample ring.
-  for (const Rect& r : rects) compute_slopes(level, intersect(dilate(r, 1), clip));
-  // Samples that became border samples on the side the region moved away from turn one-sided.
+  // A sample's texels depend on the samples within 2 of it (U's support), clamped to the clip
+  // region: recompute a 2-sample ring around the new samples, and the 2-sample band along the clip
+  // border, where the clamp now reaches other samples than before.
+  for (const Rect& r : rects) compute_normals(level, intersect(dilate(r, 2), clip));
   if (!full) {
-    compute_slopes(level, Rect{x0, y0, n_, 1});
-    compute_slopes(level, Rect{x0, y0 + n_ - 1, n_, 1});
-    compute_slopes(level, Rect{x0, y0, 1, n_});
-    compute_slopes(level, Rect{x0 + n_ - 1, y0, 1, n_});
+    compute_normals(level, Rect{x0, y0, n_, 2});
+    compute_normals(level, Rect{x0, y0 + n_ - 2, n_, 2});
+    compute_normals(level, Rect{x0, y0 + 2, 2, n_ - 4});
+    compute_normals(level, Rect{x0 + n_ - 2, y0 + 2, 2, n_ - 4});
   }
-  stats.seconds_normals += since(t0);
+  mine.seconds_normals = since(t0);
+  stats.seconds_normals += mine.seconds_normals;
   t0 = Clock::now();
   for (const Rect& r : rects) compute_tiles(level, r);
   // Tiles straddling the clip border lost or gained samples where the region moved away: refresh
@@ -217,14 +258,15 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
     compute_tiles(level, Rect{x0, y0, kTile, n_});
     compute_tiles(level, Rect{x0 + n_ - kTile, y0, kTile, n_});
   }
-  stats.seconds_bounds += since(t0);
-  // Slopes changed on the ring and on the clip border too: report them for upload.
+  mine.seconds_bounds = since(t0);
+  stats.seconds_bounds += mine.seconds_bounds;
+  // Normals changed on the ring and on the clip border too: report them for upload.
   if (!full) {
-    for (Rect& r : rects) r = intersect(dilate(r, 1), clip);
-    rects.push_back(Rect{x0, y0, n_, 1});
-    rects.push_back(Rect{x0, y0 + n_ - 1, n_, 1});
-    rects.push_back(Rect{x0, y0, 1, n_});
-    rects.push_back(Rect{x0 + n_ - 1, y0, 1, n_});
+    for (Rect& r : rects) r = intersect(dilate(r, 2), clip);
+    rects.push_back(Rect{x0, y0, n_, 2});
+    rects.push_back(Rect{x0, y0 + n_ - 2, n_, 2});
+    rects.push_back(Rect{x0, y0 + 2, 2, n_ - 4});
+    rects.push_back(Rect{x0 + n_ - 2, y0 + 2, 2, n_ - 4});
   }
 }
 

@@ -1,5 +1,5 @@
 // Drawing a geometry clipmap with OpenGL 4.5 core: toroidal height textures read in the vertex
-// shader, footprints generated from gl_VertexID, transition morph, T-junction stitching, per-block
+// shader, footprints from constant vertex/index buffers, transition morph, T-junction stitching, per-block
 // view-frustum culling, z-coloured diffuse shading from the slope (normal) maps.
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
@@ -21,10 +21,11 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 const char* kVertexShader = R"(#version 450 core
-uniform ivec2 u_origin;      // first vertex of the footprint, level grid
-uniform int u_cols;          // grid footprint: quads per row
-uniform int u_mode;          // 0: grid of quads, 1: zero-area stitching triangles along u_dir
-uniform ivec2 u_dir;
+layout(location = 0) in ivec2 a_local;  // footprint vertex (constant vertex buffer), local grid units
+uniform ivec2 u_origin;      // where the footprint's (0, 0) goes, level grid
+uniform ivec2 u_extent;      // local coordinates are clamped to this: a cropped piece's extra
+                             // quads collapse onto its edge (zero area, never rasterised)
+uniform int u_transpose;     // 1: swap the footprint's axes (fix-ups, trims, stitches along x or y)
 uniform int u_level;
 uniform int u_n;
 uniform ivec2 u_wrap_base;   // a multiple of n making every vertex coordinate non-negative
@@ -41,17 +42,9 @@ out float v_alpha;
 out float v_height;
 invariant gl_Position;
 
-// Triangulation of a quad: diagonal (0,0)-(1,1), the one the clipmap's zc assumes.
-const ivec2 kCorners[6] = ivec2[6](ivec2(0, 0), ivec2(1, 0), ivec2(1, 1), ivec2(0, 0), ivec2(1, 1), ivec2(0, 1));
-
 void main() {
-  ivec2 g;
-  if (u_mode == 0) {
-    int q = gl_VertexID / 6;
-    g = u_origin + ivec2(q % u_cols, q / u_cols) + kCorners[gl_VertexID % 6];
-  } else {
-    g = u_origin + u_dir * (2 * (gl_VertexID / 3) + gl_VertexID % 3);
-  }
+  ivec2 p = u_transpose != 0 ? a_local.yx : a_local;
+  ivec2 g = u_origin + min(p, u_extent);
   ivec3 t = ivec3((g + u_wrap_base) % u_n, u_level);
   float zf = texelFetch(u_z, t, 0).r;
   float zc = texelFetch(u_zc, t, 0).r;
@@ -83,7 +76,7 @@ const char* kFragmentShader = R"(#version 450 core
 in vec2 v_grid;
 in float v_alpha;
 in float v_height;
-uniform sampler2DArray u_slope;  // dz/dx, dz/dy; linear filtering, repeat = toroidal wrap
+uniform sampler2DArray u_normal;  // 2n x 2n: dz/dx, dz/dy; linear filtering, repeat = toroidal wrap
 uniform int u_level;
 uniform int u_coarse_layer;
 uniform float u_coarse_scale;    // 0.5: the coarser level's grid, 1: level 0 (no coarser level)
@@ -107,9 +100,10 @@ void main() {
     o_colour = vec4(u_flat_rgb, 1.0);
     return;
   }
-  float n = float(u_n);
-  vec2 sf = texture(u_slope, vec3((v_grid + 0.5) / n, float(u_level))).rg;
-  vec2 sc = texture(u_slope, vec3((v_grid * u_coarse_scale + 0.5) / n, float(u_coarse_layer))).rg;
+  // Texel T of the normal map sits at level position T / 2: position p is texture coordinate (2 p + 0.5) / 2n.
+  float n2 = 2.0 * float(u_n);
+  vec2 sf = texture(u_normal, vec3((2.0 * v_grid + 0.5) / n2, float(u_level))).rg;
+  vec2 sc = texture(u_normal, vec3((2.0 * u_coarse_scale * v_grid + 0.5) / n2, float(u_coarse_layer))).rg;
   vec2 s = mix(sf, sc, v_alpha);
   vec3 normal = normalize(vec3(-s, 1.0));
   float diffuse = max(dot(normal, normalize(u_light)), 0.0);
@@ -198,8 +192,17 @@ bool box_outside(const std::array<std::array<double, 4>, 6>& planes, const doubl
 
 struct ClipmapRenderer::Gl {
   GLuint program = 0, vao = 0, fbo = 0, colour = 0, depth = 0;
-  GLuint tex_z = 0, tex_zc = 0, tex_slope = 0;
-  GLint u_origin = -1, u_cols = -1, u_mode = -1, u_dir = -1, u_level = -1, u_n = -1, u_wrap_base = -1, u_g = -1,
+  GLuint tex_z = 0, tex_zc = 0, tex_normal = 0, vbo = 0, ibo = 0;
+  // The constant footprints (L&H 2004 §6.1, A&H 2005 §2.3.2) in one vertex and one index buffer.
+  struct Footprint {
+    GLint base_vertex = 0;
+    size_t first_index = 0;
+    int row_indices = 0;  // indices per local row of quads (row-major: the first k rows are a prefix)
+    int rows = 0;         // local rows of quads
+    int cols = 0;         // local columns of quads
+  };
+  Footprint block, fixup, trim, stitch;
+  GLint u_origin = -1, u_extent = -1, u_transpose = -1, u_level = -1, u_n = -1, u_wrap_base = -1, u_g = -1,
         u_viewer = -1, u_active = -1, u_w = -1, u_transitions = -1, u_mvp = -1, u_coarse_layer = -1,
         u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1;
 };
@@ -224,7 +227,7 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
     throw std::runtime_error(std::string("clipmap renderer: program link failed: ") + log);
   }
   auto loc = [&](const char* name) { return glGetUniformLocation(g.program, name); };
-  g.u_origin = loc("u_origin"), g.u_cols = loc("u_cols"), g.u_mode = loc("u_mode"), g.u_dir = loc("u_dir");
+  g.u_origin = loc("u_origin"), g.u_extent = loc("u_extent"), g.u_transpose = loc("u_transpose");
   g.u_level = loc("u_level"), g.u_n = loc("u_n"), g.u_wrap_base = loc("u_wrap_base"), g.u_g = loc("u_g");
   g.u_viewer = loc("u_viewer"), g.u_active = loc("u_active"), g.u_w = loc("u_w"), g.u_transitions = loc("u_transitions");
   g.u_mvp = loc("u_mvp"), g.u_coarse_layer = loc("u_coarse_layer"), g.u_coarse_scale = loc("u_coarse_scale");
@@ -232,20 +235,63 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   glUseProgram(g.program);
   glUniform1i(loc("u_z"), 0);
   glUniform1i(loc("u_zc"), 1);
-  glUniform1i(loc("u_slope"), 2);
-  glCreateVertexArrays(1, &g.vao);  // core profile needs one, even without attributes
+  glUniform1i(loc("u_normal"), 2);
 
-  auto make_array = [&](GLuint& tex, GLenum format, bool linear) {
+  // Footprints, local coordinates as short2: m x m block (m = (n+1)/4), the 3 x m fix-up (2 quads
+  // wide), the 2 x n trim (1 quad wide, up to a ring side long) and the line of zero-area stitching
+  // triangles (v_2k, v_2k+1, v_2k+2) that closes the T-junctions on a ring's outer edge. Every quad
+  // is split along its (0,0)-(1,1) diagonal, the one the clipmap's zc assumes; transposing keeps it.
+  std::vector<int16_t> vertices;
+  std::vector<uint16_t> indices;
+  auto grid = [&](int cols, int rows, Gl::Footprint& f) {  // cols x rows quads
+    f.base_vertex = GLint(vertices.size() / 2);
+    f.first_index = indices.size();
+    f.row_indices = 6 * cols;
+    f.rows = rows;
+    f.cols = cols;
+    for (int y = 0; y <= rows; ++y)
+      for (int x = 0; x <= cols; ++x) vertices.push_back(int16_t(x)), vertices.push_back(int16_t(y));
+    const int w = cols + 1;
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x) {
+        const int v = y * w + x;
+        for (int k : {v, v + 1, v + w + 1, v, v + w + 1, v + w}) indices.push_back(uint16_t(k));
+      }
+  };
+  const int m = (n + 1) / 4;
+  grid(m - 1, m - 1, g.block);
+  grid(2, m - 1, g.fixup);
+  grid(1, n - 1, g.trim);
+  g.stitch.base_vertex = GLint(vertices.size() / 2);
+  g.stitch.first_index = indices.size();
+  g.stitch.row_indices = 3;
+  g.stitch.rows = (n - 1) / 2;
+  g.stitch.cols = 0;
+  for (int i = 0; i < n; ++i) vertices.push_back(int16_t(i)), vertices.push_back(0);
+  for (int t = 0; t < (n - 1) / 2; ++t)
+    for (int k = 0; k < 3; ++k) indices.push_back(uint16_t(2 * t + k));
+  glCreateBuffers(1, &g.vbo);
+  glNamedBufferStorage(g.vbo, GLsizeiptr(vertices.size() * sizeof(int16_t)), vertices.data(), 0);
+  glCreateBuffers(1, &g.ibo);
+  glNamedBufferStorage(g.ibo, GLsizeiptr(indices.size() * sizeof(uint16_t)), indices.data(), 0);
+  glCreateVertexArrays(1, &g.vao);
+  glEnableVertexArrayAttrib(g.vao, 0);
+  glVertexArrayAttribIFormat(g.vao, 0, 2, GL_SHORT, 0);
+  glVertexArrayAttribBinding(g.vao, 0, 0);
+  glVertexArrayVertexBuffer(g.vao, 0, g.vbo, 0, 2 * sizeof(int16_t));
+  glVertexArrayElementBuffer(g.vao, g.ibo);
+
+  auto make_array = [&](GLuint& tex, GLenum format, bool linear, int side) {
     glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &tex);
-    glTextureStorage3D(tex, 1, format, n, n, levels);
+    glTextureStorage3D(tex, 1, format, side, side, levels);
     glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, linear ? GL_LINEAR : GL_NEAREST);
     glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, linear ? GL_LINEAR : GL_NEAREST);
     glTextureParameteri(tex, GL_TEXTURE_WRAP_S, GL_REPEAT);  // repeat = the toroidal wrap
     glTextureParameteri(tex, GL_TEXTURE_WRAP_T, GL_REPEAT);
   };
-  make_array(g.tex_z, GL_R32F, false);
-  make_array(g.tex_zc, GL_R32F, false);
-  make_array(g.tex_slope, GL_RG32F, true);
+  make_array(g.tex_z, GL_R32F, false, n);
+  make_array(g.tex_zc, GL_R32F, false, n);
+  make_array(g.tex_normal, GL_RG32F, true, 2 * n);
 
   glCreateRenderbuffers(1, &g.colour);
   glNamedRenderbufferStorage(g.colour, GL_RGBA8, width, height);
@@ -261,8 +307,10 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
 
 ClipmapRenderer::~ClipmapRenderer() {
   Gl& g = *gl_;
-  const GLuint textures[3] = {g.tex_z, g.tex_zc, g.tex_slope};
+  const GLuint textures[3] = {g.tex_z, g.tex_zc, g.tex_normal};
   glDeleteTextures(3, textures);
+  glDeleteBuffers(1, &g.vbo);
+  glDeleteBuffers(1, &g.ibo);
   glDeleteFramebuffers(1, &g.fbo);
   glDeleteRenderbuffers(1, &g.colour);
   glDeleteRenderbuffers(1, &g.depth);
@@ -300,9 +348,12 @@ void ClipmapRenderer::upload(const Clipmap& cm, bool everything) {
                               cm.heights(l) + at);
           glTextureSubImage3D(g.tex_zc, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1, GL_RED, GL_FLOAT,
                               cm.coarse_heights(l) + at);
-          glTextureSubImage3D(g.tex_slope, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1, GL_RG,
-                              GL_FLOAT, cm.slopes(l) + 2 * at);
           upload_samples_ += wx[px] * wy[py];
+          // The normal map's texels of these samples: the same piece at twice the resolution.
+          glPixelStorei(GL_UNPACK_ROW_LENGTH, 2 * n_);
+          glTextureSubImage3D(g.tex_normal, 0, GLint(2 * ox), GLint(2 * oy), l, GLsizei(2 * wx[px]), GLsizei(2 * wy[py]), 1,
+                              GL_RG, GL_FLOAT, cm.normal_map(l) + 2 * size_t(2 * oy * 2 * n_ + 2 * ox));
+          glPixelStorei(GL_UNPACK_ROW_LENGTH, n_);
         }
     }
   }
@@ -341,7 +392,7 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
   glBindVertexArray(g.vao);
   glBindTextureUnit(0, g.tex_z);
   glBindTextureUnit(1, g.tex_zc);
-  glBindTextureUnit(2, g.tex_slope);
+  glBindTextureUnit(2, g.tex_normal);
   glUniformMatrix4fv(g.u_mvp, 1, GL_FALSE, mvp);
   glUniform1i(g.u_n, n_);
   glUniform1i(g.u_transitions, opt.transitions ? 2 : opt.snap_perimeter ? 1 : 0);
@@ -355,7 +406,18 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
     glUniform2f(g.u_zrange, zr.lo, zr.hi);
   }
 
-  const int block = (n_ + 1) / 4 - 1;  // quads per side of the m x m block, m = (n+1)/4
+  const int64_t B = g.block.cols;  // quads per side of the m x m block
+  // One footprint instance: local (0,0) at `origin`, clamped to extent (ex, ey) quads in world axes;
+  // only the local rows that hold visible quads are submitted.
+  auto draw = [&](const Gl::Footprint& f, int64_t ox, int64_t oy, int64_t ex, int64_t ey, bool transpose) {
+    const int64_t local_rows = std::min<int64_t>(transpose ? ex : ey, f.rows);
+    glUniform2i(g.u_origin, GLint(ox), GLint(oy));
+    glUniform2i(g.u_extent, GLint(ex), GLint(ey));
+    glUniform1i(g.u_transpose, transpose ? 1 : 0);
+    glDrawElementsBaseVertex(GL_TRIANGLES, GLsizei(local_rows * f.row_indices), GL_UNSIGNED_SHORT,
+                             reinterpret_cast<const void*>(f.first_index * sizeof(uint16_t)), f.base_vertex);
+    ++stats.draw_calls;
+  };
   // Fine to coarse, so that nearer terrain fills the depth buffer first.
   for (int l = levels_ - 1; l >= 0; --l) {
     const LevelRegion a = cm.active_region(l);
@@ -374,56 +436,82 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
     glUniform1i(g.u_coarse_layer, l > 0 ? l - 1 : 0);
     glUniform1f(g.u_coarse_scale, l > 0 ? 0.5f : 1.0f);
 
-    // render region = active(l) - active(l+1), as up to four rectangles of quads.
+    // A piece of the render region (x0..x1, y0..y1 vertices), culled against its extruded z range.
+    auto visible = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1) {
+      if (!opt.culling) return true;
+      const ZRange zr = cm.z_bounds(l, LevelRegion{x0, y0, x1, y1});
+      const double lo[3] = {double(x0) * gm, double(y0) * gm, double(zr.lo)};
+      const double hi[3] = {double(x1) * gm, double(y1) * gm, double(zr.hi)};
+      if (!box_outside(planes, lo, hi)) return true;
+      ++stats.blocks_culled;
+      return false;
+    };
+    // A strip 1 or 2 quads wide: trims or fix-ups laid end to end along it.
+    auto strip = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1) {
+      const bool along_x = (x1 - x0) > (y1 - y0);
+      const int64_t width = along_x ? y1 - y0 : x1 - x0, length = along_x ? x1 - x0 : y1 - y0;
+      const Gl::Footprint& f = width == 1 ? g.trim : g.fixup;
+      for (int64_t s = 0; s < length; s += f.rows) {
+        const int64_t len = std::min<int64_t>(f.rows, length - s);
+        const int64_t px = along_x ? x0 + s : x0, py = along_x ? y0 : y0 + s;
+        const int64_t ex = along_x ? len : width, ey = along_x ? width : len;
+        if (!visible(px, py, px + ex, py + ey)) continue;
+        draw(f, px, py, ex, ey, along_x);
+        ++stats.blocks_drawn;
+        stats.triangles += 2 * ex * ey;
+      }
+    };
+    // A rectangle of the render region: m x m blocks (the last ones clamped), a 1-2 quad remainder
+    // on the right and bottom as fix-up / trim strips (the paper's ring fix-ups and L-shaped trim).
+    auto tile = [&](const LevelRegion& p) {
+      const int64_t W = p.x1 - p.x0, H = p.y1 - p.y0;
+      if (W <= 0 || H <= 0) return;
+      if (W <= 2 || H <= 2) return strip(p.x0, p.y0, p.x1, p.y1);
+      const int64_t rw = W % B <= 2 ? W % B : 0, rh = H % B <= 2 ? H % B : 0;
+      const int64_t mx1 = p.x1 - rw, my1 = p.y1 - rh;
+      for (int64_t by = p.y0; by < my1; by += B)
+        for (int64_t bx = p.x0; bx < mx1; bx += B) {
+          const int64_t w = std::min<int64_t>(B, mx1 - bx), h = std::min<int64_t>(B, my1 - by);
+          if (!visible(bx, by, bx + w, by + h)) continue;
+          draw(g.block, bx, by, w, h, false);
+          ++stats.blocks_drawn;
+          stats.triangles += 2 * w * h;
+        }
+      if (rw > 0) strip(mx1, p.y0, p.x1, my1);
+      if (rh > 0) strip(p.x0, my1, p.x1, p.y1);
+    };
+
+    // render region = active(l) - active(l+1), as up to four rectangles.
     LevelRegion inner;
     if (l + 1 < levels_ && !cm.active_region(l + 1).empty()) {
       const LevelRegion f = cm.active_region(l + 1);
       inner = LevelRegion{f.x0 / 2, f.y0 / 2, f.x1 / 2, f.y1 / 2};
     }
-    std::vector<LevelRegion> parts;
     if (inner.empty()) {
-      parts.push_back(a);
+      tile(a);
     } else {
-      parts.push_back(LevelRegion{a.x0, a.y0, a.x1, inner.y0});
-      parts.push_back(LevelRegion{a.x0, inner.y1, a.x1, a.y1});
-      parts.push_back(LevelRegion{a.x0, inner.y0, inner.x0, inner.y1});
-      parts.push_back(LevelRegion{inner.x1, inner.y0, a.x1, inner.y1});
-    }
-    glUniform1i(g.u_mode, 0);
-    for (const LevelRegion& p : parts) {
-      for (int64_t by = p.y0; by < p.y1; by += block)
-        for (int64_t bx = p.x0; bx < p.x1; bx += block) {
-          const int64_t w = std::min<int64_t>(block, p.x1 - bx), h = std::min<int64_t>(block, p.y1 - by);
-          if (opt.culling) {
-            const ZRange zr = cm.z_bounds(l, LevelRegion{bx, by, bx + w, by + h});
-            const double lo[3] = {double(bx) * gm, double(by) * gm, double(zr.lo)};
-            const double hi[3] = {double(bx + w) * gm, double(by + h) * gm, double(zr.hi)};
-            if (box_outside(planes, lo, hi)) {
-              ++stats.blocks_culled;
-              continue;
-            }
-          }
-          glUniform2i(g.u_origin, GLint(bx), GLint(by));
-          glUniform1i(g.u_cols, GLint(w));
-          glDrawArrays(GL_TRIANGLES, 0, GLsizei(w * h * 6));
-          ++stats.blocks_drawn;
-          ++stats.draw_calls;
-          stats.triangles += 2 * w * h;
-        }
+      tile(LevelRegion{a.x0, a.y0, a.x1, inner.y0});
+      tile(LevelRegion{a.x0, inner.y1, a.x1, a.y1});
+      tile(LevelRegion{a.x0, inner.y0, inner.x0, inner.y1});
+      tile(LevelRegion{inner.x1, inner.y0, a.x1, inner.y1});
     }
     // Zero-area triangles (v0, v1, v2) on each outer side close the T-junctions against level l-1.
     if (opt.stitch && l > 0) {
-      glUniform1i(g.u_mode, 1);
+      const int64_t wx = a.x1 - a.x0, wy = a.y1 - a.y0;
       const struct {
-        int64_t x, y, dx, dy, len;
-      } sides[4] = {{a.x0, a.y0, 1, 0, a.x1 - a.x0}, {a.x0, a.y1, 1, 0, a.x1 - a.x0},
-                    {a.x0, a.y0, 0, 1, a.y1 - a.y0}, {a.x1, a.y0, 0, 1, a.y1 - a.y0}};
-      for (const auto& s : sides) {
-        glUniform2i(g.u_origin, GLint(s.x), GLint(s.y));
-        glUniform2i(g.u_dir, GLint(s.dx), GLint(s.dy));
-        glDrawArrays(GL_TRIANGLES, 0, GLsizei(s.len / 2 * 3));
+        int64_t x, y, len;
+        bool along_x;
+      } sides[4] = {{a.x0, a.y0, wx, true}, {a.x0, a.y1, wx, true}, {a.x0, a.y0, wy, false}, {a.x1, a.y0, wy, false}};
+      for (const auto& sd : sides) {
+        // The stitch line is local x with one row of triangles per 2 quads: extent (len, 0).
+        const int64_t tris = sd.len / 2;
+        glUniform2i(g.u_origin, GLint(sd.x), GLint(sd.y));
+        glUniform2i(g.u_extent, GLint(sd.along_x ? sd.len : 0), GLint(sd.along_x ? 0 : sd.len));
+        glUniform1i(g.u_transpose, sd.along_x ? 0 : 1);
+        glDrawElementsBaseVertex(GL_TRIANGLES, GLsizei(tris * 3), GL_UNSIGNED_SHORT,
+                                 reinterpret_cast<const void*>(g.stitch.first_index * sizeof(uint16_t)), g.stitch.base_vertex);
         ++stats.draw_calls;
-        stats.triangles += s.len / 2;
+        stats.triangles += tris;
       }
     }
   }

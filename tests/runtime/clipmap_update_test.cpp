@@ -41,8 +41,11 @@ bool same_level(const Clipmap& a, const Clipmap& b, int l, std::string& why) {
       const size_t i = a.index(x, y);
       if (a.heights(l)[i] != b.heights(l)[i]) return why = "z", false;
       if (a.coarse_heights(l)[i] != b.coarse_heights(l)[i]) return why = "zc", false;
-      if (a.slopes(l)[2 * i] != b.slopes(l)[2 * i] || a.slopes(l)[2 * i + 1] != b.slopes(l)[2 * i + 1])
-        return why = "slope at " + std::to_string(x) + "," + std::to_string(y), false;
+      for (int64_t t = 0; t < 4; ++t) {  // the sample's four normal-map texels
+        const size_t k = a.normal_index(2 * x + (t & 1), 2 * y + (t >> 1));
+        if (a.normal_map(l)[2 * k] != b.normal_map(l)[2 * k] || a.normal_map(l)[2 * k + 1] != b.normal_map(l)[2 * k + 1])
+          return why = "normal map at sample " + std::to_string(x) + "," + std::to_string(y), false;
+      }
     }
   for (int64_t y = c.y0; y < c.y0 + n; y += 5)
     for (int64_t x = c.x0; x < c.x0 + n; x += 7) {
@@ -283,4 +286,38 @@ TEST_CASE("clipmap: bad options are rejected with a clear error", "[clipmap]") {
   o.n = 31;
   o.levels = kLevels + 1;
   CHECK_THROWS_WITH(Clipmap(src, o), Catch::Contains("level count"));
+}
+
+TEST_CASE("clipmap: the normal map has twice the geometry's resolution (slopes of U's cubic surface)", "[clipmap]") {
+  // U's four-point rule reproduces cubics, so on z = c x^3 + d y (sample units) every texel away from
+  // the clip border is exact: at a vertex the slope between the half positions x -+ 1/2, between
+  // vertices the secant slope; neither is an interpolation of per-vertex normals.
+  constexpr double c = 1e-4, d = 0.25, g = 2.0;
+  const int levels = 3;
+  FunctionHeightSource src(levels, GridSize{1 << 10, 1 << 10}, g,
+                           [](int, int64_t x, int64_t y) { return float(c * double(x) * double(x) * double(x) + d * double(y)); },
+                           true);
+  ClipmapOptions o;
+  o.n = 31;
+  o.budget = 1 << 30;
+  o.deactivate_by_height = false;
+  Clipmap cm(src, o);
+  cm.update(37.0 * g, 11.0 * g, 10.0);
+  cm.update(61.0 * g, 3.0 * g, 10.0);  // an incremental move: ring and border texels recomputed
+  const int l = levels - 1;
+  REQUIRE(cm.has_data(l));
+  const double gl = cm.spacing(l);
+  const Rect r = cm.clip_region(l);
+  int checked = 0;
+  for (int64_t y = r.y0 + 2; y < r.y0 + r.height - 2; y += 3)
+    for (int64_t x = r.x0 + 2; x < r.x0 + r.width - 2; ++x) {
+      auto cube = [](double v) { return c * v * v * v; };
+      const size_t at_vertex = cm.normal_index(2 * x, 2 * y), between = cm.normal_index(2 * x + 1, 2 * y);
+      INFO("sample " << x << "," << y);
+      CHECK(cm.normal_map(l)[2 * at_vertex] == Approx((cube(x + 0.5) - cube(x - 0.5)) / gl).margin(1e-4));
+      CHECK(cm.normal_map(l)[2 * between] == Approx((cube(x + 1.0) - cube(double(x))) / gl).margin(1e-4));
+      CHECK(cm.normal_map(l)[2 * at_vertex + 1] == Approx(d / gl).margin(1e-5));
+      ++checked;
+    }
+  CHECK(checked > 200);
 }

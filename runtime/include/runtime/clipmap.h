@@ -22,15 +22,19 @@
 // (paper §4: active region empty when height > 0.4 n g_l).
 //
 // Each level also keeps, per sample: zc, the coarser level's surface at that vertex (for the
-// transition morph), the surface slope (dz/dx, dz/dy; the normal map, at the geometry's
-// resolution), and per 8 x 8 tile the z range of z and zc (for view-frustum culling).
+// transition morph), a normal map at twice the geometry's resolution (paper §3: one normal per
+// vertex is too blurry) holding the slopes dz/dx, dz/dy of the level upsampled by the pyramid's
+// four-point U, and per 8 x 8 tile the z range of z and zc (for view-frustum culling).
 #pragma once
 
 #include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
+
+#include "pyramid/heightmap.h"
 
 #include "pyramid/pyramid.h"
 
@@ -89,6 +93,54 @@ class FunctionHeightSource final : public HeightSource {
   int64_t samples_ = 0;
 };
 
+// Heights held in memory, one grid per level in metres, level 0 coarsest (sizes halve as in the
+// pyramid); outside a level the nearest edge sample repeats, like every source. The verification
+// reference: the original input's lossless pyramid (original_source), rendered beside the
+// compressed one.
+class GridHeightSource final : public HeightSource {
+ public:
+  // levels[l] holds sizes[l].width * sizes[l].height samples, row-major. Throws
+  // std::invalid_argument on mismatched sizes or a non-positive spacing.
+  GridHeightSource(std::vector<GridSize> sizes, std::vector<std::vector<float>> levels, double spacing_m);
+  int level_count() const override { return int(sizes_.size()); }
+  GridSize level_size(int level) const override { return sizes_.at(size_t(level)); }
+  double spacing_m() const override { return spacing_m_; }
+  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
+  const std::vector<float>& level(int level) const { return levels_.at(size_t(level)); }
+  // Validity of the finest level's samples (1 = data); empty when all are valid.
+  std::vector<uint8_t> finest_valid;
+
+ private:
+  std::vector<GridSize> sizes_;
+  std::vector<std::vector<float>> levels_;
+  double spacing_m_;
+};
+
+// The original (uncompressed) heightmap `input`, in any format libpyramid reads, as a lossless
+// pyramid with the level count and the D filter of a compressed pyramid: level l is then the
+// exact T_l that the compressed file approximates by T^_l. Voids come out as 0 m (as from
+// RegionDecoderSource) and are flagged in finest_valid. Throws IoError naming the file, or
+// std::invalid_argument when the input's size differs from `finest` (not the pyramid's input).
+GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
+                                 int level_count, const std::vector<double>& filter_11x11, double spacing_m);
+
+// Screen-space geometric error of one rendered level against the finest original data (L&H 2004
+// §9, Table 2): e_l = PL(T^_l) - T_m at every finest-level sample (PL: the renderer's
+// triangulation), projected as e_l * s / g_l pixels, s = the screen-space size of a grid cell.
+struct LevelScreenError {
+  int level = 0;                  // source level (0 coarsest)
+  double spacing_m = 0;           // g_l
+  double rms_m = 0, max_m = 0;    // |e_l| in metres
+  double rms_px = 0, p999_px = 0, max_px = 0;
+};
+// s (pixels per grid cell at the average ring depth 0.4 n g_l, L&H 2004 §4):
+// 1.25 W / (n tan(phi/2)), W the frame width and phi the horizontal field of view.
+double triangle_size_px(int width, int height, double fov_y_deg, int n);
+// Levels first_level..finest of `rendered` (the heights the clipmap draws) against `original`'s
+// finest level (same finest size); only samples valid in original.finest_valid count.
+std::vector<LevelScreenError> screen_space_error(HeightSource& rendered, const GridHeightSource& original,
+                                                 int first_level, double s_px);
+
 // Inclusive vertex bounds on a level's grid; empty when x1 < x0 or y1 < y0.
 struct LevelRegion {
   int64_t x0 = 0, y0 = 0, x1 = -1, y1 = -1;
@@ -111,7 +163,7 @@ struct ClipmapOptions {
 struct ClipmapUpdateStats {
   double seconds_fill = 0;        // height source: region decode (U + residual inside decode_units)
   double seconds_coarse = 0;      // zc: the coarser level's surface at each new vertex
-  double seconds_normals = 0;     // slopes of the new samples and their neighbours
+  double seconds_normals = 0;     // normal map texels of the new samples and their neighbours
   double seconds_bounds = 0;      // per-tile z ranges
   int64_t samples_filled = 0;     // samples taken from the source this update
   int levels_updated = 0;         // levels whose clip region moved
@@ -119,13 +171,21 @@ struct ClipmapUpdateStats {
   int enabled_levels = 0;         // levels not switched off by height (0 .. L)
   int active_levels = 0;          // levels with a non-empty active region
   double viewer_height = 0;       // viewer height above the terrain used for switching levels, metres
+  // The same split per clipmap level (index = level; levels beyond level_count() stay zero).
+  struct Level {
+    double seconds_fill = 0, seconds_coarse = 0, seconds_normals = 0, seconds_bounds = 0;
+    int64_t samples_filled = 0;
+  };
+  std::array<Level, 32> per_level{};
 };
 
 class Clipmap {
  public:
   static constexpr int kTile = 8;  // z-range tiles are kTile x kTile samples, aligned to the level grid
 
-  // Throws std::invalid_argument for an unusable n (not 2^k - 1 in 15..1023) or level count.
+  static constexpr int kMaxLevels = 32;
+  // Throws std::invalid_argument for an unusable n (not 2^k - 1 in 15..1023) or level count
+  // (1..min(source levels, kMaxLevels)).
   // The source must outlive the clipmap.
   Clipmap(HeightSource& source, const ClipmapOptions& options);
 
@@ -156,7 +216,13 @@ class Clipmap {
   size_t index(int64_t x, int64_t y) const { return size_t(wrap(y) * n_ + wrap(x)); }
   const float* heights(int level) const { return lv(level).z.data(); }         // n*n toroidal
   const float* coarse_heights(int level) const { return lv(level).zc.data(); } // n*n toroidal
-  const float* slopes(int level) const { return lv(level).slope.data(); }      // 2*n*n: dz/dx, dz/dy
+  // Normal map: 2n x 2n texels of (dz/dx, dz/dy), toroidal like the heights: texel (X, Y), at level
+  // position (X / 2, Y / 2), lives at normal_index(X, Y); sample (x, y) owns texels 2x..2x+1, 2y..2y+1.
+  const float* normal_map(int level) const { return lv(level).normal.data(); }  // 2 * 4n^2 floats
+  size_t normal_index(int64_t X, int64_t Y) const {
+    const int64_t m = 2 * int64_t(n_);
+    return size_t((((Y % m) + m) % m) * m + (((X % m) + m) % m));
+  }
   // Samples (level grid) written by the last update, as rectangles inside the clip region.
   const std::vector<Rect>& dirty_rects(int level) const { return lv(level).dirty; }
 
@@ -174,7 +240,7 @@ class Clipmap {
     int64_t clip_x0 = 0, clip_y0 = 0;
     LevelRegion desired, active;
     double transition_width = 1;
-    std::vector<float> z, zc, slope;
+    std::vector<float> z, zc, normal;
     // Toroidal tile table: tile (tx, ty) at wrap_tile(ty) * tiles + wrap_tile(tx).
     std::vector<ZRange> tile_range;
     std::vector<Rect> dirty;
@@ -185,7 +251,7 @@ class Clipmap {
   void refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stats);
   void fill_rect(int level, const Rect& r);
   void compute_coarse(int level, const Rect& r);
-  void compute_slopes(int level, const Rect& r);
+  void compute_normals(int level, const Rect& r);
   void compute_tiles(int level, const Rect& r);
   float level_height_at(int level, double gx, double gy) const;  // bilinear, inside clip region
   void crop_active_regions();
@@ -199,6 +265,7 @@ class Clipmap {
   int tiles_;  // tile table side
   std::vector<Level> levels_;
   std::vector<float> scratch_;  // fill buffer, reused
+  std::vector<float> up_rows_, up_;  // normal map: the level upsampled by U (rows, then both axes)
 };
 
 }  // namespace terrain::runtime

@@ -4,12 +4,15 @@
 // present (llvmpipe on a machine without GPU), otherwise the default EGL display (a GPU driver);
 // drawing goes to an RGBA8 + depth framebuffer object that is read back for PNG frames.
 //
-// Heights live in per-level layers of texture arrays (z, zc, slopes), addressed toroidally in the
-// vertex shader exactly like the CPU clipmap; only the samples an update wrote are uploaded.
-// Geometry has no vertex buffers: every footprint is a grid of quads generated from gl_VertexID
-// (block origin and size as uniforms), so one shader draws the m x m blocks, the leftover fix-up
-// and trim strips, the finest level's filled square and the zero-area triangles on each ring's
-// outer edge that stitch the T-junctions against the coarser level.
+// Heights live in per-level layers of texture arrays (z, zc: n x n; the normal map: 2n x 2n),
+// addressed toroidally exactly like the CPU clipmap; only the samples an update wrote are uploaded.
+// Geometry comes from a few constant footprints in one vertex and one index buffer (A&H 2005
+// §2.3.2): the m x m block (m = (n+1)/4; 12 per ring, 16 fill the finest level), the 2-quad-wide
+// ring fix-up, the 1-quad-wide trim (the L-shaped gap left by the off-centre finer level) and a
+// line of zero-area triangles on each ring's outer edge that stitches the T-junctions against the
+// coarser level. The vertex shader translates (and for strips transposes) a footprint; a piece of
+// a cropped active region clamps the footprint's local coordinates, collapsing the quads it does
+// not need onto its edge.
 //
 // World frame: x = column * spacing, y = row * spacing (metres), z up (metres). A viewer looking
 // along +y therefore looks "south" on a north-up map.

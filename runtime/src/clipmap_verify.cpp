@@ -1,0 +1,136 @@
+// Verification of the clipmap against the original data: the original input as an in-memory
+// lossless pyramid (the reference flight's height source) and the screen-space geometric error of
+// the rendered levels (L&H 2004 §9, Table 2).
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "runtime/clipmap.h"
+#include "runtime/pyramid_build.h"
+
+namespace terrain::runtime {
+
+GridHeightSource::GridHeightSource(std::vector<GridSize> sizes, std::vector<std::vector<float>> levels, double spacing_m)
+    : sizes_(std::move(sizes)), levels_(std::move(levels)), spacing_m_(spacing_m) {
+  if (sizes_.empty() || sizes_.size() != levels_.size())
+    throw std::invalid_argument("GridHeightSource: one grid per level needed");
+  for (size_t l = 0; l < sizes_.size(); ++l)
+    if (sizes_[l].width < 1 || sizes_[l].height < 1 || levels_[l].size() != size_t(sizes_[l].width * sizes_[l].height))
+      throw std::invalid_argument("GridHeightSource: level " + std::to_string(l) + " has the wrong number of samples");
+  if (!(spacing_m_ > 0) || !std::isfinite(spacing_m_))
+    throw std::invalid_argument("GridHeightSource: spacing must be a positive number of metres");
+}
+
+void GridHeightSource::fill(int level, const Rect& rect, float* out, int64_t out_stride) {
+  const GridSize s = level_size(level);
+  const float* z = levels_[size_t(level)].data();
+  for (int64_t y = 0; y < rect.height; ++y) {
+    const float* row = z + std::clamp<int64_t>(rect.y0 + y, 0, s.height - 1) * s.width;
+    float* o = out + y * out_stride;
+    for (int64_t x = 0; x < rect.width; ++x) o[x] = row[std::clamp<int64_t>(rect.x0 + x, 0, s.width - 1)];
+  }
+}
+
+GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
+                                 int level_count, const std::vector<double>& filter_11x11, double spacing_m) {
+  const Heightmap map = read_heightmap(input, read_options);
+  if (map.width() != finest.width || map.height() != finest.height)
+    throw std::invalid_argument(input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
+                                " samples, but the pyramid's finest level is " + std::to_string(finest.width) + "x" +
+                                std::to_string(finest.height));
+  const LevelUnits units = level_units(map.info, 0);
+  BuildOptions bo;
+  bo.level_count = level_count;
+  bo.value_scale = units.value_scale;
+  bo.threads = 1;
+  bo.level_ordered_output = false;  // no temp files: the bands go straight to memory
+  if (filter_11x11.size() == size_t(DownsampleFilter::kSize * DownsampleFilter::kSize)) {
+    // The compressed file's D, so that the reference's coarse levels are the T_l it approximates.
+    bo.use_fixed_filter = true;
+    bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
+    std::copy(filter_11x11.begin(), filter_11x11.end(), bo.fixed_filter.taps.begin());
+  }
+  UniformQuantizerCoder lossless(1);
+  MemoryPyramid pyramid;
+  build_pyramid(map, bo, lossless, pyramid);
+  if (int(pyramid.recon.size()) != level_count)
+    throw std::invalid_argument(input + ": the lossless pyramid has " + std::to_string(pyramid.recon.size()) +
+                                " levels, expected " + std::to_string(level_count));
+  const double metres_per_unit = map.info.vertical_scale / units.value_scale, offset = map.info.vertical_offset;
+  std::vector<std::vector<float>> levels(static_cast<size_t>(level_count));
+  for (int l = 0; l < level_count; ++l) {
+    const std::vector<int32_t>& r = pyramid.recon[size_t(l)];
+    levels[size_t(l)].resize(r.size());
+    for (size_t i = 0; i < r.size(); ++i) levels[size_t(l)][i] = float(r[i] * metres_per_unit + offset);
+  }
+  std::vector<uint8_t> valid = map.valid;
+  if (!valid.empty()) {  // voids read as 0 m, as RegionDecoderSource gives them
+    std::vector<float>& f = levels.back();
+    for (size_t i = 0; i < f.size(); ++i)
+      if (!valid[i]) f[i] = 0.0f;
+  }
+  GridHeightSource src(pyramid.header.levels, std::move(levels), spacing_m);
+  src.finest_valid = std::move(valid);
+  return src;
+}
+
+double triangle_size_px(int width, int height, double fov_y_deg, int n) {
+  const double tan_half_h = std::tan(fov_y_deg * M_PI / 360.0) * double(width) / double(height);
+  return 1.25 * double(width) / (double(n) * tan_half_h);
+}
+
+std::vector<LevelScreenError> screen_space_error(HeightSource& rendered, const GridHeightSource& original,
+                                                 int first_level, double s_px) {
+  const int finest = original.level_count() - 1;
+  if (rendered.level_count() != original.level_count() ||
+      !(rendered.level_size(finest) == original.level_size(finest)))
+    throw std::invalid_argument("screen_space_error: the rendered and original pyramids differ in size");
+  const GridSize fs = original.level_size(finest);
+  const std::vector<float>& truth = original.level(finest);
+  const std::vector<uint8_t>& valid = original.finest_valid;
+  std::vector<LevelScreenError> out;
+  std::vector<float> level, err;
+  err.reserve(truth.size());
+  for (int l = std::max(first_level, 0); l <= finest; ++l) {
+    const GridSize s = rendered.level_size(l);
+    level.resize(size_t(s.width * s.height));
+    rendered.fill(l, Rect{0, 0, s.width, s.height}, level.data(), s.width);
+    const int shift = finest - l;
+    const double inv = 1.0 / double(int64_t(1) << shift);
+    auto z = [&](int64_t x, int64_t y) {
+      return double(level[size_t(std::min(y, s.height - 1) * s.width + std::min(x, s.width - 1))]);
+    };
+    err.clear();
+    double sum2 = 0;
+    for (int64_t y = 0; y < fs.height; ++y)
+      for (int64_t x = 0; x < fs.width; ++x) {
+        if (!valid.empty() && !valid[size_t(y * fs.width + x)]) continue;
+        // PL(T^_l) at the fine sample: the renderer's triangles, diagonal (0,0)-(1,1) in each quad.
+        const int64_t cx = x >> shift, cy = y >> shift;
+        const double u = double(x) * inv - double(cx), v = double(y) * inv - double(cy);
+        const double z00 = z(cx, cy), z11 = z(cx + 1, cy + 1);
+        const double p = u >= v ? z00 + u * (z(cx + 1, cy) - z00) + v * (z11 - z(cx + 1, cy))
+                                : z00 + v * (z(cx, cy + 1) - z00) + u * (z11 - z(cx, cy + 1));
+        const double e = std::abs(p - double(truth[size_t(y * fs.width + x)]));
+        err.push_back(float(e));
+        sum2 += e * e;
+      }
+    LevelScreenError r;
+    r.level = l;
+    r.spacing_m = rendered.spacing_m() * double(int64_t(1) << shift);
+    const double to_px = s_px / r.spacing_m;
+    if (!err.empty()) {
+      r.rms_m = std::sqrt(sum2 / double(err.size()));
+      const size_t k = std::min(err.size() - 1, size_t(std::ceil(0.999 * double(err.size()))) - 1);
+      std::nth_element(err.begin(), err.begin() + ptrdiff_t(k), err.end());
+      r.p999_px = double(err[k]) * to_px;
+      r.max_m = double(*std::max_element(err.begin() + ptrdiff_t(k), err.end()));
+    }
+    r.rms_px = r.rms_m * to_px;
+    r.max_px = r.max_m * to_px;
+    out.push_back(r);
+  }
+  return out;
+}
+
+}  // namespace terrain::runtime
