@@ -96,6 +96,7 @@ void Clipmap::fill_rect(int level, const Rect& r) {
 }
 
 void Clipmap::compute_coarse(int level, const Rect& r) {
+  if (r.width <= 0 || r.height <= 0) return;
   Level& L = levels_[size_t(level)];
   if (level == 0) {  // no coarser level: the morph target is the level itself
     for (int64_t y = r.y0; y < r.y0 + r.height; ++y)
@@ -104,26 +105,29 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
   }
   const Level& C = levels_[size_t(level) - 1];
   // Coarse samples are clamped into the coarse clip region; the nesting of the desired regions keeps
-  // them inside whenever this level is refilled, the clamp only guards against misuse.
-  auto zc_at = [&](int64_t cx, int64_t cy) {
-    cx = std::clamp(cx, C.clip_x0, C.clip_x0 + n_ - 1);
-    cy = std::clamp(cy, C.clip_y0, C.clip_y0 + n_ - 1);
-    return C.z[index(cx, cy)];
-  };
+  // them inside whenever this level is refilled, the clamp only guards against misuse. Storage
+  // columns of cx and cx + 1 for every fine column, computed once per call.
+  auto ccol = [&](int64_t cx) { return int32_t(wrap(std::clamp(cx, C.clip_x0, C.clip_x0 + n_ - 1))); };
+  auto crow = [&](int64_t cy) { return C.z.data() + wrap(std::clamp(cy, C.clip_y0, C.clip_y0 + n_ - 1)) * n_; };
+  up_cols_.resize(size_t(2 * r.width));
+  for (int64_t i = 0; i < r.width; ++i) {
+    const int64_t cx = (r.x0 + i) >> 1;
+    up_cols_[size_t(2 * i)] = ccol(cx);
+    up_cols_[size_t(2 * i + 1)] = ccol(cx + 1);
+  }
   // The coarse surface at a fine vertex: the coarse vertex, the midpoint of the coarse edge, or the
   // midpoint of the quad diagonal (x0, y0)-(x1, y1) that the renderer's triangulation uses.
   for (int64_t y = r.y0; y < r.y0 + r.height; ++y) {
-    const int64_t cy = y >> 1;
-    const bool oy = (y & 1) != 0;
-    for (int64_t x = r.x0; x < r.x0 + r.width; ++x) {
-      const int64_t cx = x >> 1;
-      const bool ox = (x & 1) != 0;
+    const float* c0 = crow(y >> 1);
+    const float* c1 = (y & 1) ? crow((y >> 1) + 1) : c0;
+    float* out = L.zc.data() + wrap(y) * n_;
+    for (int64_t i = 0; i < r.width; ++i) {
+      const int64_t x = r.x0 + i;
+      const int32_t a = up_cols_[size_t(2 * i)], b = up_cols_[size_t(2 * i + 1)];
       float v;
-      if (!ox && !oy) v = zc_at(cx, cy);
-      else if (ox && !oy) v = 0.5f * (zc_at(cx, cy) + zc_at(cx + 1, cy));
-      else if (!ox && oy) v = 0.5f * (zc_at(cx, cy) + zc_at(cx, cy + 1));
-      else v = 0.5f * (zc_at(cx, cy) + zc_at(cx + 1, cy + 1));
-      L.zc[index(x, y)] = v;
+      if ((x & 1) == 0) v = (y & 1) ? 0.5f * (c0[a] + c1[a]) : c0[a];
+      else v = 0.5f * (c0[a] + ((y & 1) ? c1[b] : c0[b]));
+      out[wrap(x)] = v;
     }
   }
 }
@@ -131,50 +135,55 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
 void Clipmap::compute_normals(int level, const Rect& r) {
   if (r.width <= 0 || r.height <= 0) return;
   Level& L = levels_[size_t(level)];
-  const double inv_g = 1.0 / spacing(level);
+  const float inv_g = float(1.0 / spacing(level));
   const int64_t cx0 = L.clip_x0, cx1 = L.clip_x0 + n_ - 1, cy0 = L.clip_y0, cy1 = L.clip_y0 + n_ - 1;
   // The level on the half-sample grid: U's four-point rule (-1, 9, 9, -1) / 16 between samples,
   // samples clamped to the clip region. Texel (X, Y) needs half positions X +- 1 and Y +- 1, so the
   // buffer covers half coordinates 2 x0 - 1 .. 2 (x0 + w), likewise in y: z samples x0 - 2 .. x0 + w + 1.
+  const int64_t zw = r.width + 4, zh = r.height + 4;
   const int64_t hw = 2 * r.width + 2, hh = 2 * r.height + 2;
-  const int64_t hx0 = 2 * r.x0 - 1, hy0 = 2 * r.y0 - 1;
-  up_rows_.resize(size_t(hw * (r.height + 4)));
+  const int64_t hy0 = 2 * r.y0 - 1;
+  up_cols_.resize(size_t(zw));
+  up_rows_.resize(size_t(hw * zh) + size_t(zw));
   up_.resize(size_t(hw * hh));
-  auto zs = [&](int64_t x, int64_t y) { return L.z[index(std::clamp(x, cx0, cx1), std::clamp(y, cy0, cy1))]; };
-  for (int64_t j = 0; j < r.height + 4; ++j) {  // sample rows y0 - 2 .. y0 + h + 1, upsampled in x
-    const int64_t y = r.y0 - 2 + j;
+  // Storage column of each sample column (clamped, wrapped): computed once per call, not per access.
+  for (int64_t i = 0; i < zw; ++i) up_cols_[size_t(i)] = int32_t(wrap(std::clamp(r.x0 - 2 + i, cx0, cx1)));
+  float* zrow = up_rows_.data() + hw * zh;  // one gathered sample row
+  const float k9 = 9.0f / 16.0f, k1 = 1.0f / 16.0f;
+  for (int64_t j = 0; j < zh; ++j) {  // sample rows y0 - 2 .. y0 + h + 1, upsampled in x
+    const float* src = L.z.data() + wrap(std::clamp(r.y0 - 2 + j, cy0, cy1)) * n_;
+    for (int64_t i = 0; i < zw; ++i) zrow[i] = src[up_cols_[size_t(i)]];
     float* row = up_rows_.data() + j * hw;
-    for (int64_t i = 0; i < hw; ++i) {
-      const int64_t X = hx0 + i;
-      if ((X & 1) == 0) {
-        row[i] = zs(X >> 1, y);
-      } else {
-        const int64_t x = X >> 1;  // between x and x + 1
-        row[i] = (9.0f * (zs(x, y) + zs(x + 1, y)) - (zs(x - 1, y) + zs(x + 2, y))) * (1.0f / 16.0f);
-      }
+    // Half coordinate hx0 + i: odd i is sample x0 - 2 + (i + 3) / 2 - 1 ... written out per pair:
+    // i = 2k: between samples x0 - 2 + k and x0 - 1 + k (hx0 is odd); i = 2k + 1: sample x0 - 1 + k.
+    for (int64_t k = 0; k < r.width + 1; ++k) {
+      const float* z = zrow + k;  // z[0] = sample x0 - 2 + k
+      row[2 * k] = k9 * (z[1] + z[2]) - k1 * (z[0] + z[3]);
+      row[2 * k + 1] = z[2];
     }
   }
-  for (int64_t k = 0; k < hh; ++k) {  // then in y
-    const int64_t Y = hy0 + k;
+  for (int64_t k = 0; k < hh; ++k) {  // then in y: half row hy0 + k (odd k: a sample row)
     float* out = up_.data() + k * hw;
-    const int64_t j = (Y >> 1) - (r.y0 - 2);  // row of sample Y >> 1 in up_rows_
-    const float* a = up_rows_.data() + j * hw;
-    if ((Y & 1) == 0) {
-      std::copy_n(a, hw, out);
+    if (k & 1) {
+      std::copy_n(up_rows_.data() + (k / 2 + 2) * hw, hw, out);
     } else {
-      const float *m1 = a - hw, *p1 = a + hw, *p2 = a + 2 * hw;
-      for (int64_t i = 0; i < hw; ++i) out[i] = (9.0f * (a[i] + p1[i]) - (m1[i] + p2[i])) * (1.0f / 16.0f);
+      const float* a = up_rows_.data() + (k / 2) * hw;  // sample rows y0 - 2 + k/2 .. + 3
+      const float *b = a + hw, *c = b + hw, *d = c + hw;
+      for (int64_t i = 0; i < hw; ++i) out[i] = k9 * (b[i] + c[i]) - k1 * (a[i] + d[i]);
     }
   }
-  // Central differences one sample apart (two half steps), texels 2 x0 .. 2 (x0 + w) - 1.
-  const float s = float(inv_g);
+  // Central differences one sample apart (two half steps), texels 2 x0 .. 2 (x0 + w) - 1, written
+  // toroidally in at most two runs per row.
+  const int64_t m = 2 * int64_t(n_);
+  const int64_t tx0 = ((2 * r.x0) % m + m) % m, texels = 2 * r.width;
+  const int64_t run1 = std::min(texels, m - tx0);
   for (int64_t k = 1; k < hh - 1; ++k) {
     const float *c = up_.data() + k * hw, *above = c - hw, *below = c + hw;
-    const int64_t Y = hy0 + k;
-    for (int64_t i = 1; i < hw - 1; ++i) {
-      const size_t t = normal_index(hx0 + i, Y);
-      L.normal[2 * t] = (c[i + 1] - c[i - 1]) * s;
-      L.normal[2 * t + 1] = (below[i] - above[i]) * s;
+    float* dst = L.normal.data() + 2 * size_t(((hy0 + k) % m + m) % m * m);
+    for (int64_t i = 1; i <= texels; ++i) {
+      const int64_t t = i - 1 < run1 ? tx0 + i - 1 : i - 1 - run1;
+      dst[2 * t] = (c[i + 1] - c[i - 1]) * inv_g;
+      dst[2 * t + 1] = (below[i] - above[i]) * inv_g;
     }
   }
 }
@@ -186,16 +195,23 @@ void Clipmap::compute_tiles(int level, const Rect& r) {
   if (in.width == 0 || in.height == 0) return;
   const int64_t tx0 = floor_div(in.x0, kTile), tx1 = floor_div(in.x0 + in.width - 1, kTile);
   const int64_t ty0 = floor_div(in.y0, kTile), ty1 = floor_div(in.y0 + in.height - 1, kTile);
+  // Storage column of every level column the tiles span (clip region only), computed once.
+  const int64_t colx0 = std::max(tx0 * kTile, clip.x0), colx1 = std::min((tx1 + 1) * kTile, clip.x0 + n_);
+  up_cols_.resize(size_t(colx1 - colx0));
+  for (int64_t x = colx0; x < colx1; ++x) up_cols_[size_t(x - colx0)] = int32_t(wrap(x));
   for (int64_t ty = ty0; ty <= ty1; ++ty)
     for (int64_t tx = tx0; tx <= tx1; ++tx) {
       const Rect t = intersect(Rect{tx * kTile, ty * kTile, kTile, kTile}, clip);
       float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-      for (int64_t y = t.y0; y < t.y0 + t.height; ++y)
-        for (int64_t x = t.x0; x < t.x0 + t.width; ++x) {
-          const size_t i = index(x, y);
-          lo = std::min({lo, L.z[i], L.zc[i]});
-          hi = std::max({hi, L.z[i], L.zc[i]});
+      const int32_t* cols = up_cols_.data() + (t.x0 - colx0);
+      for (int64_t y = t.y0; y < t.y0 + t.height; ++y) {
+        const float* z = L.z.data() + wrap(y) * n_;
+        const float* zc = L.zc.data() + wrap(y) * n_;
+        for (int64_t i = 0; i < t.width; ++i) {
+          lo = std::min({lo, z[cols[i]], zc[cols[i]]});
+          hi = std::max({hi, z[cols[i]], zc[cols[i]]});
         }
+      }
       const int64_t wt = ((tx % tiles_) + tiles_) % tiles_, ht = ((ty % tiles_) + tiles_) % tiles_;
       L.tile_range[size_t(ht * tiles_ + wt)] = ZRange{lo, hi};
     }

@@ -266,6 +266,7 @@ class Clipmap {
   std::vector<Level> levels_;
   std::vector<float> scratch_;  // fill buffer, reused
   std::vector<float> up_rows_, up_;  // normal map: the level upsampled by U (rows, then both axes)
+  std::vector<int32_t> up_cols_;     // normal map: storage column of each gathered sample column
 };
 
 }  // namespace terrain::runtime
