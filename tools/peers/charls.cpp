@@ -31,7 +31,7 @@ class CharlsPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> metres = quick ? std::vector<double>{2} : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    const std::vector<double> metres = quick ? std::vector<double>{1, 2, 5} : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out{{"near=0 lossless", 0, 0, 0}};
     for (double m : metres) {
       const int near = std::max(1, int(std::lround(m / unit_m)));

@@ -95,7 +95,7 @@ class JpegXrPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    std::vector<int> qps = quick ? std::vector<int>{1, 40}
+    std::vector<int> qps = quick ? std::vector<int>{1, 24, 40, 56}
                                  : std::vector<int>{1, 2, 4, 8, 12, 16, 24, 32, 40, 48, 56, 64, 72, 80, 88, 96, 112, 128};
     // Above QP 16 the quantiser step doubles every 16 QP indices: shift the lossy QPs so that the
     // steps in metres stay about the same for finer sample units.

@@ -24,7 +24,7 @@ class LercPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> metres = quick ? std::vector<double>{0, 2}
+    const std::vector<double> metres = quick ? std::vector<double>{0, 1, 2, 5}
                                              : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out;
     for (double m : metres) {

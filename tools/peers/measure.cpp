@@ -10,19 +10,17 @@
 
 namespace peers {
 
-ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded) {
-  const size_t n = size_t(img.sample_count());
-  if (decoded.size() != n) throw PeerError("decoded sample count does not match the image");
+ErrorStats error_stats(const double* reference, const double* decoded, const uint8_t* valid, size_t n) {
   std::vector<double> abs_err;
   abs_err.reserve(n);
   double sum_sq = 0;
-  int32_t zmin = std::numeric_limits<int32_t>::max(), zmax = std::numeric_limits<int32_t>::min();
+  double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
   for (size_t i = 0; i < n; ++i) {
-    if (!img.valid.empty() && !img.valid[i]) continue;
-    const int32_t z = img.samples[i];
+    if (valid && !valid[i]) continue;
+    const double z = reference[i];
     zmin = std::min(zmin, z);
     zmax = std::max(zmax, z);
-    const double e = double(decoded[i]) - double(z);
+    const double e = decoded[i] - z;
     sum_sq += e * e;
     abs_err.push_back(std::fabs(e));
   }
@@ -34,13 +32,19 @@ ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded) 
   const size_t rank = size_t(std::ceil(0.999 * double(abs_err.size()))) - 1;
   std::nth_element(abs_err.begin(), abs_err.begin() + ptrdiff_t(rank), abs_err.end());
   s.p999_abs = abs_err[rank];
-  const double range = double(zmax) - double(zmin);
-  s.psnr_db = s.rms > 0 ? 20.0 * std::log10(std::max(range, 1.0) / s.rms)
+  const double range = zmax - zmin;
+  s.psnr_db = s.rms > 0 ? 20.0 * std::log10(std::max(range, 1e-300) / s.rms)
                         : std::numeric_limits<double>::infinity();
   return s;
 }
 
-namespace {
+ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded) {
+  const size_t n = size_t(img.sample_count());
+  if (decoded.size() != n) throw PeerError("decoded sample count does not match the image");
+  const std::vector<double> reference(img.samples.begin(), img.samples.end());
+  const std::vector<double> out(decoded.begin(), decoded.end());
+  return error_stats(reference.data(), out.data(), img.valid.empty() ? nullptr : img.valid.data(), n);
+}
 
 double process_cpu_seconds() {
   timespec ts{};
@@ -48,29 +52,6 @@ double process_cpu_seconds() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
-// Runs fn until the runs total min_total_seconds (at least once, at most max_reps); returns the
-// fastest wall-clock time and stores the fastest CPU time in *best_cpu.
-template <class Fn>
-double best_time(Fn&& fn, double min_total_seconds, int max_reps, int* reps, double* best_cpu) {
-  using clock = std::chrono::steady_clock;
-  double best = std::numeric_limits<double>::infinity(), total = 0;
-  *best_cpu = std::numeric_limits<double>::infinity();
-  int count = 0;
-  do {
-    const double c0 = process_cpu_seconds();
-    const auto t0 = clock::now();
-    fn();
-    const double t = std::chrono::duration<double>(clock::now() - t0).count();
-    *best_cpu = std::min(*best_cpu, process_cpu_seconds() - c0);
-    best = std::min(best, t);
-    total += t;
-    ++count;
-  } while (total < min_total_seconds && count < max_reps);
-  *reps = count;
-  return best;
-}
-
-}  // namespace
 
 Result measure(Peer& peer, const Image16& img, const Setting& setting, double min_total_seconds,
                int max_reps) {

@@ -95,11 +95,11 @@ class OpenJpegPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    std::vector<double> rates = quick ? std::vector<double>{0.5, 2.0}
+    std::vector<double> rates = quick ? std::vector<double>{0.5, 1.0, 2.0, 3.5, 5.0, 7.0}
                                       : std::vector<double>{0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5,
-                                                            2.0, 2.5, 3.0, 4.0, 5.0, 6.0};
+                                                            2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0};
     // Finer-than-metre units need higher rates to reach the same errors in metres.
-    if (!quick && unit_m < 0.75) rates.insert(rates.end(), {7.0, 8.0, 9.0});
+    if (!quick && unit_m < 0.75) rates.insert(rates.end(), {9.0, 10.0});
     std::vector<Setting> out;
     for (double bps : rates) {
       char label[48];

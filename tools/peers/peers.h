@@ -7,7 +7,10 @@
 // Peers throw PeerError (message names the codec and the problem) when the library reports failure.
 #pragma once
 
+#include <algorithm>
+#include <chrono>
 #include <cstddef>
+#include <limits>
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
@@ -72,6 +75,8 @@ struct ErrorStats {
   double psnr_db = 0;    // 20 log10((zmax - zmin) / rms); +inf when lossless
 };
 ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded);
+// The same over n doubles (any unit; valid may be null = all valid). PSNR uses the reference's range.
+ErrorStats error_stats(const double* reference, const double* decoded, const uint8_t* valid, size_t n);
 
 struct Result {
   size_t bytes = 0;
@@ -92,6 +97,31 @@ struct Result {
 // repetition is kept.
 Result measure(Peer& peer, const Image16& img, const Setting& setting, double min_total_seconds,
                int max_reps);
+
+// CPU time of the whole process (all threads), in seconds.
+double process_cpu_seconds();
+
+// Runs fn until the runs total min_total_seconds of wall time (at least once, at most max_reps);
+// returns the fastest wall-clock time and stores the fastest CPU time in *best_cpu.
+template <class Fn>
+double best_time(Fn&& fn, double min_total_seconds, int max_reps, int* reps, double* best_cpu) {
+  using clock = std::chrono::steady_clock;
+  double best = std::numeric_limits<double>::infinity(), total = 0;
+  *best_cpu = std::numeric_limits<double>::infinity();
+  int count = 0;
+  do {
+    const double c0 = process_cpu_seconds();
+    const auto t0 = clock::now();
+    fn();
+    const double t = std::chrono::duration<double>(clock::now() - t0).count();
+    *best_cpu = std::min(*best_cpu, process_cpu_seconds() - c0);
+    best = std::min(best, t);
+    total += t;
+    ++count;
+  } while (total < min_total_seconds && count < max_reps);
+  *reps = count;
+  return best;
+}
 
 // One (error, bits/sample) point of a sweep.
 struct RatePoint {

@@ -44,7 +44,7 @@ class ZfpPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> metres = quick ? std::vector<double>{2} : std::vector<double>{0.5, 1, 2, 4, 8, 16, 32, 64};
+    const std::vector<double> metres = quick ? std::vector<double>{1, 2, 4} : std::vector<double>{0.5, 1, 2, 4, 8, 16, 32, 64};
     std::vector<Setting> out;
     for (double m : metres) {
       const double t = std::exp2(std::round(std::log2(m / unit_m)));  // zfp uses powers of two anyway

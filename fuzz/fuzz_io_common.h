@@ -1,0 +1,75 @@
+// Shared plumbing of the file-reader fuzz targets: the readers take paths (the format is detected
+// from the name and the sidecar sits beside the file), so each input is written into a private
+// scratch directory under $TMPDIR and read back through the public API. Any IoError is fine;
+// crashes, sanitizer reports, leaks and other exception types are not.
+#pragma once
+
+#include <unistd.h>
+
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+#include "pyramid/heightmap.h"
+
+namespace fuzz_io {
+
+// A per-process directory, removed at exit.
+inline const std::string& scratch_dir() {
+  static const std::string dir = [] {
+    const char* tmp = std::getenv("TMPDIR");
+    std::string d = std::string(tmp && *tmp ? tmp : "/tmp") + "/terrain-fuzz-" + std::to_string(getpid());
+    std::filesystem::create_directories(d);
+    std::atexit([] { std::error_code ec; std::filesystem::remove_all(scratch_dir(), ec); });
+    return d;
+  }();
+  return dir;
+}
+
+inline std::string write_file(const std::string& name, const uint8_t* data, size_t size) {
+  const std::string path = scratch_dir() + "/" + name;
+  FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) std::abort();
+  if (size && std::fwrite(data, 1, size, f) != size) std::abort();
+  std::fclose(f);
+  return path;
+}
+
+inline void remove_file(const std::string& name) {
+  std::error_code ec;
+  std::filesystem::remove(scratch_dir() + "/" + name, ec);
+}
+
+// Reads the grid both whole and streamed in small bands; both must agree on what they accept.
+// Grids over max_samples are only probed (keeps memory per input small).
+inline void read_both_ways(const std::string& path, const terrain::ReadOptions& options, int64_t max_samples = 1 << 20) {
+  terrain::GridInfo info;
+  try {
+    info = terrain::probe(path, options);
+  } catch (const terrain::IoError&) {
+    return;
+  }
+  if (info.width <= 0 || info.height <= 0) std::abort();  // probe must reject empty grids
+  if (info.width > max_samples / info.height) return;
+  bool whole_ok = true;
+  terrain::Heightmap map;
+  try {
+    map = terrain::read_heightmap(path, options);
+  } catch (const terrain::IoError&) {
+    whole_ok = false;
+  }
+  if (whole_ok) {
+    if (int64_t(map.values.size()) != map.width() * map.height()) std::abort();
+    if (!map.valid.empty() && map.valid.size() != map.values.size()) std::abort();
+    (void)terrain::compute_stats(map);
+  }
+  try {
+    auto reader = terrain::open_band_reader(path, options);
+    (void)terrain::stream_stats(*reader, 3);
+  } catch (const terrain::IoError&) {
+  }
+}
+
+}  // namespace fuzz_io

@@ -1,0 +1,334 @@
+// Numerical stress suite (issue 7): pathological terrains through the real public API
+// (build_pyramid_file + RegionDecoder). Every case states its bound and checks it:
+//   * no NaN/Inf at valid samples, voids decode as NaN, coarse levels within [zmin - 4R - s,
+//     zmax + 4R + s] (R = the input's range, s = the step: D's negative taps and the quantiser may
+//     overshoot, but never blow up);
+//   * --lossless: the finest level is exact;
+//   * --max-error E: every valid finest sample within E (the builder guarantees it);
+//   * --rms T: within 1.5 T (the step is calibrated on a window; the goal is 10 %, see e2e tests,
+//     but these inputs are built to defeat calibration, so only "no blow-up" is asserted here).
+// Cases tagged [!mayfail] and named "KNOWN BUG" reproduce defects found by this suite in code
+// outside it (see the issue 7 report); they run and print their failures without failing the run.
+#include <catch2/catch.hpp>
+
+#include <cstdint>
+#include <random>
+
+#include "stress_util.h"
+
+using namespace stress;
+
+namespace {
+
+void lossless_and_max_error(const std::string& src, iotest::TempDir& dir, double max_error,
+                            const ReadOptions& ro = {}) {
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorTarget::Lossless), ro);
+  STRESS_CHECK_SANE(l);
+  CHECK(l.max_err == 0);
+  const Outcome m = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, max_error), ro);
+  STRESS_CHECK_SANE(m);
+  CHECK(m.max_err <= max_error + 1e-9);
+}
+
+}  // namespace
+
+TEST_CASE("stress: flat terrain codes to almost nothing, exactly", "[stress]") {
+  iotest::TempDir dir;
+  const std::string src = dir.file("flat.raw");
+  write_raw(src, make_grid(300, 200, SampleType::Int16, 1234));
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorTarget::Lossless));
+  STRESS_CHECK_SANE(l);
+  CHECK(l.max_err == 0);
+  CHECK(l.bits_per_sample < 1.0);  // bound: a constant costs only headers (60000 samples)
+  lossless_and_max_error(src, dir, 0.5);
+}
+
+TEST_CASE("stress: KNOWN BUG: rms target on flat terrain is missed 4x (calibration picks a 100 m step)",
+          "[stress][!mayfail]") {
+  iotest::TempDir dir;
+  const std::string src = dir.file("flat.raw");
+  write_raw(src, make_grid(300, 200, SampleType::Int16, 1234));
+  for (double rms : {0.5, 4.0}) {
+    INFO("rms target " << rms);
+    const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, rms));
+    STRESS_CHECK_SANE(r);
+    CHECK(r.rms <= 1.5 * rms);
+  }
+}
+
+TEST_CASE("stress: one 8000 m needle on a plain", "[stress]") {
+  iotest::TempDir dir;
+  Heightmap m = make_grid(257, 257, SampleType::Int16, 100);
+  m.values[size_t(128 * 257 + 128)] = 8100;
+  const std::string src = dir.file("needle.raw");
+  write_raw(src, m);
+  lossless_and_max_error(src, dir, 2);
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, 1));
+  STRESS_CHECK_SANE(r);
+  CHECK(r.rms <= 1.5);
+}
+
+TEST_CASE("stress: 8000 m cliffs, straight and diagonal", "[stress]") {
+  iotest::TempDir dir;
+  Heightmap m = make_grid(200, 190, SampleType::Int16);
+  for (int64_t y = 0; y < 190; ++y)
+    for (int64_t x = 0; x < 200; ++x) m.values[size_t(y * 200 + x)] = (x < 100) ? 0 : 8000;
+  for (int64_t y = 0; y < 190; ++y)  // a diagonal cliff cutting back down
+    for (int64_t x = 0; x < 200; ++x)
+      if (x + y > 250) m.values[size_t(y * 200 + x)] = -500;
+  const std::string src = dir.file("cliff.raw");
+  write_raw(src, m);
+  lossless_and_max_error(src, dir, 1);
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, 2));
+  STRESS_CHECK_SANE(r);
+  CHECK(r.rms <= 3.0);
+}
+
+TEST_CASE("stress: the full int16 range, alternating extremes and noise", "[stress]") {
+  iotest::TempDir dir;
+  Heightmap m = make_grid(131, 97, SampleType::Int16);
+  std::mt19937 rng(11);
+  for (int64_t y = 0; y < 97; ++y)
+    for (int64_t x = 0; x < 131; ++x) {
+      const size_t i = size_t(y * 131 + x);
+      if (x < 40) m.values[i] = ((x + y) & 1) ? 32767 : -32768;  // worst-case swing, every sample
+      else m.values[i] = double(int32_t(rng() % 65536u) - 32768);
+    }
+  const std::string src = dir.file("range.raw");
+  write_raw(src, m);
+  lossless_and_max_error(src, dir, 4);
+}
+
+TEST_CASE("stress: maximum-frequency checkerboard", "[stress]") {
+  iotest::TempDir dir;
+  Heightmap m = make_grid(160, 144, SampleType::Int16);
+  for (int64_t y = 0; y < 144; ++y)
+    for (int64_t x = 0; x < 160; ++x) m.values[size_t(y * 160 + x)] = ((x + y) & 1) ? 1000 : -1000;
+  const std::string src = dir.file("checker.raw");
+  write_raw(src, m);
+  lossless_and_max_error(src, dir, 2);
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, 4));
+  STRESS_CHECK_SANE(r);
+  CHECK(r.rms <= 6.0);
+}
+
+TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range", "[stress]") {
+  iotest::TempDir dir;
+  SECTION("float32 with a 1e6 m vertical_offset and centimetre values: max error 0.01 m") {
+    Heightmap m = make_grid(150, 120, SampleType::Float32);
+    m.info.vertical_offset = 1e6;
+    for (int64_t y = 0; y < 120; ++y)
+      for (int64_t x = 0; x < 150; ++x) m.values[size_t(y * 150 + x)] = double(float(0.01 * double((x * 7 + y * 13) % 23)));
+    const std::string src = dir.file("offset_f32b.raw");
+    write_raw(src, m);
+    const Outcome out = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.01));
+    STRESS_CHECK_SANE(out);
+    CHECK(out.max_err <= 0.01 + 1e-6);  // + float32 representation of the centimetre values
+  }
+  SECTION("float32 at 1e6 m (input ulp 0.0625 m), quantum 1 m: max error 2 m holds") {
+    Heightmap m = make_grid(150, 120, SampleType::Float32);
+    for (int64_t y = 0; y < 120; ++y)
+      for (int64_t x = 0; x < 150; ++x)
+        m.values[size_t(y * 150 + x)] = double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 5 * std::sin(0.1 * double(x))));
+    const std::string src = dir.file("offset_f32.raw");
+    write_raw(src, m);
+    BuildFileOptions o = target(ErrorTarget::MaxError, 2);
+    o.quantum_metres = 1;
+    const Outcome out = build_and_measure(src, dir.file("m.pyr"), o);
+    STRESS_CHECK_SANE(out);
+    CHECK(out.max_err <= 2 + 1e-9);
+  }
+}
+
+TEST_CASE("stress: KNOWN BUG: level units beyond +-2^20 (libcodec's range) make the build fail",
+          "[stress][!mayfail]") {
+  // The coarsest level is coded as absolute values, so any input whose level units exceed
+  // codec::kMaxAbsSample = 2^20 fails with "sample value out of range" (pyramid-build exit 70):
+  // 1e6 m at the default 0.01 m float quantum, but also realistic data such as float bathymetry
+  // of -11000 m (1.1e6 centimetre units) or int32 millimetre heights above 1048 m.
+  iotest::TempDir dir;
+  SECTION("int32 centimetre units at 1e6 m: lossless and max error 0.05 m") {
+    Heightmap m = make_grid(150, 120, SampleType::Int32);
+    m.info.vertical_scale = 0.01;
+    for (int64_t y = 0; y < 120; ++y)
+      for (int64_t x = 0; x < 150; ++x)
+        m.values[size_t(y * 150 + x)] = std::round(1e8 + double((x * 7 + y * 13) % 23) + 50 * std::sin(0.1 * double(x)));
+    const std::string src = dir.file("offset_i32.raw");
+    write_raw(src, m);
+    lossless_and_max_error(src, dir, 0.05);
+  }
+  SECTION("float32 at 1e6 m, default 0.01 m quantum: max error 0.1 m") {
+    Heightmap m = make_grid(150, 120, SampleType::Float32);
+    for (int64_t y = 0; y < 120; ++y)
+      for (int64_t x = 0; x < 150; ++x)
+        m.values[size_t(y * 150 + x)] = double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 0.5 * std::sin(0.1 * double(x))));
+    const std::string src = dir.file("offset_f32.raw");
+    write_raw(src, m);
+    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.1));
+    STRESS_CHECK_SANE(o);
+    CHECK(o.max_err <= 0.1 + 1e-9);
+  }
+  SECTION("float32 bathymetry near -11000 m, default 0.01 m quantum: max error 0.5 m") {
+    Heightmap m = make_grid(200, 150, SampleType::Float32);
+    for (int64_t i = 0; i < 200 * 150; ++i) m.values[size_t(i)] = double(float(-11000 + 50 * std::sin(double(i) / 300.0)));
+    const std::string src = dir.file("trench.raw");
+    write_raw(src, m);
+    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.5));
+    STRESS_CHECK_SANE(o);
+    CHECK(o.max_err <= 0.5 + 1e-9);
+  }
+}
+
+TEST_CASE("stress: NaN and nodata regions stay voids, the rest within bounds", "[stress]") {
+  iotest::TempDir dir;
+  SECTION("int16 with -32768 voids: a block, a full row, a full column, scattered samples") {
+    Heightmap m = make_grid(180, 150, SampleType::Int16);
+    m.info.nodata = -32768;
+    for (int64_t y = 0; y < 150; ++y)
+      for (int64_t x = 0; x < 180; ++x) {
+        double v = 500 + 300 * std::sin(0.05 * double(x)) * std::cos(0.07 * double(y));
+        if ((x >= 20 && x < 90 && y >= 30 && y < 100) || y == 120 || x == 150 || (x * 31 + y * 17) % 97 == 0) v = -32768;
+        m.values[size_t(y * 180 + x)] = std::round(v);
+      }
+    const std::string src = dir.file("voids.raw");
+    write_raw(src, m);
+    lossless_and_max_error(src, dir, 1);
+  }
+  SECTION("float32 with NaN voids (nodata NaN)") {
+    Heightmap m = make_grid(170, 130, SampleType::Float32);
+    m.info.nodata = std::numeric_limits<double>::quiet_NaN();
+    for (int64_t y = 0; y < 130; ++y)
+      for (int64_t x = 0; x < 170; ++x) {
+        double v = 100.25 * std::sin(0.03 * double(x + y));
+        if ((x / 16 + y / 16) % 3 == 0) v = std::numeric_limits<double>::quiet_NaN();
+        m.values[size_t(y * 170 + x)] = v;
+      }
+    const std::string src = dir.file("nan.raw");
+    write_raw(src, m);
+    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.5));
+    STRESS_CHECK_SANE(o);
+    CHECK(o.max_err <= 0.5 + 1e-9);
+  }
+  SECTION("everything void but one sample") {
+    Heightmap m = make_grid(40, 30, SampleType::Int16, -32768);
+    m.info.nodata = -32768;
+    m.values[size_t(15 * 40 + 20)] = 77;
+    const std::string src = dir.file("one.raw");
+    write_raw(src, m);
+    lossless_and_max_error(src, dir, 1);
+  }
+}
+
+TEST_CASE("stress: every grid from 1x1 to 7x7", "[stress]") {
+  iotest::TempDir dir;
+  for (int64_t h = 1; h <= 7; ++h)
+    for (int64_t w = 1; w <= 7; ++w) {
+      INFO(w << "x" << h);
+      Heightmap m = make_grid(w, h, SampleType::Int16);
+      for (int64_t i = 0; i < w * h; ++i) m.values[size_t(i)] = double((i * 2654435761u) % 2001) - 1000;
+      const std::string src = dir.file("tiny.raw");
+      write_raw(src, m);
+      lossless_and_max_error(src, dir, 3);
+    }
+}
+
+TEST_CASE("stress: 1e5 x 3 and 3 x 1e5 strips", "[stress]") {
+  iotest::TempDir dir;
+  for (const bool wide : {true, false}) {
+    const int64_t w = wide ? 100000 : 3, h = wide ? 3 : 100000;
+    INFO(w << "x" << h);
+    Heightmap m = make_grid(w, h, SampleType::Int16);
+    for (int64_t i = 0; i < w * h; ++i) m.values[size_t(i)] = std::round(1000 * std::sin(1e-3 * double(i)) + double(i % 7));
+    const std::string src = dir.file("strip.raw");
+    write_raw(src, m);
+    lossless_and_max_error(src, dir, 2);
+  }
+}
+
+TEST_CASE("stress: a 20-level pyramid", "[stress]") {
+  iotest::TempDir dir;
+  // 2^19 + 1 columns halve (rounding up) to 2 after 19 steps, so 20 levels exist above 1x1.
+  const int64_t w = (int64_t(1) << 19) + 1;
+  Heightmap m = make_grid(w, 1, SampleType::Int16);
+  for (int64_t x = 0; x < w; ++x) m.values[size_t(x)] = std::round(2000 * std::sin(double(x) * 1e-4) + double(x % 13));
+  const std::string src = dir.file("deep.raw");
+  write_raw(src, m);
+  BuildFileOptions o = target(ErrorTarget::Lossless);
+  o.levels = 20;
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), o);
+  STRESS_CHECK_SANE(l);
+  CHECK(l.levels == 20);
+  CHECK(l.max_err == 0);
+  o = target(ErrorTarget::MaxError, 3);
+  o.levels = 20;
+  const Outcome e = build_and_measure(src, dir.file("e.pyr"), o);
+  STRESS_CHECK_SANE(e);
+  CHECK(e.levels == 20);
+  CHECK(e.max_err <= 3 + 1e-9);
+}
+
+TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
+  // Bound: each generation is the previous one's decode, rebuilt at the same max error E. Every
+  // generation stays within E of its own input; the sequence must settle (a fixed point: the last
+  // generations decode identically) instead of random-walking, and its rms against the original
+  // may grow by at most 25 % over the first generation's. Lossless generations are exact.
+  // (Measured: max |error| against the original settles at 10 m for E = 3 after 4 generations,
+  // because D is re-fitted on each generation's input; rms 2.03 -> 2.35 m.)
+  iotest::TempDir dir;
+  Heightmap m = make_grid(190, 170, SampleType::Int16);
+  std::mt19937 rng(5);
+  for (int64_t y = 0; y < 170; ++y)
+    for (int64_t x = 0; x < 190; ++x)
+      m.values[size_t(y * 190 + x)] = std::round(800 * std::sin(0.04 * double(x)) * std::cos(0.05 * double(y)) + double(rng() % 9));
+  const std::vector<double> original = m.values;
+  const double E = 3;
+  const int generations = 8;
+  double first_rms = 0;
+  int64_t last_changed = -1;
+  for (int gen = 0; gen < generations; ++gen) {
+    INFO("generation " << gen);
+    const std::string src = dir.file("gen.raw");
+    write_raw(src, m);
+    const Outcome o = build_and_measure(src, dir.file("g.pyr"), target(ErrorTarget::MaxError, E));
+    STRESS_CHECK_SANE(o);
+    CHECK(o.max_err <= E + 1e-9);
+    double sq = 0, worst = 0;
+    int64_t changed = 0;
+    for (size_t i = 0; i < original.size(); ++i) {
+      const double e = o.finest[i] - original[i];
+      sq += e * e;
+      worst = std::max(worst, std::abs(e));
+      changed += o.finest[i] != m.values[i];
+    }
+    const double rms = std::sqrt(sq / double(original.size()));
+    if (gen == 0) first_rms = rms;
+    CHECK(rms <= 1.25 * first_rms + 1e-9);
+    std::printf("stress drift: generation %d: rms vs original %.4f m, max %.1f m, %lld samples changed\n", gen, rms,
+                worst, (long long)changed);
+    last_changed = changed;
+    m.values = o.finest;  // decoded metres are whole numbers here (integer input, integer step)
+  }
+  CHECK(last_changed == 0);  // settled: the last rebuild reproduced its input exactly
+  for (int gen = 0; gen < 3; ++gen) {
+    const std::string src = dir.file("lgen.raw");
+    write_raw(src, m);
+    const Outcome o = build_and_measure(src, dir.file("lg.pyr"), target(ErrorTarget::Lossless));
+    CHECK(o.max_err == 0);
+    m.values = o.finest;
+  }
+}
+
+TEST_CASE("stress: output is identical for 1 and 2 build threads on a pathological grid", "[stress]") {
+  iotest::TempDir dir;
+  Heightmap m = make_grid(300, 280, SampleType::Int16);
+  for (int64_t i = 0; i < 300 * 280; ++i) m.values[size_t(i)] = (i % 3 == 0) ? 8000 : double(i % 101);
+  const std::string src = dir.file("t.raw");
+  write_raw(src, m);
+  BuildFileOptions a = target(ErrorTarget::MaxError, 2), b = a;
+  a.threads = 1;
+  b.threads = 2;
+  const Outcome oa = build_and_measure(src, dir.file("a.pyr"), a);
+  const Outcome ob = build_and_measure(src, dir.file("b.pyr"), b);
+  CHECK(oa.finest == ob.finest);
+  CHECK(oa.bits_per_sample == ob.bits_per_sample);
+}

@@ -1,0 +1,869 @@
+// terrain-bench: run time against error for this project's whole pyramid and for the peer codecs.
+//
+// For every DEM: (1) the project end to end: build_pyramid_file (the library form of pyramid-build)
+// at a sweep of rms / max-error targets and lossless, then the region decoder reconstructs the
+// finest level; bits/sample = whole pyramid file bytes / finest samples, errors against the input in
+// metres, build / full-decode / cold-region-decode speeds. (2) Every peer codec (and libcodec alone
+// as one level) on the same grid converted to int16 sample units (the file's own integers for SRTM;
+// the native quantum minus a mid-range offset for 16-bit data such as Puget Sound's 0.1 m units),
+// one thread, codec time only. Writes a CSV and, with --markdown, the generated BENCHMARKS.md.
+#include <peers.h>
+#include <pyramid/heightmap.h>
+#include <runtime/pyramid_build.h>
+#include <runtime/pyramid_file.h>
+#include <runtime/region_decoder.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <map>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+constexpr int kExitOk = 0, kExitUsage = 1, kExitNotFound = 2, kExitWriteFailed = 9, kExitInternal = 70;
+
+const char* const kUsage =
+    "usage: terrain-bench [options] [FILE...]\n"
+    "Run time against error. For each height grid: this project's whole pyramid (build_pyramid_file,\n"
+    "then the region decoder) at a sweep of rms and max-error targets and lossless; and the peer\n"
+    "codecs (OpenJPEG JPEG 2000, jxrlib JPEG XR, CharLS JPEG-LS, LERC, ZFP, zstd, and libcodec alone as\n"
+    "one level) over each codec's parameter sweep, one thread, codec time only.\n"
+    "Writes a markdown summary to stdout (or BENCHMARKS.md with --markdown).\n"
+    "FILE defaults to every .hgt and .png in the shared data directory ($TERRAIN_DATA_DIR,\n"
+    "../shared/data or /work/shared/data).\n"
+    "options:\n"
+    "  --csv PATH        also write one CSV row per (file, codec, setting)\n"
+    "  --markdown PATH   write the generated benchmark report (BENCHMARKS.md) to PATH\n"
+    "  --command TEXT    the command line quoted in the report as the way to reproduce it\n"
+    "  --provenance TEXT a line for the report: commit, machine, date\n"
+    "  --plot-dir DIR    where the report's plots (rms.png, max.png, speed.png) are, relative to it\n"
+    "  --json            print the rows as JSON to stdout instead of the markdown summary\n"
+    "  --peers a,b,...   only these peer codecs (see --list); 'none' for the pyramid only\n"
+    "  --no-pyramid      peers only (the former codec-bench)\n"
+    "  --threads N       pyramid build threads (default: all cores); decoding is single-threaded\n"
+    "  --work-dir DIR    where the pyramid files are built (default $TMPDIR or /tmp); removed after\n"
+    "  --quick           short sweeps and one repetition (smoke runs)\n"
+    "  --vertical-scale S metres per stored unit for every FILE (default: the file's own; the shared\n"
+    "                    Puget Sound PNG is known to be 0.1)\n"
+    "  --min-time S      repeat encode and decode until each totals S seconds, keep the best (default 0.2)\n"
+    "  --region-speed PYR  only time cold 256x256 region decodes of an existing pyramid file's\n"
+    "                    finest level (scale runs): 64 windows, one thread, prints Msamples/s\n"
+    "  --list            print each codec's exact configuration and exit\n"
+    "  --self-test       round-trip a synthetic 97x61 int16 grid through every setting of every codec,\n"
+    "                    checking the size and each declared error bound; exit 0 if all pass\n"
+    "  --help            this text\n"
+    "exit status: 0 success; 1 usage error; 2 input not found or unreadable; 3 truncated input;\n"
+    "  4 oversized input; 5 dimensions don't match; 6 unknown sample type or format; 7 NaN/Inf in input;\n"
+    "  8 missing or malformed header/sidecar field; 9 cannot write output; 10 corrupted data;\n"
+    "  70 internal error (a codec failed, a bound was exceeded, or a self-test check failed).\n";
+
+struct Options {
+  std::string csv_path, markdown_path, command, provenance, work_dir, plot_dir = ".", region_speed;
+  bool json = false;
+  bool quick = false;
+  bool list = false;
+  bool self_test = false;
+  bool pyramid = true;
+  int threads = 0;
+  double min_time = 0.2;
+  std::optional<double> vertical_scale;
+  std::vector<std::string> peer_names;
+  std::vector<std::string> files;
+};
+
+struct UsageError {
+  std::string message;
+};
+
+std::vector<std::string> split_commas(const std::string& text) {
+  std::vector<std::string> parts;
+  std::stringstream ss(text);
+  std::string part;
+  while (std::getline(ss, part, ','))
+    if (!part.empty()) parts.push_back(part);
+  return parts;
+}
+
+double parse_number(const std::string& option, const std::string& v, double lo, double hi) {
+  char* end = nullptr;
+  const double x = std::strtod(v.c_str(), &end);
+  if (end == v.c_str() || *end || !(x >= lo && x <= hi))
+    throw UsageError{option + " must be a number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" + v + "'"};
+  return x;
+}
+
+Options parse_args(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw UsageError{a + " needs a value"};
+      return argv[++i];
+    };
+    if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(kExitOk);
+    } else if (a == "--csv") {
+      o.csv_path = value();
+    } else if (a == "--markdown") {
+      o.markdown_path = value();
+    } else if (a == "--command") {
+      o.command = value();
+    } else if (a == "--provenance") {
+      o.provenance = value();
+    } else if (a == "--region-speed") {
+      o.region_speed = value();
+    } else if (a == "--plot-dir") {
+      o.plot_dir = value();
+    } else if (a == "--work-dir") {
+      o.work_dir = value();
+    } else if (a == "--json") {
+      o.json = true;
+    } else if (a == "--quick") {
+      o.quick = true;
+    } else if (a == "--no-pyramid") {
+      o.pyramid = false;
+    } else if (a == "--list") {
+      o.list = true;
+    } else if (a == "--self-test") {
+      o.self_test = true;
+    } else if (a == "--peers") {
+      o.peer_names = split_commas(value());
+    } else if (a == "--threads") {
+      o.threads = int(parse_number("--threads", value(), 1, 256));
+    } else if (a == "--min-time") {
+      o.min_time = parse_number("--min-time", value(), 0, 60);
+    } else if (a == "--vertical-scale") {
+      const std::string v = value();
+      const double scale = parse_number("--vertical-scale", v, 1e-12, 1e12);
+      o.vertical_scale = scale;
+    } else if (a.size() > 1 && a[0] == '-') {
+      throw UsageError{"unknown option " + a};
+    } else {
+      o.files.push_back(a);
+    }
+  }
+  if (o.quick) o.min_time = 0;
+  if (o.work_dir.empty()) {
+    const char* tmp = std::getenv("TMPDIR");
+    o.work_dir = tmp && *tmp ? tmp : "/tmp";
+  }
+  return o;
+}
+
+std::vector<std::string> default_files() {
+  std::vector<std::string> dirs;
+  if (const char* env = std::getenv("TERRAIN_DATA_DIR")) dirs.push_back(env);
+  dirs.push_back("../shared/data");
+  dirs.push_back("/work/shared/data");
+  for (const std::string& dir : dirs) {
+    std::error_code ec;
+    if (!std::filesystem::is_directory(dir, ec)) continue;
+    std::vector<std::string> files;
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+      const std::string ext = entry.path().extension().string();
+      if (ext == ".hgt" || ext == ".png") files.push_back(entry.path().string());
+    }
+    std::sort(files.begin(), files.end());
+    if (!files.empty()) return files;
+  }
+  return {};
+}
+
+// The grid in int16 units: round(metres / unit) - offset. unit is the native quantum (x 2^k only if
+// the range exceeds 65535 quanta); offset is 0 when the values fit int16 as they are (SRTM: the file's
+// own integers), else the mid-range, so 16-bit data such as Puget Sound keeps its 0.1 m quantum.
+peers::Image16 to_image16(const terrain::Heightmap& map, std::string* note) {
+  peers::Image16 img;
+  img.width = map.width();
+  img.height = map.height();
+  img.valid = map.valid;
+  const double quantum = map.info.integer_valued() ? map.info.vertical_scale : 0.1;
+  double lo = 0, hi = 0;
+  bool first = true;
+  for (size_t i = 0; i < map.values.size(); ++i) {
+    if (!map.valid.empty() && !map.valid[i]) continue;
+    const double m = map.values[i] * map.info.vertical_scale + map.info.vertical_offset;
+    lo = first ? m : std::min(lo, m);
+    hi = first ? m : std::max(hi, m);
+    first = false;
+  }
+  int k = 0;
+  while (std::round(hi / (quantum * std::ldexp(1.0, k))) - std::round(lo / (quantum * std::ldexp(1.0, k))) > 65535) ++k;
+  img.unit_m = quantum * std::ldexp(1.0, k);
+  const double lo_u = std::round(lo / img.unit_m), hi_u = std::round(hi / img.unit_m);
+  const double offset = (lo_u >= -32768 && hi_u <= 32767) ? 0.0 : std::floor((lo_u + hi_u) / 2);
+  img.samples.resize(map.values.size());
+  for (size_t i = 0; i < map.values.size(); ++i) {
+    const bool valid = map.valid.empty() || map.valid[i];
+    const double m = valid ? map.values[i] * map.info.vertical_scale + map.info.vertical_offset : 0.0;
+    img.samples[i] = int16_t(std::clamp(std::round(m / img.unit_m) - offset, -32768.0, 32767.0));
+  }
+  std::ostringstream os;
+  os << "unit " << img.unit_m << " m";
+  if (k > 0) os << " (native " << quantum << " m quantum x" << (1 << k) << " to fit 16 bits)";
+  if (offset != 0) os << ", offset " << offset << " units to fit int16";
+  if (!map.valid.empty()) {
+    const auto voids = std::count(map.valid.begin(), map.valid.end(), uint8_t(0));
+    if (voids > 0) os << ", " << voids << " voids coded as 0 m and excluded from the errors";
+  }
+  *note = os.str();
+  return img;
+}
+
+// Vertical scales the shared data's MANIFEST.md states but the files do not carry.
+std::optional<double> known_vertical_scale(const std::string& path) {
+  const std::string name = std::filesystem::path(path).filename().string();
+  if (name == "pugetsound_ps_height_1k.png") return 0.1;
+  return std::nullopt;
+}
+
+struct Row {
+  std::string file, codec, setting;
+  std::string target_kind;     // pyramid rows: "lossless", "rms", "max"; peers: ""
+  double target_m = 0;
+  double unit_m = 1;
+  int64_t width = 0, height = 0;
+  peers::Result result;
+  double bound = -1;           // declared max error in sample units (peers) or metres / unit_m (pyramid)
+  // Pyramid rows only: cold region decodes (fresh cache per window) and the build's thread count.
+  double region_seconds = 0, region_cpu_seconds = 0;
+  int64_t region_samples = 0;
+  int threads = 1;
+  std::string error;  // non-empty when the codec failed or broke its bound
+};
+
+constexpr const char* kPyramid = "pyramid";
+
+std::string short_name(const std::string& path) { return std::filesystem::path(path).stem().string(); }
+
+double msps(double samples, double seconds) { return seconds > 0 ? samples / seconds / 1e6 : 0.0; }
+
+void write_csv_header(std::ostream& os) {
+  os << "file,codec,setting,target_kind,target_m,unit_m,width,height,bytes,bits_per_sample,rms_m,max_abs_m,"
+        "p999_abs_m,psnr_db,encode_s,decode_s,encode_cpu_s,decode_cpu_s,encode_msamples_s,decode_msamples_s,"
+        "encode_cpu_msamples_s,decode_cpu_msamples_s,region_msamples_s,region_cpu_msamples_s,encode_reps,"
+        "decode_reps,threads,declared_bound_m,error\n";
+}
+
+void write_csv_row(std::ostream& os, const Row& r) {
+  const double n = double(r.width * r.height);
+  const peers::Result& x = r.result;
+  char buf[800];
+  std::snprintf(buf, sizeof buf,
+                "%zu,%.5f,%.5f,%.4f,%.4f,%.3f,%.6f,%.6f,%.6f,%.6f,%.2f,%.2f,%.2f,%.2f,%.2f,%.2f,%d,%d,%d,%.4g", x.bytes,
+                x.bits_per_sample, x.error.rms * r.unit_m, x.error.max_abs * r.unit_m, x.error.p999_abs * r.unit_m,
+                x.error.psnr_db, x.encode_seconds, x.decode_seconds,
+                x.encode_cpu_seconds, x.decode_cpu_seconds, msps(n, x.encode_seconds), msps(n, x.decode_seconds),
+                msps(n, x.encode_cpu_seconds), msps(n, x.decode_cpu_seconds),
+                msps(double(r.region_samples), r.region_seconds), msps(double(r.region_samples), r.region_cpu_seconds),
+                x.encode_reps, x.decode_reps, r.threads, r.bound < 0 ? -1.0 : r.bound * r.unit_m);
+  os << r.file << ',' << r.codec << ",\"" << r.setting << "\"," << r.target_kind << ',' << r.target_m << ','
+     << r.unit_m << ',' << r.width << ',' << r.height << ',' << buf << ",\"" << r.error << "\"\n";
+}
+
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (static_cast<unsigned char>(c) < 0x20) continue;
+    out += c;
+  }
+  return out + "\"";
+}
+
+void write_json(std::ostream& os, const std::vector<Row>& rows) {
+  os << "[\n";
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const Row& r = rows[i];
+    const peers::Result& x = r.result;
+    const double psnr = std::isfinite(x.error.psnr_db) ? x.error.psnr_db : -1;
+    const double n = double(r.width * r.height);
+    os << "  {\"file\": " << json_string(r.file) << ", \"codec\": " << json_string(r.codec)
+       << ", \"setting\": " << json_string(r.setting) << ", \"unit_m\": " << r.unit_m
+       << ", \"width\": " << r.width << ", \"height\": " << r.height << ", \"bytes\": " << x.bytes
+       << ", \"bits_per_sample\": " << x.bits_per_sample << ", \"rms_m\": " << x.error.rms * r.unit_m
+       << ", \"max_abs_m\": " << x.error.max_abs * r.unit_m << ", \"p999_abs_m\": " << x.error.p999_abs * r.unit_m
+       << ", \"psnr_db\": " << psnr << ", \"encode_s\": " << x.encode_seconds
+       << ", \"decode_s\": " << x.decode_seconds << ", \"encode_cpu_s\": " << x.encode_cpu_seconds
+       << ", \"decode_cpu_s\": " << x.decode_cpu_seconds
+       << ", \"region_cpu_msamples_s\": " << msps(double(r.region_samples), r.region_cpu_seconds)
+       << ", \"encode_cpu_msamples_s\": " << msps(n, x.encode_cpu_seconds)
+       << ", \"error\": " << json_string(r.error) << "}" << (i + 1 < rows.size() ? ",\n" : "\n");
+  }
+  os << "]\n";
+}
+
+std::string fmt(const char* format, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+std::string cell(double bits) { return bits < 0 ? "—" : fmt("%.2f", bits); }
+
+double median(std::vector<double> v) {
+  if (v.empty()) return -1;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+double geomean(const std::vector<double>& v) {
+  double s = 0;
+  int n = 0;
+  for (double x : v)
+    if (x > 0) s += std::log(x), ++n;
+  return n ? std::exp(s / n) : -1;
+}
+
+// The rate/speed figures of one (file, codec) over its sweep.
+struct Curve {
+  std::vector<peers::RatePoint> by_rms, by_max;
+  double lossless = -1;
+  std::vector<double> encode_msps, decode_msps, region_msps;  // CPU-time based, one figure per sweep point
+  std::vector<double> build_msps, build_cpu_msps;             // pyramid: wall clock / CPU time, end to end
+  bool any = false;
+};
+
+Curve curve_of(const std::vector<Row>& rows, const std::string& file, const std::string& codec) {
+  Curve c;
+  for (const Row& r : rows) {
+    if (r.file != file || r.codec != codec || !r.error.empty()) continue;
+    c.any = true;
+    const peers::Result& x = r.result;
+    c.by_rms.push_back({x.error.rms * r.unit_m, x.bits_per_sample});
+    c.by_max.push_back({x.error.max_abs * r.unit_m, x.bits_per_sample});
+    const double n = double(r.width * r.height);
+    if (x.error.max_abs == 0) {
+      if (c.lossless < 0 || x.bits_per_sample < c.lossless) c.lossless = x.bits_per_sample;
+    }
+    if (x.encode_cpu_seconds > 0) c.encode_msps.push_back(msps(n, x.encode_cpu_seconds));
+    if (x.decode_cpu_seconds > 0) c.decode_msps.push_back(msps(n, x.decode_cpu_seconds));
+    if (r.region_cpu_seconds > 0) c.region_msps.push_back(msps(double(r.region_samples), r.region_cpu_seconds));
+    if (codec == kPyramid && x.encode_seconds > 0) c.build_msps.push_back(msps(n, x.encode_seconds));
+    if (codec == kPyramid && x.encode_cpu_seconds > 0) c.build_cpu_msps.push_back(msps(n, x.encode_cpu_seconds));
+  }
+  return c;
+}
+
+std::string speed_range(const std::vector<double>& v) {
+  if (v.empty()) return "—";
+  const auto [lo, hi] = std::minmax_element(v.begin(), v.end());
+  if (*hi < 1.05 * *lo) return fmt("%.3g", *lo);
+  return fmt("%.3g", *lo) + "–" + fmt("%.3g", *hi);
+}
+
+const double kRmsTargets[] = {0.5, 1, 2, 4};
+const double kMaxTargets[] = {1, 2, 5};
+
+// Markdown summary: one row per (file, codec) with interpolated rates and the speed range.
+void write_summary(std::ostream& os, const std::vector<Row>& rows, const std::vector<std::string>& file_order,
+                   const std::vector<std::string>& codec_order) {
+  os << "| DEM | codec | lossless | @rms 0.5 m | @rms 1 m | @rms 2 m | @rms 4 m | @max 1 m | @max 2 m | @max 5 m "
+        "| encode Ms/s (CPU) | decode Ms/s (CPU) |\n";
+  os << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const std::string& file : file_order) {
+    for (const std::string& codec : codec_order) {
+      const Curve c = curve_of(rows, file, codec);
+      if (!c.any) continue;
+      os << "| " << file << " | " << codec << " | " << cell(c.lossless);
+      for (double t : kRmsTargets) os << " | " << cell(peers::bits_at_error(c.by_rms, t));
+      for (double t : kMaxTargets) os << " | " << cell(peers::bits_at_error(c.by_max, t));
+      os << " | " << speed_range(c.encode_msps) << " | " << speed_range(c.decode_msps) << " |\n";
+    }
+  }
+  os << "\nBits/sample; '—' = the sweep does not reach that error. Ms/s = million samples per second of "
+        "process CPU time, one thread, best of N repetitions, range over the sweep (wall-clock figures: "
+        "CSV). The pyramid row's encode figure is the whole build (CPU time of all build threads).\n";
+}
+
+bool is_external_peer(const std::string& codec) { return codec != kPyramid && codec != "libcodec"; }
+
+// The generated BENCHMARKS.md: the pyramid against the best peer at each error point, the issue's
+// goals, lossless rates and speeds. Everything comes from `rows`; nothing is typed in by hand.
+void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vector<std::string>& file_order,
+                  const std::vector<std::string>& codec_order, const Options& opt,
+                  const std::vector<std::string>& peer_configs) {
+  os << "# Benchmarks: run time against error\n\n"
+     << "This file is generated by `scripts/bench` (program `tools/terrain-bench.cpp`); do not edit it by hand.\n\n";
+  if (!opt.provenance.empty()) os << opt.provenance << "\n\n";
+  os << "Reproduce:\n\n```\n" << (opt.command.empty() ? "scripts/bench" : opt.command) << "\n```\n\n";
+  os << "## Method\n\n"
+     << "* **pyramid** = this project end to end: `build_pyramid_file` (what `pyramid-build` runs: streamed "
+        "read, optimal D filter, closed-loop residuals, libcodec, container) at each `--rms` / `--max-error` "
+        "target and `--lossless`, "
+     << (opt.threads ? std::to_string(opt.threads) + " build thread(s)" : std::string("all cores for the build"))
+     << "; then `RegionDecoder` reconstructs the finest level (one thread). "
+        "**bits/sample = whole pyramid file bytes × 8 / finest-level samples** (all levels, container, "
+        "band tables, mask and metadata included). Errors are measured on the finest level against the "
+        "input in metres, over valid samples.\n"
+     << "* **Peers**: each codec on the same grid in int16 sample units, one thread, codec time only (no "
+        "file I/O), best of N repetitions. `libcodec` is our residual coder alone on the single finest "
+        "level (no pyramid); it is not counted as a peer.\n"
+     << "* Bits/sample at a target error is interpolated on each codec's lower envelope of (error, "
+        "bits/sample) points, linear in log(bits) against log(error); '—' = the sweep does not reach "
+        "that error. The rms columns use every point of a codec's sweep (any mode), the max-error "
+        "columns the measured max |error|.\n"
+     << "* Speeds are million finest samples per second of process CPU time (the machine is shared); "
+        "build speed is the whole `build_pyramid_file` call, file read to file renamed (rms targets include "
+        "the step calibration), as wall clock and per CPU-second of all build threads. Region decode = 256×256 windows of the "
+        "finest level at scattered positions, each with an empty cache (cold).\n\n";
+
+  // Table 1: pyramid vs best peer.
+  os << "## Bits/sample of the pyramid and ratio to the best peer\n\n"
+     << "Cell: pyramid bits/sample (ratio to the best peer at that error, and which peer). Ratio < 1 means "
+        "the pyramid is smaller.\n\n";
+  os << "| DEM | lossless | rms 0.5 m | rms 1 m | rms 2 m | rms 4 m | max 1 m | max 2 m | max 5 m |\n"
+     << "|---|---|---|---|---|---|---|---|---|\n";
+  std::map<std::string, std::vector<double>> ratios;  // column -> ratio per DEM, for the geometric mean
+  for (const std::string& file : file_order) {
+    const Curve ours = curve_of(rows, file, kPyramid);
+    if (!ours.any) continue;
+    std::vector<Curve> peer_curves;
+    std::vector<std::string> peer_names;
+    for (const std::string& codec : codec_order)
+      if (is_external_peer(codec)) {
+        Curve c = curve_of(rows, file, codec);
+        if (c.any) peer_curves.push_back(std::move(c)), peer_names.push_back(codec);
+      }
+    auto entry = [&](const std::string& column, double mine, auto peer_bits) {
+      double best = -1;
+      std::string best_name;
+      for (size_t i = 0; i < peer_curves.size(); ++i) {
+        const double b = peer_bits(peer_curves[i]);
+        if (b > 0 && (best < 0 || b < best)) best = b, best_name = peer_names[i];
+      }
+      if (mine < 0) return std::string("—");
+      if (best < 0) return cell(mine);
+      ratios[column].push_back(mine / best);
+      return cell(mine) + " (" + fmt("%.2f", mine / best) + " " + best_name + ")";
+    };
+    os << "| " << file << " | " << entry("lossless", ours.lossless, [](const Curve& c) { return c.lossless; });
+    for (double t : kRmsTargets)
+      os << " | " << entry("rms" + fmt("%g", t), peers::bits_at_error(ours.by_rms, t),
+                           [t](const Curve& c) { return peers::bits_at_error(c.by_rms, t); });
+    for (double t : kMaxTargets)
+      os << " | " << entry("max" + fmt("%g", t), peers::bits_at_error(ours.by_max, t),
+                           [t](const Curve& c) { return peers::bits_at_error(c.by_max, t); });
+    os << " |\n";
+  }
+  os << "| **geometric mean of the ratios** | " << cell(geomean(ratios["lossless"]));
+  for (double t : kRmsTargets) os << " | " << cell(geomean(ratios["rms" + fmt("%g", t)]));
+  for (double t : kMaxTargets) os << " | " << cell(geomean(ratios["max" + fmt("%g", t)]));
+  os << " |\n\n";
+
+  // Table 2: the issue's goals.
+  os << "## Goals (issue 7)\n\n"
+     << "Goals: bits/sample ≤ 0.9 × JPEG 2000 (openjpeg) at rms 1 and 2 m; ≤ 0.9 × JPEG-LS (charls) at max "
+        "error 2 and 5 m; full decode ≥ 2 × OpenJPEG's Ms/s; build ≥ 30 Ms/s (scale run, reported "
+        "separately). Decode speeds: median over the lossy sweep points.\n\n"
+     << "| DEM | ÷J2K @rms 1 | ÷J2K @rms 2 | ÷JPEG-LS @max 2 | ÷JPEG-LS @max 5 | pyramid full decode Ms/s "
+        "| region decode Ms/s | OpenJPEG decode Ms/s | decode ratio | build Ms/s (wall) | build Ms/CPU-s |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::vector<double> g[5];
+  for (const std::string& file : file_order) {
+    const Curve ours = curve_of(rows, file, kPyramid);
+    if (!ours.any) continue;
+    const Curve j2k = curve_of(rows, file, "openjpeg"), jls = curve_of(rows, file, "charls");
+    auto ratio = [](double a, double b) { return a > 0 && b > 0 ? a / b : -1.0; };
+    const double r[4] = {ratio(peers::bits_at_error(ours.by_rms, 1), peers::bits_at_error(j2k.by_rms, 1)),
+                         ratio(peers::bits_at_error(ours.by_rms, 2), peers::bits_at_error(j2k.by_rms, 2)),
+                         ratio(peers::bits_at_error(ours.by_max, 2), peers::bits_at_error(jls.by_max, 2)),
+                         ratio(peers::bits_at_error(ours.by_max, 5), peers::bits_at_error(jls.by_max, 5))};
+    os << "| " << file;
+    for (int i = 0; i < 4; ++i) {
+      os << " | " << (r[i] < 0 ? "—" : fmt("%.2f", r[i]) + (r[i] <= 0.9 ? " ✓" : " ✗"));
+      g[i].push_back(r[i]);
+    }
+    const double dec = median(ours.decode_msps), reg = median(ours.region_msps), oj = median(j2k.decode_msps);
+    const double dr = ratio(dec, oj);
+    g[4].push_back(dr);
+    os << " | " << (dec < 0 ? "—" : fmt("%.1f", dec)) << " | " << (reg < 0 ? "—" : fmt("%.1f", reg)) << " | "
+       << (oj < 0 ? "—" : fmt("%.1f", oj)) << " | " << (dr < 0 ? "—" : fmt("%.2f", dr) + (dr >= 2 ? " ✓" : " ✗"))
+       << " | " << speed_range(ours.build_msps) << " | " << speed_range(ours.build_cpu_msps) << " |\n";
+  }
+  os << "| **geometric mean** | " << cell(geomean(g[0])) << " | " << cell(geomean(g[1])) << " | "
+     << cell(geomean(g[2])) << " | " << cell(geomean(g[3])) << " | | | | " << cell(geomean(g[4])) << " | | |\n\n";
+
+  // Table 3: every codec, every point.
+  os << "## All codecs\n\n";
+  write_summary(os, rows, file_order, codec_order);
+  os << "\n## Plots\n\n"
+     << "![bits/sample against rms](" << opt.plot_dir << "/rms.png)\n\n![bits/sample against max error]("
+     << opt.plot_dir << "/max.png)\n\n![decode speed against bits/sample](" << opt.plot_dir << "/speed.png)\n\n"
+     << "Data: [" << opt.plot_dir << "/bench.csv](" << opt.plot_dir << "/bench.csv).\n\n";
+  os << "## Codec configurations\n\n";
+  for (const std::string& c : peer_configs) os << "* " << c << "\n";
+  os << "* pyramid: `build_pyramid_file` defaults (automatic levels, default tile size), targets as in "
+        "the CSV's `setting` column.\n";
+}
+
+std::vector<std::unique_ptr<peers::Peer>> select_peers(const std::vector<std::string>& names) {
+  auto all = peers::all_peers();
+  if (names.empty()) return all;
+  std::vector<std::unique_ptr<peers::Peer>> chosen;
+  for (const std::string& name : names) {
+    if (name == "none") continue;
+    auto it = std::find_if(all.begin(), all.end(), [&](const auto& p) { return p && p->name() == name; });
+    if (it == all.end()) throw UsageError{"unknown codec '" + name + "' (see --list)"};
+    chosen.push_back(std::move(*it));
+  }
+  return chosen;
+}
+
+// Smooth relief, a negative basin and deterministic noise, so transforms, predictors and signed
+// handling are all exercised.
+peers::Image16 synthetic_image() {
+  peers::Image16 img;
+  img.width = 97;
+  img.height = 61;
+  img.samples.resize(size_t(img.width * img.height));
+  uint32_t state = 12345;
+  for (int64_t y = 0; y < img.height; ++y)
+    for (int64_t x = 0; x < img.width; ++x) {
+      state = state * 1664525u + 1013904223u;
+      const double noise = double(state >> 24) / 255.0 * 40.0 - 20.0;
+      double h = 1200 + 800 * std::sin(double(x) / 9.0) * std::cos(double(y) / 7.0) + 6.0 * double(x) + noise;
+      if ((x - 20) * (x - 20) + (y - 40) * (y - 40) < 100) h = -300 + noise;
+      img.samples[size_t(y * img.width + x)] = int16_t(std::lround(h));
+    }
+  return img;
+}
+
+int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
+  const peers::Image16 img = synthetic_image();
+  const auto [lo, hi] = std::minmax_element(img.samples.begin(), img.samples.end());
+  const double range = double(*hi) - double(*lo);
+  int failures = 0;
+  for (auto& peer : peer_list) {
+    bool has_lossless = false;
+    for (const peers::Setting& s : peer->sweep(false, 1.0)) {
+      std::string verdict = "ok";
+      try {
+        const peers::Result r = peers::measure(*peer, img, s, 0, 1);
+        if (r.bytes == 0) verdict = "FAIL: empty stream";
+        else if (s.max_error_bound >= 0 && r.error.max_abs > s.max_error_bound) verdict = "FAIL: max error above bound";
+        else if (s.max_error_bound < 0 && !(r.error.rms <= 0.25 * range)) verdict = "FAIL: rms above a quarter of the range";
+        if (s.max_error_bound == 0 && r.error.max_abs == 0) has_lossless = true;
+        std::printf("%-9s %-20s bytes %6zu  max|err| %7.1f  rms %7.2f  bound %5s  %s\n", peer->name().c_str(),
+                    s.label.c_str(), r.bytes, r.error.max_abs, r.error.rms,
+                    s.max_error_bound < 0 ? "none" : std::to_string(int(s.max_error_bound)).c_str(), verdict.c_str());
+      } catch (const std::exception& e) {
+        verdict = std::string("FAIL: ") + e.what();
+        std::printf("%-9s %-20s %s\n", peer->name().c_str(), s.label.c_str(), verdict.c_str());
+      }
+      if (verdict != "ok") ++failures;
+    }
+    if (peer->lossless_capable() && !has_lossless) {
+      std::printf("%-9s FAIL: claims lossless capability but no setting round-tripped exactly\n", peer->name().c_str());
+      ++failures;
+    }
+  }
+  std::printf("self-test: %s (%d failure%s)\n", failures ? "FAILED" : "passed", failures, failures == 1 ? "" : "s");
+  return failures ? kExitInternal : kExitOk;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The pyramid end to end.
+
+struct PyramidTarget {
+  terrain::runtime::ErrorTarget target;
+  double metres;
+};
+
+std::vector<PyramidTarget> pyramid_sweep(bool quick) {
+  using terrain::runtime::ErrorTarget;
+  std::vector<PyramidTarget> t{{ErrorTarget::Lossless, 0}};
+  const std::vector<double> rms = quick ? std::vector<double>{0.5, 1, 2, 4}
+                                        : std::vector<double>{0.25, 0.35, 0.5, 0.7, 1, 1.4, 2, 2.8, 4, 5.7, 8};
+  const std::vector<double> max = quick ? std::vector<double>{1, 2, 5}
+                                        : std::vector<double>{0.5, 0.7, 1, 1.4, 2, 3, 5, 8, 11, 16};
+  for (double m : rms) t.push_back({ErrorTarget::Rms, m});
+  for (double m : max) t.push_back({ErrorTarget::MaxError, m});
+  return t;
+}
+
+struct RegionTiming {
+  double seconds = 0, cpu_seconds = 0;
+  int64_t samples = 0;
+  bool mismatch = false;
+};
+
+// Cold region decodes: `windows` 256x256 windows (clipped to the level) at scattered, deterministic
+// positions, each decoded with an empty cache. When `whole` (the level decoded whole) is given, each
+// window must equal the same samples of it.
+RegionTiming time_cold_windows(terrain::runtime::RegionDecoder& decoder, int level, terrain::GridSize size,
+                               int windows, const int32_t* whole) {
+  RegionTiming t;
+  const int64_t side_x = std::min<int64_t>(256, size.width), side_y = std::min<int64_t>(256, size.height);
+  std::vector<int32_t> window(size_t(side_x * side_y));
+  uint64_t state = 0x9E3779B97F4A7C15ull;
+  for (int i = 0; i < windows; ++i) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    const int64_t x0 = int64_t((state >> 33) % uint64_t(size.width - side_x + 1));
+    const int64_t y0 = int64_t((state >> 13) % uint64_t(size.height - side_y + 1));
+    decoder.clear_cache();
+    const double c0 = peers::process_cpu_seconds();
+    const auto t0 = std::chrono::steady_clock::now();
+    decoder.decode_units(level, {x0, y0, side_x, side_y}, window.data(), side_x);
+    t.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    t.cpu_seconds += peers::process_cpu_seconds() - c0;
+    t.samples += side_x * side_y;
+    for (int64_t y = 0; whole && y < side_y; ++y)
+      if (std::memcmp(&window[size_t(y * side_x)], &whole[size_t((y0 + y) * size.width + x0)], size_t(side_x) * 4) != 0)
+        t.mismatch = true;
+  }
+  return t;
+}
+
+// Builds one pyramid file at `target`, decodes its finest level whole (timed, best of N, cold cache
+// each time) and in cold 256x256 windows, and measures the error against `reference` (metres).
+Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_options, const std::string& file,
+                    const terrain::Heightmap& map, const std::vector<double>& reference,
+                    const PyramidTarget& target, const Options& opt) {
+  using namespace terrain::runtime;
+  Row row;
+  row.file = file;
+  row.codec = kPyramid;
+  row.width = map.width();
+  row.height = map.height();
+  row.unit_m = 1;  // pyramid rows are measured in metres directly
+  row.target_m = target.metres;
+  row.target_kind = target.target == ErrorTarget::Lossless ? "lossless" : target.target == ErrorTarget::Rms ? "rms" : "max";
+  row.setting = target.target == ErrorTarget::Lossless ? "lossless" : row.target_kind + "=" + fmt("%g", target.metres) + " m";
+  row.bound = target.target == ErrorTarget::Lossless ? 0 : target.target == ErrorTarget::MaxError ? target.metres : -1;
+  row.threads = opt.threads ? opt.threads : int(std::max(1L, sysconf(_SC_NPROCESSORS_ONLN)));
+  const std::string output = opt.work_dir + "/terrain-bench-" + std::to_string(getpid()) + "-" + file + ".pyr";
+  struct Remove {
+    std::string p;
+    ~Remove() {
+      std::error_code ec;
+      std::filesystem::remove(p, ec);
+    }
+  } remove_output{output};
+
+  BuildFileOptions bo;
+  bo.target = target.target;
+  bo.target_metres = target.metres;
+  bo.threads = opt.threads;
+  bo.temp_dir = opt.work_dir;
+  peers::Result& x = row.result;
+  BuildFileResult built;
+  try {
+    const double c0 = peers::process_cpu_seconds();
+    const auto t0 = std::chrono::steady_clock::now();
+    built = build_pyramid_file(path, read_options, output, bo);
+    x.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    x.encode_cpu_seconds = peers::process_cpu_seconds() - c0;
+    x.encode_reps = 1;
+  } catch (const std::invalid_argument& e) {
+    row.error = std::string("n/a: ") + e.what();  // a target the input cannot honour (e.g. below its quantum)
+    return row;
+  }
+  row.setting += " (step " + fmt("%g", built.step_units) + " u, " + std::to_string(built.build.levels.size()) + " levels)";
+  x.bytes = size_t(std::filesystem::file_size(output));
+  const double n = double(map.width() * map.height());
+  x.bits_per_sample = 8.0 * double(x.bytes) / n;
+
+  auto pyramid = PyramidFile::open(output);
+  RegionDecoder decoder(pyramid);
+  const int finest = pyramid->level_count() - 1;
+  const terrain::Rect whole{0, 0, map.width(), map.height()};
+  std::vector<int32_t> units(size_t(map.width() * map.height()));
+  x.decode_seconds = peers::best_time(
+      [&] {
+        decoder.clear_cache();
+        decoder.decode_units(finest, whole, units.data(), map.width());
+      },
+      opt.min_time, 20, &x.decode_reps, &x.decode_cpu_seconds);
+  std::vector<double> decoded(units.size());
+  const double scale = decoder.metres_per_unit(), offset = decoder.metres_offset();
+  for (size_t i = 0; i < units.size(); ++i) decoded[i] = double(units[i]) * scale + offset;
+  x.error = peers::error_stats(reference.data(), decoded.data(), map.valid.empty() ? nullptr : map.valid.data(),
+                               units.size());
+  if (row.bound >= 0 && x.error.max_abs > row.bound * (1 + 1e-9))
+    row.error = "max error " + fmt("%g", x.error.max_abs) + " m exceeds the requested bound " + fmt("%g", row.bound) + " m";
+
+  const RegionTiming t = time_cold_windows(decoder, finest, {map.width(), map.height()}, opt.quick ? 8 : 32, units.data());
+  row.region_seconds = t.seconds;
+  row.region_cpu_seconds = t.cpu_seconds;
+  row.region_samples = t.samples;
+  if (t.mismatch) row.error = "region decode differs from the whole-level decode";
+  return row;
+}
+
+// Writes `text` to path through a temporary name.
+bool write_file_atomically(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp." + std::to_string(getpid());
+  {
+    std::ofstream f(tmp);
+    f << text;
+    f.close();
+    if (!f) return false;
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  return !ec;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  std::vector<std::unique_ptr<peers::Peer>> peer_list;
+  try {
+    opt = parse_args(argc, argv);
+    peer_list = select_peers(opt.peer_names);
+  } catch (const UsageError& e) {
+    std::fprintf(stderr, "terrain-bench: %s\n%s", e.message.c_str(), kUsage);
+    return kExitUsage;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "terrain-bench: %s\n", e.what());
+    return kExitInternal;
+  }
+
+  if (opt.list) {
+    for (const auto& p : peer_list) std::printf("%s: %s\n", p->name().c_str(), p->configuration().c_str());
+    return kExitOk;
+  }
+  if (opt.self_test) return run_self_test(peer_list);
+  if (!opt.region_speed.empty()) {
+    try {
+      auto file = terrain::runtime::PyramidFile::open(opt.region_speed);
+      terrain::runtime::RegionDecoder decoder(file);
+      const int finest = file->level_count() - 1;
+      const RegionTiming t = time_cold_windows(decoder, finest, file->level_size(finest), 64, nullptr);
+      std::printf("%s: %d levels, finest %lldx%lld; 64 cold 256x256 windows: %.1f Msamples/s wall, %.1f Msamples/s CPU\n",
+                  opt.region_speed.c_str(), file->level_count(), (long long)file->level_size(finest).width,
+                  (long long)file->level_size(finest).height, msps(double(t.samples), t.seconds),
+                  msps(double(t.samples), t.cpu_seconds));
+      return kExitOk;
+    } catch (const terrain::runtime::FormatError& e) {
+      std::fprintf(stderr, "terrain-bench: %s\n", e.what());
+      return terrain::runtime::exit_code(e.code());
+    }
+  }
+
+  if (opt.files.empty()) opt.files = default_files();
+  if (opt.files.empty()) {
+    std::fprintf(stderr, "terrain-bench: no input files given and no shared data directory found\n");
+    return kExitNotFound;
+  }
+
+  std::ofstream csv;
+  const std::string csv_tmp = opt.csv_path + ".tmp." + std::to_string(getpid());
+  if (!opt.csv_path.empty()) {
+    csv.open(csv_tmp);
+    if (!csv) {
+      std::fprintf(stderr, "terrain-bench: cannot write %s\n", csv_tmp.c_str());
+      return kExitWriteFailed;
+    }
+    write_csv_header(csv);
+  }
+
+  std::vector<Row> rows;
+  std::vector<std::string> file_order, codec_order, peer_configs;
+  if (opt.pyramid) codec_order.push_back(kPyramid);
+  for (const auto& p : peer_list) {
+    codec_order.push_back(p->name());
+    peer_configs.push_back(p->name() + ": " + p->configuration());
+  }
+  bool codec_failed = false;
+  auto add_row = [&](Row&& row) {
+    if (!row.error.empty() && row.error.rfind("n/a:", 0) != 0) {
+      codec_failed = true;
+      std::fprintf(stderr, "terrain-bench: %s %s %s: %s\n", row.file.c_str(), row.codec.c_str(), row.setting.c_str(),
+                   row.error.c_str());
+    }
+    if (csv.is_open()) {
+      write_csv_row(csv, row);
+      csv.flush();
+    }
+    rows.push_back(std::move(row));
+  };
+  for (const std::string& path : opt.files) {
+    terrain::Heightmap map;
+    terrain::ReadOptions read_options;
+    try {
+      read_options.vertical_scale = opt.vertical_scale ? opt.vertical_scale : known_vertical_scale(path);
+      map = terrain::read_heightmap(path, read_options);
+    } catch (const terrain::IoError& e) {
+      std::fprintf(stderr, "terrain-bench: %s\n", e.what());
+      return int(e.code());
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "terrain-bench: %s: %s\n", path.c_str(), e.what());
+      return kExitNotFound;
+    }
+    std::string note;
+    const peers::Image16 img = to_image16(map, &note);
+    const std::string file = short_name(path);
+    file_order.push_back(file);
+    std::fprintf(stderr, "%s: %lldx%lld, %s\n", file.c_str(), (long long)img.width, (long long)img.height,
+                 note.c_str());
+    if (opt.pyramid) {
+      std::vector<double> reference(map.values.size());
+      for (int64_t y = 0; y < map.height(); ++y)
+        for (int64_t x = 0; x < map.width(); ++x) reference[size_t(y * map.width() + x)] = map.metres(x, y);
+      for (const PyramidTarget& t : pyramid_sweep(opt.quick)) {
+        try {
+          add_row(measure_pyramid(path, read_options, file, map, reference, t, opt));
+        } catch (const std::exception& e) {
+          Row row{file, kPyramid, "target " + fmt("%g", t.metres), "", t.metres, 1, map.width(), map.height(), {}, -1,
+                  0, 0, 0, 1, e.what()};
+          add_row(std::move(row));
+        }
+        std::fprintf(stderr, "  pyramid %-40s %s\n", rows.back().setting.c_str(),
+                     rows.back().error.empty() ? (fmt("%.3f bits/sample", rows.back().result.bits_per_sample) +
+                                                  fmt(", rms %.3f m", rows.back().result.error.rms) +
+                                                  fmt(", max %.3f m", rows.back().result.error.max_abs)).c_str()
+                                               : rows.back().error.c_str());
+      }
+    }
+    for (auto& peer : peer_list) {
+      for (const peers::Setting& s : peer->sweep(opt.quick, img.unit_m)) {
+        Row row{file, peer->name(), s.label, "", 0, img.unit_m, img.width, img.height, {}, s.max_error_bound, 0, 0, 0, 1, {}};
+        try {
+          row.result = peers::measure(*peer, img, s, opt.min_time, 50);
+          row.result.decoded.clear();
+          row.result.decoded.shrink_to_fit();
+          if (s.max_error_bound >= 0 && row.result.error.max_abs > s.max_error_bound)
+            row.error = "max error exceeds the declared bound";
+        } catch (const std::exception& e) {
+          row.error = e.what();
+        }
+        add_row(std::move(row));
+      }
+    }
+  }
+  if (csv.is_open()) {
+    csv.close();
+    std::error_code ec;
+    if (!csv || (std::filesystem::rename(csv_tmp, opt.csv_path, ec), ec)) {
+      std::fprintf(stderr, "terrain-bench: cannot write %s\n", opt.csv_path.c_str());
+      return kExitWriteFailed;
+    }
+  }
+  if (!opt.markdown_path.empty()) {
+    std::ostringstream md;
+    write_report(md, rows, file_order, codec_order, opt, peer_configs);
+    if (!write_file_atomically(opt.markdown_path, md.str())) {
+      std::fprintf(stderr, "terrain-bench: cannot write %s\n", opt.markdown_path.c_str());
+      return kExitWriteFailed;
+    }
+  }
+  if (opt.json) write_json(std::cout, rows);
+  else write_summary(std::cout, rows, file_order, codec_order);
+  std::cout.flush();
+  return codec_failed ? kExitInternal : kExitOk;
+}
