@@ -45,23 +45,28 @@ void RegionDecoderSource::fill(int level, const Rect& rect, float* out, int64_t 
   const int64_t cx0 = clamp64(rect.x0, 0, size.width - 1), cx1 = clamp64(rect.x0 + rect.width - 1, 0, size.width - 1);
   const int64_t cy0 = clamp64(rect.y0, 0, size.height - 1), cy1 = clamp64(rect.y0 + rect.height - 1, 0, size.height - 1);
   const int64_t w = cx1 - cx0 + 1, h = cy1 - cy0 + 1;
-  const bool inside = cx0 == rect.x0 && cy0 == rect.y0 && w == rect.width && h == rect.height;
-  if (inside) {
-    decoder_->decode_metres(level, Rect{cx0, cy0, w, h}, out, out_stride);
-    for (int64_t y = 0; y < h; ++y)
-      for (int64_t x = 0; x < w; ++x)
-        if (std::isnan(out[y * out_stride + x])) out[y * out_stride + x] = 0.0f;
-    return;
-  }
   scratch_.resize(size_t(w * h));
-  decoder_->decode_metres(level, Rect{cx0, cy0, w, h}, scratch_.data(), w);
+  const bool voids = level == level_count() - 1 && decoder_->file().info().void_count > 0;
+  if (voids) {
+    decoder_->decode_metres(level, Rect{cx0, cy0, w, h}, scratch_.data(), w);
+  } else {
+    // Units into a reused buffer, converted here: no per-call allocation (decode_metres makes one).
+    units_.resize(size_t(w * h));
+    decoder_->decode_units(level, Rect{cx0, cy0, w, h}, units_.data(), w);
+    const double scale = decoder_->metres_per_unit(), offset = decoder_->metres_offset();
+    for (size_t i = 0; i < units_.size(); ++i) scratch_[i] = float(units_[i] * scale + offset);
+  }
   for (int64_t y = 0; y < rect.height; ++y) {
-    const int64_t sy = clamp64(rect.y0 + y, cy0, cy1) - cy0;
-    for (int64_t x = 0; x < rect.width; ++x) {
-      const int64_t sx = clamp64(rect.x0 + x, cx0, cx1) - cx0;
-      const float v = scratch_[size_t(sy * w + sx)];
-      out[y * out_stride + x] = std::isnan(v) ? 0.0f : v;
-    }
+    const float* src = scratch_.data() + (clamp64(rect.y0 + y, cy0, cy1) - cy0) * w;
+    float* o = out + y * out_stride;
+    const int64_t inside0 = std::clamp<int64_t>(cx0 - rect.x0, 0, rect.width);
+    const int64_t inside1 = std::clamp<int64_t>(cx1 + 1 - rect.x0, 0, rect.width);
+    for (int64_t x = 0; x < inside0; ++x) o[x] = src[0];
+    for (int64_t x = inside0; x < inside1; ++x) o[x] = src[rect.x0 + x - cx0];
+    for (int64_t x = inside1; x < rect.width; ++x) o[x] = src[w - 1];
+    if (voids)
+      for (int64_t x = 0; x < rect.width; ++x)
+        if (std::isnan(o[x])) o[x] = 0.0f;
   }
 }
 

@@ -70,6 +70,7 @@ class RegionDecoderSource final : public HeightSource {
   std::shared_ptr<const RegionDecoder> decoder_;
   double spacing_m_;
   std::vector<float> scratch_;
+  std::vector<int32_t> units_;
 };
 
 // Heights from a function of (level, x, y); `unbounded` lets the function be evaluated anywhere
