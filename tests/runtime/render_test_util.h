@@ -1,0 +1,69 @@
+// Helpers shared by the rendering tests of the runtime test program: the one headless GL context
+// of the whole program, a LeakSanitizer pause around Mesa, and the crack check of the watertight
+// tests (flat terrain colour on a black background: any background pixel in a frame that lies
+// wholly on the terrain is a crack).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "runtime/renderer.h"
+
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/lsan_interface.h>
+#endif
+
+namespace rendertest {
+
+// One context for the whole test program (inline: every test file shares it, so renderers created
+// by different files never meet a context that is not current).
+inline terrain::runtime::HeadlessGL& gl() {
+  static terrain::runtime::HeadlessGL context;
+  return context;
+}
+
+// LeakSanitizer is paused inside the rendering tests: Mesa (libgio at driver load, llvmpipe's JIT
+// on first draws) keeps a few allocations for the life of the process, which would fail the ASan
+// run at exit. The clipmap code they exercise is leak-checked by the [clipmap] tests.
+struct LeakCheckPause {
+  LeakCheckPause() {
+#if defined(__SANITIZE_ADDRESS__)
+    __lsan_disable();
+#endif
+  }
+  ~LeakCheckPause() {
+#if defined(__SANITIZE_ADDRESS__)
+    __lsan_enable();
+#endif
+  }
+  LeakCheckPause(const LeakCheckPause&) = delete;
+  LeakCheckPause& operator=(const LeakCheckPause&) = delete;
+};
+
+// Render options of the crack check: every terrain pixel white, the background black.
+inline terrain::runtime::RenderOptions crack_check_options() {
+  terrain::runtime::RenderOptions opt;
+  opt.flat_colour = true;
+  opt.background_rgb[0] = opt.background_rgb[1] = opt.background_rgb[2] = 0.0f;
+  return opt;
+}
+
+// The same with transitions, perimeter snap and stitching off: real cracks at the ring boundaries
+// (the negative control: the crack check must see them).
+inline terrain::runtime::RenderOptions cracked_options() {
+  terrain::runtime::RenderOptions opt = crack_check_options();
+  opt.transitions = false;
+  opt.snap_perimeter = false;
+  opt.stitch = false;
+  return opt;
+}
+
+// Background pixels of an RGBA frame rendered with crack_check_options().
+inline int64_t background_pixels(const std::vector<uint8_t>& rgba) {
+  int64_t count = 0;
+  for (size_t p = 0; p < rgba.size(); p += 4)
+    if (rgba[p] < 128) ++count;
+  return count;
+}
+
+}  // namespace rendertest
