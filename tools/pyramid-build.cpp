@@ -48,7 +48,7 @@ int run(int argc, char** argv) {
   });
   parser.option("--levels", "N", "number of levels (default: until the coarsest is about 128 samples)",
                 [&](const std::string& v) { o.levels = int(cli::parse_int("--levels", v, 1, 40)); });
-  parser.option("--tile", "T", "codec tile side, multiple of 16 in [16, 1024] (default 64)",
+  parser.option("--tile", "T", "codec tile side, multiple of 16 in [16, 1024] (default 32)",
                 [&](const std::string& v) {
                   o.tile_size = uint32_t(cli::parse_int("--tile", v, 16, 1024));
                   if (o.tile_size % 16) throw cli::UsageError("--tile must be a multiple of 16");

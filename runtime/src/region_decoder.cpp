@@ -1,4 +1,4 @@
-// RegionDecoder: recursive coarse-to-fine reconstruction of rectangles through a tile cache.
+// RegionDecoder: exact-window coarse-to-fine reconstruction with a cache of decoded residual tiles.
 #include "runtime/region_decoder.h"
 
 #include <algorithm>
@@ -10,6 +10,13 @@
 #include "codec/codec.h"
 
 namespace terrain::runtime {
+
+struct RegionDecoder::Band {
+  std::once_flag once;
+  codec::Decoder decoder;
+  codec::Status status = codec::Status::Ok;
+};
+
 namespace {
 
 codec::Scratch& thread_codec_scratch() {
@@ -20,28 +27,61 @@ UpsampleScratch& thread_upsample_scratch() {
   thread_local UpsampleScratch s;
   return s;
 }
+// One buffer per level for the coarser windows of the recursion (level l's call fills buffer l-1),
+// reused across calls so that steady-state decoding does not allocate.
+std::vector<int32_t>& thread_window(int level) {
+  thread_local std::array<std::vector<int32_t>, RegionDecoder::kMaxLevels> windows;
+  return windows[size_t(level)];
+}
 
-// Key: level (6 bits), tile row and column (29 bits each): enough for 2^29 tiles per axis.
-uint64_t tile_key(int level, int64_t tx, int64_t ty) {
-  return (uint64_t(level) << 58) | (uint64_t(ty) << 29) | uint64_t(tx);
+// Key: level (6 bits), band (24 bits), tile within the band (34 bits).
+uint64_t tile_key(int level, size_t band, int64_t tile) {
+  return (uint64_t(level) << 58) | (uint64_t(band) << 34) | uint64_t(tile);
 }
 
 int32_t saturate(int64_t v) {
   return int32_t(std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
 }
 
+// out[rect] += residual (rows of `width` samples starting at `res`, `res_stride` apart).
+void add_rows(int32_t* out, int64_t out_stride, const int32_t* res, int64_t res_stride, int64_t width, int64_t rows) {
+  for (int64_t y = 0; y < rows; ++y) {
+    int32_t* o = out + y * out_stride;
+    const int32_t* r = res + y * res_stride;
+    for (int64_t x = 0; x < width; ++x) o[x] = saturate(int64_t(o[x]) + r[x]);
+  }
+}
+
+// Sum of the extents of the tiles [t0, t1] of size ts along an axis of length n.
+int64_t tiles_extent(int64_t t0, int64_t t1, int64_t ts, int64_t n) {
+  return std::min(n, (t1 + 1) * ts) - t0 * ts;
+}
+
 }  // namespace
 
-RegionDecoder::RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes, int64_t tile_size)
-    : file_(std::move(file)), tile_size_(tile_size), cache_capacity_(cache_bytes) {
-  if (tile_size_ < 4 || tile_size_ > 4096) throw std::invalid_argument("region decoder: tile size out of [4, 4096]");
+RegionDecoder::RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes)
+    : file_(std::move(file)), cache_capacity_(cache_bytes) {
+  if (file_->level_count() > kMaxLevels)
+    throw FormatError(FormatErrorCode::Corrupt, file_->path() + ": more than " + std::to_string(kMaxLevels) + " levels");
+  bands_.resize(size_t(file_->level_count()));
+  for (int l = 0; l < file_->level_count(); ++l) {
+    bands_[size_t(l)].resize(file_->bands(l).size());
+    for (auto& b : bands_[size_t(l)]) b = std::make_unique<Band>();
+  }
 }
+
+RegionDecoder::~RegionDecoder() = default;
 
 RegionStats RegionDecoder::stats() const {
-  return RegionStats{tiles_.load(), samples_.load(), hits_.load(), residual_samples_.load()};
+  RegionStats s{samples_.load(), tiles_.load(), residual_samples_.load(), hits_.load(), {}};
+  for (int l = 0; l < file_->level_count(); ++l) s.residual_samples_by_level.push_back(by_level_[size_t(l)].load());
+  return s;
 }
 
-void RegionDecoder::reset_stats() { tiles_ = 0, samples_ = 0, hits_ = 0, residual_samples_ = 0; }
+void RegionDecoder::reset_stats() {
+  samples_ = 0, tiles_ = 0, residual_samples_ = 0, hits_ = 0;
+  for (auto& c : by_level_) c = 0;
+}
 
 void RegionDecoder::clear_cache() {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -50,60 +90,41 @@ void RegionDecoder::clear_cache() {
   cache_bytes_ = 0;
 }
 
-void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const {
-  thread_local std::vector<int32_t> residual;
-  const auto& bands = file_->bands(level);
-  for (size_t b = file_->band_of_row(level, rect.y0); b < bands.size(); ++b) {
-    const BandView& band = bands[b];
-    if (band.y0 >= rect.y0 + rect.height) break;
-    const int64_t y0 = std::max(rect.y0, band.y0), y1 = std::min(rect.y0 + rect.height, band.y0 + band.rows);
-    codec::Decoder dec;
-    codec::Status s = dec.open(band.data, band.size);
-    const codec::Rect cr{rect.x0, y0 - band.y0, rect.width, y1 - y0};
-    if (s == codec::Status::Ok) {
-      residual.resize(size_t(cr.width * cr.height));
-      s = dec.decode_region(cr, residual.data(), cr.width, thread_codec_scratch());
-    }
-    if (s != codec::Status::Ok)
-      throw FormatError(s == codec::Status::ChecksumMismatch ? FormatErrorCode::ChecksumMismatch : FormatErrorCode::Corrupt,
-                        file_->path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) +
-                            " (rows " + std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) +
-                            "), columns " + std::to_string(rect.x0) + ".." + std::to_string(rect.x0 + rect.width - 1) +
-                            ": " + codec::status_name(s));
-    const int64_t ts = dec.header().tile_size;
-    const int64_t tx0 = cr.x / ts, tx1 = (cr.x + cr.width - 1) / ts, ty0 = cr.y / ts, ty1 = (cr.y + cr.height - 1) / ts;
-    residual_samples_ += uint64_t((tx1 - tx0 + 1) * (ty1 - ty0 + 1) * ts * ts);
-    for (int64_t y = y0; y < y1; ++y) {
-      int32_t* row = out + (y - rect.y0) * out_stride;
-      const int32_t* r = residual.data() + (y - y0) * cr.width;
-      for (int64_t x = 0; x < rect.width; ++x) row[x] = saturate(int64_t(row[x]) + r[x]);
-    }
-  }
+void RegionDecoder::count_decoded(int level, uint64_t tiles, uint64_t samples) const {
+  tiles_ += tiles;
+  residual_samples_ += samples;
+  by_level_[size_t(level)] += samples;
 }
 
-std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::build_tile(int level, int64_t tx, int64_t ty) const {
-  const GridSize size = file_->level_size(level);
-  const Rect r{tx * tile_size_, ty * tile_size_, std::min(tile_size_, size.width - tx * tile_size_),
-               std::min(tile_size_, size.height - ty * tile_size_)};
-  auto t = std::make_shared<Tile>(size_t(r.width * r.height));
-  if (level == 0) {
-    std::fill(t->begin(), t->end(), 0);
-  } else {
-    const Rect need = upsample_required_window(r, size);
-    std::vector<int32_t> coarse(size_t(need.width * need.height));
-    decode_units(level - 1, need, coarse.data(), need.width);
-    const CoarseWindow win{coarse.data(), need.width, need, file_->level_size(level - 1)};
-    upsample_region(win, size, r, t->data(), r.width, thread_upsample_scratch());
-  }
-  add_residual(level, r, t->data(), r.width);
-  tiles_ += 1;
-  samples_ += uint64_t(r.width * r.height);
-  return t;
+namespace {
+[[noreturn]] void throw_band_error(const PyramidFile& file, int level, size_t b, const BandView& band, int64_t x0,
+                                   int64_t width, codec::Status s) {
+  throw FormatError(s == codec::Status::ChecksumMismatch ? FormatErrorCode::ChecksumMismatch : FormatErrorCode::Corrupt,
+                    file.path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
+                        std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) + "), columns " +
+                        std::to_string(x0) + ".." + std::to_string(x0 + width - 1) + ": " + codec::status_name(s));
+}
+}  // namespace
+
+const RegionDecoder::Band& RegionDecoder::band(int level, size_t b) const {
+  Band& band = *bands_[size_t(level)][b];
+  std::call_once(band.once, [&] {
+    const BandView& v = file_->bands(level)[b];
+    band.status = band.decoder.open(v.data, v.size);
+    if (band.status == codec::Status::Ok &&
+        (band.decoder.header().width != file_->level_size(level).width || band.decoder.header().height != v.rows))
+      band.status = codec::Status::Corrupt;
+  });
+  if (band.status != codec::Status::Ok)
+    throw_band_error(*file_, level, b, file_->bands(level)[b], 0, file_->level_size(level).width, band.status);
+  return band;
 }
 
-std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::tile(int level, int64_t tx, int64_t ty) const {
-  const uint64_t key = tile_key(level, tx, ty);
-  if (cache_capacity_ > 0) {
+std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int level, size_t b, const Band& bd, int64_t tx,
+                                                                        int64_t ty) const {
+  const codec::HeaderInfo& h = bd.decoder.header();
+  const uint64_t key = tile_key(level, b, ty * h.tiles_x + tx);
+  {
     std::lock_guard<std::mutex> lock(mutex_);
     auto it = map_.find(key);
     if (it != map_.end()) {
@@ -112,22 +133,59 @@ std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::tile(int level, int64_
       return it->second->tile;
     }
   }
-  // Built outside the lock: two threads may race to build the same tile; both get identical data.
-  std::shared_ptr<const Tile> t = build_tile(level, tx, ty);
-  if (cache_capacity_ > 0) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (map_.find(key) == map_.end()) {
-      lru_.push_front(Entry{key, t});
-      map_[key] = lru_.begin();
-      cache_bytes_ += t->size() * sizeof(int32_t);
-      while (cache_bytes_ > cache_capacity_ && lru_.size() > 1) {
-        cache_bytes_ -= lru_.back().tile->size() * sizeof(int32_t);
-        map_.erase(lru_.back().key);
-        lru_.pop_back();
-      }
+  // Decoded outside the lock: two threads may race on the same tile; both get identical data.
+  const int64_t ts = h.tile_size;
+  const codec::Rect r{tx * ts, ty * ts, std::min(ts, h.width - tx * ts), std::min(ts, h.height - ty * ts)};
+  auto t = std::make_shared<Tile>(size_t(r.width * r.height));
+  const codec::Status s = bd.decoder.decode_region(r, t->data(), r.width, thread_codec_scratch());
+  if (s != codec::Status::Ok) throw_band_error(*file_, level, b, file_->bands(level)[b], r.x, r.width, s);
+  count_decoded(level, 1, uint64_t(r.width * r.height));
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (map_.find(key) == map_.end()) {
+    lru_.push_front(Entry{key, t});
+    map_[key] = lru_.begin();
+    cache_bytes_ += t->size() * sizeof(int32_t);
+    while (cache_bytes_ > cache_capacity_ && lru_.size() > 1) {
+      cache_bytes_ -= lru_.back().tile->size() * sizeof(int32_t);
+      map_.erase(lru_.back().key);
+      lru_.pop_back();
     }
   }
   return t;
+}
+
+void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const {
+  const auto& views = file_->bands(level);
+  for (size_t b = file_->band_of_row(level, rect.y0); b < views.size(); ++b) {
+    const BandView& view = views[b];
+    if (view.y0 >= rect.y0 + rect.height) break;
+    const Band& bd = band(level, b);
+    const int64_t y0 = std::max(rect.y0, view.y0), y1 = std::min(rect.y0 + rect.height, view.y0 + view.rows);
+    const codec::Rect cr{rect.x0, y0 - view.y0, rect.width, y1 - y0};
+    const codec::HeaderInfo& h = bd.decoder.header();
+    const int64_t ts = h.tile_size;
+    const int64_t tx0 = cr.x / ts, tx1 = (cr.x + cr.width - 1) / ts, ty0 = cr.y / ts, ty1 = (cr.y + cr.height - 1) / ts;
+    int32_t* band_out = out + (y0 - rect.y0) * out_stride;
+    if (cache_capacity_ == 0) {
+      thread_local std::vector<int32_t> residual;
+      residual.resize(size_t(cr.width * cr.height));
+      const codec::Status s = bd.decoder.decode_region(cr, residual.data(), cr.width, thread_codec_scratch());
+      if (s != codec::Status::Ok) throw_band_error(*file_, level, b, view, cr.x, cr.width, s);
+      count_decoded(level, uint64_t((tx1 - tx0 + 1) * (ty1 - ty0 + 1)),
+                    uint64_t(tiles_extent(tx0, tx1, ts, h.width) * tiles_extent(ty0, ty1, ts, h.height)));
+      add_rows(band_out, out_stride, residual.data(), cr.width, cr.width, cr.height);
+      continue;
+    }
+    for (int64_t ty = ty0; ty <= ty1; ++ty)
+      for (int64_t tx = tx0; tx <= tx1; ++tx) {
+        const std::shared_ptr<const Tile> t = residual_tile(level, b, bd, tx, ty);
+        const int64_t tw = std::min(ts, h.width - tx * ts);
+        const int64_t x0 = std::max(cr.x, tx * ts), x1 = std::min(cr.x + cr.width, tx * ts + tw);
+        const int64_t ya = std::max(cr.y, ty * ts), yb = std::min(cr.y + cr.height, (ty + 1) * ts);
+        add_rows(band_out + (ya - cr.y) * out_stride + (x0 - cr.x), out_stride,
+                 t->data() + (ya - ty * ts) * tw + (x0 - tx * ts), tw, x1 - x0, yb - ya);
+      }
+  }
 }
 
 void RegionDecoder::decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const {
@@ -137,17 +195,18 @@ void RegionDecoder::decode_units(int level, const Rect& rect, int32_t* out, int6
       rect.y0 + rect.height > size.height)
     throw std::out_of_range("region decoder: rectangle outside level " + std::to_string(level));
   if (rect.width == 0 || rect.height == 0) return;
-  const int64_t T = tile_size_;
-  for (int64_t ty = rect.y0 / T; ty <= (rect.y0 + rect.height - 1) / T; ++ty)
-    for (int64_t tx = rect.x0 / T; tx <= (rect.x0 + rect.width - 1) / T; ++tx) {
-      std::shared_ptr<const Tile> t = tile(level, tx, ty);
-      const int64_t tw = std::min(T, size.width - tx * T);
-      const int64_t x0 = std::max(rect.x0, tx * T), x1 = std::min(rect.x0 + rect.width, tx * T + tw);
-      const int64_t y0 = std::max(rect.y0, ty * T), y1 = std::min(rect.y0 + rect.height, (ty + 1) * T);
-      for (int64_t y = y0; y < y1; ++y)
-        std::copy_n(t->data() + (y - ty * T) * tw + (x0 - tx * T), x1 - x0,
-                    out + (y - rect.y0) * out_stride + (x0 - rect.x0));
-    }
+  if (level == 0) {
+    for (int64_t y = 0; y < rect.height; ++y) std::fill_n(out + y * out_stride, rect.width, 0);
+  } else {
+    const Rect need = upsample_required_window(rect, size);
+    std::vector<int32_t>& coarse = thread_window(level - 1);
+    coarse.resize(size_t(need.width * need.height));
+    decode_units(level - 1, need, coarse.data(), need.width);
+    const CoarseWindow win{coarse.data(), need.width, need, file_->level_size(level - 1)};
+    upsample_region(win, size, rect, out, out_stride, thread_upsample_scratch());
+  }
+  add_residual(level, rect, out, out_stride);
+  samples_ += uint64_t(rect.width * rect.height);
 }
 
 void RegionDecoder::decode_metres(int level, const Rect& rect, float* out, int64_t out_stride) const {

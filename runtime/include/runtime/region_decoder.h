@@ -2,13 +2,17 @@
 //
 // decode_units(level, rect) reconstructs T^_level on rect exactly as the builder did:
 // U(T^_{level-1}) on the rectangle plus the decoded residual, recursively down to the coarsest
-// level, decoding only the libcodec tiles that the rectangle and the upsampling support need.
-// Reconstructed tiles (tile_size x tile_size, aligned to the level's origin) are kept in a bounded
-// LRU cache shared by all callers, so coarse levels that neighbouring requests share are decoded once.
+// level. Each recursion step asks the coarser level for exactly the window that U needs on rect
+// (rect/2 plus the four-point support), so reconstruction costs about 4/3 of rect's area in all;
+// the residuals are entropy-decoded only for the libcodec tiles those windows intersect.
+// Decoded residual tiles are kept in a bounded LRU cache shared by all callers, so requests that
+// share tiles (the thin L-shaped strips of a moving clipmap, neighbouring windows) decode each
+// tile once.
 //
 // Thread-safe: any number of threads may call the decode functions concurrently.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <list>
@@ -22,17 +26,21 @@
 namespace terrain::runtime {
 
 struct RegionStats {
-  uint64_t tiles_reconstructed = 0;   // cache misses: tiles rebuilt (U + residual)
-  uint64_t samples_reconstructed = 0; // their samples, all levels
-  uint64_t cache_hits = 0;
-  uint64_t residual_samples_decoded = 0;  // samples of the libcodec tiles entropy-decoded
+  uint64_t samples_reconstructed = 0;     // samples computed as U + residual, all levels
+  uint64_t residual_tiles_decoded = 0;    // libcodec tiles entropy-decoded (cache misses)
+  uint64_t residual_samples_decoded = 0;  // their samples, all levels
+  uint64_t cache_hits = 0;                // residual tiles served from the cache
+  std::vector<uint64_t> residual_samples_by_level;  // residual_samples_decoded split by level
 };
 
 class RegionDecoder {
  public:
-  // cache_bytes bounds the reconstructed-tile cache (0 disables it: every call rebuilds what it needs).
-  explicit RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes = size_t(256) << 20,
-                         int64_t tile_size = 64);
+  static constexpr int kMaxLevels = 64;
+
+  // cache_bytes bounds the decoded-residual cache (0 disables it: each call decodes exactly the
+  // libcodec tiles its rectangles intersect, and nothing is kept).
+  explicit RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes = size_t(256) << 20);
+  ~RegionDecoder();
 
   // T^_level on rect in level units (int32); rect must lie inside the level (else std::out_of_range).
   // Throws FormatError naming the file, level, band and libcodec status when data is damaged.
@@ -49,15 +57,17 @@ class RegionDecoder {
   void clear_cache();
 
  private:
+  struct Band;  // a band's libcodec stream, opened (header + tile index parsed) on first use
   using Tile = std::vector<int32_t>;
-  std::shared_ptr<const Tile> tile(int level, int64_t tx, int64_t ty) const;
-  std::shared_ptr<const Tile> build_tile(int level, int64_t tx, int64_t ty) const;
+  const Band& band(int level, size_t b) const;
   void add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
+  std::shared_ptr<const Tile> residual_tile(int level, size_t b, const Band& band, int64_t tx, int64_t ty) const;
+  void count_decoded(int level, uint64_t tiles, uint64_t samples) const;
 
   std::shared_ptr<const PyramidFile> file_;
-  int64_t tile_size_;
   size_t cache_capacity_;
-  // LRU: most recent at the front; the map points into the list.
+  std::vector<std::vector<std::unique_ptr<Band>>> bands_;
+  // LRU of decoded residual tiles: most recent at the front; the map points into the list.
   struct Entry {
     uint64_t key;
     std::shared_ptr<const Tile> tile;
@@ -66,7 +76,8 @@ class RegionDecoder {
   mutable std::list<Entry> lru_;
   mutable std::unordered_map<uint64_t, std::list<Entry>::iterator> map_;
   mutable size_t cache_bytes_ = 0;
-  mutable std::atomic<uint64_t> tiles_ = 0, samples_ = 0, hits_ = 0, residual_samples_ = 0;
+  mutable std::atomic<uint64_t> samples_ = 0, tiles_ = 0, residual_samples_ = 0, hits_ = 0;
+  mutable std::array<std::atomic<uint64_t>, kMaxLevels> by_level_{};
 };
 
 }  // namespace terrain::runtime
