@@ -58,3 +58,64 @@ TEST_CASE("clipmap: a decoded pyramid fills the levels with the decoder's sample
     }
   }
 }
+
+TEST_CASE("clipmap: the original input's in-memory reference equals a lossless pyramid file, level by level",
+          "[clipmap]") {
+  // original_source rebuilds the original's pyramid with the file's D: for a lossless file every
+  // decoded level must equal it exactly, and the finest level's screen-space error must be 0. For a
+  // lossy file the finest level's error is the compression error, and coarser levels err more.
+  iotest::TempDir dir;
+  SynthOptions so;
+  so.width = 200;
+  so.height = 170;
+  so.seed = 11;
+  const Heightmap map = synthesize_terrain(so);
+  write_raw(dir.file("t.raw"), map);
+  BuildFileOptions bo;
+  bo.levels = 3;
+  bo.threads = 1;
+  build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossless.pyr"), bo);
+  bo.target = ErrorTarget::Step;
+  bo.target_metres = 8.0;
+  build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossy.pyr"), bo);
+
+  auto file = PyramidFile::open(dir.file("lossless.pyr"));
+  const int finest = file->level_count() - 1;
+  const GridHeightSource original =
+      original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(finest), file->level_count(), file->info().filter, 30.0);
+  REQUIRE(original.level_count() == 3);
+  RegionDecoderSource lossless(std::make_shared<const RegionDecoder>(file), 30.0);
+  for (int l = 0; l < 3; ++l) {
+    const GridSize s = original.level_size(l);
+    std::vector<float> decoded(size_t(s.width * s.height));
+    lossless.fill(l, Rect{0, 0, s.width, s.height}, decoded.data(), s.width);
+    INFO("level " << l);
+    CHECK(decoded == original.level(l));
+  }
+  for (int64_t i = 0; i < map.width() * map.height(); i += 997)
+    CHECK(original.level(finest)[size_t(i)] == float(map.metres(i % map.width(), i / map.width())));
+
+  const double s_px = triangle_size_px(640, 480, 60, 255);
+  CHECK(s_px == Approx(1.25 * 640 / (255 * std::tan(M_PI / 6) * 640 / 480)));
+  const auto exact = screen_space_error(lossless, original, 0, s_px);
+  REQUIRE(exact.size() == 3);
+  CHECK(exact[2].max_px == 0.0);
+  CHECK(exact[0].rms_px > 0.0);  // a coarse level misses the finest detail
+
+  RegionDecoderSource lossy(std::make_shared<const RegionDecoder>(PyramidFile::open(dir.file("lossy.pyr"))), 30.0);
+  const auto e = screen_space_error(lossy, original, 0, s_px);
+  REQUIRE(e.size() == 3);
+  CHECK(e[2].rms_m > 0.0);
+  {  // at the finest level PL(T^_m) is T^_m itself: the error is the plain sample difference
+    const GridSize s = original.level_size(finest);
+    std::vector<float> decoded(size_t(s.width * s.height));
+    lossy.fill(finest, Rect{0, 0, s.width, s.height}, decoded.data(), s.width);
+    double max_diff = 0;
+    for (size_t i = 0; i < decoded.size(); ++i)
+      max_diff = std::max(max_diff, std::abs(double(decoded[i]) - double(original.level(finest)[i])));
+    CHECK(e[2].max_m == Approx(max_diff));
+  }
+  CHECK(e[2].rms_px == Approx(e[2].rms_m * s_px / 30.0));
+  CHECK(e[2].p999_px <= e[2].max_px);
+  CHECK(e[0].spacing_m == 120.0);
+}
