@@ -107,6 +107,7 @@ class BitReader {
     const uint64_t inverted = ~cache_;
     return inverted ? __builtin_clzll(inverted) : 64;
   }
+  int leading_zeros() const { return cache_ ? __builtin_clzll(cache_) : 64; }
   void skip(int n) {
     cache_ <<= n;
     count_ -= n;

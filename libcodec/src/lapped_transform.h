@@ -16,7 +16,7 @@
 namespace codec::detail {
 
 // tile: width x height samples, row stride = width; width and height are multiples of 16.
-void forward_lapped(int32_t* tile, int width, int height);
-void inverse_lapped(int32_t* tile, int width, int height);
+void forward_lapped(int32_t* tile, int width, int height, bool lossy);
+void inverse_lapped(int32_t* tile, int width, int height, bool lossy);
 
 }  // namespace codec::detail

@@ -1,7 +1,7 @@
 // Band norms are measured rather than derived by hand: the norm of a band is the root energy of the
 // tile the integer inverse transform produces from one large coefficient, divided by its amplitude.
-// The impulse sits in an interior macroblock of a 64x64 tile so that the overlap filter acts on all
-// sides. Integer lifting is linear up to rounding, which a 2^14 amplitude makes negligible.
+// The impulse sits in an interior macroblock of a 64x64 tile so that the overlap filters act on all
+// sides. The norms are those of the lossy transform (the only one quantised with steps above 1). Integer lifting is linear up to rounding, which a 2^14 amplitude makes negligible.
 #include "quantizer.h"
 
 #include <array>
@@ -19,7 +19,7 @@ constexpr int32_t kImpulse = 1 << 14;
 double impulse_norm(int x, int y) {
   std::vector<int32_t> tile(size_t(kProbeSide) * kProbeSide, 0);
   tile[size_t(y) * kProbeSide + x] = kImpulse;
-  inverse_lapped(tile.data(), kProbeSide, kProbeSide);
+  inverse_lapped(tile.data(), kProbeSide, kProbeSide, true);
   double energy = 0;
   for (int32_t v : tile) energy += double(v) * double(v);
   return std::sqrt(energy) / kImpulse;

@@ -43,6 +43,26 @@ inline void put_rice(BitWriter& out, uint32_t u, RlgrState& s) {
 
 }  // namespace
 
+void gamma_encode(BitWriter& out, int32_t v) {
+  const uint32_t u = (v >= 0 ? uint32_t(v) * 2 : uint32_t(-int64_t(v)) * 2 - 1) + 1;
+  const int length = 32 - __builtin_clz(u);
+  out.put(0, length - 1);
+  out.put(u, length);
+}
+
+bool gamma_decode(BitReader& in, int32_t* v) {
+  in.refill();
+  const int zeros = in.leading_zeros();
+  if (zeros > 30) return false;
+  in.skip(zeros);
+  in.refill();
+  const uint32_t u = in.take(zeros + 1) - 1;
+  if (u >= uint32_t(2) * kRlgrMaxMagnitude) return false;
+  const int32_t half = int32_t((u + 1) >> 1);
+  *v = (u & 1) ? -half : half;
+  return true;
+}
+
 void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState& s) {
   size_t i = 0;
   while (i < count) {

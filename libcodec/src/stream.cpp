@@ -1,5 +1,5 @@
-// Stream container: fixed header (with its CRC32C), tile index of 64-bit offsets with per-tile CRC32C
-// (and an index CRC), then the tile payloads in raster order. Also the public API entry points.
+// Stream container: fixed header (with its CRC32C), the tile payloads in raster order, then the tile
+// index (varint payload sizes with per-tile CRC32C, and an index CRC). Also the public API entry points.
 // Layout: docs/codec.md.
 #include <algorithm>
 #include <cassert>
@@ -14,7 +14,11 @@
 namespace codec {
 
 struct Scratch::Impl {
+  struct IndexEntry {
+    uint32_t size, crc;
+  };
   detail::TileWork work;
+  std::vector<IndexEntry> index;  // encoder: entries until the index is written
 };
 
 Scratch::Scratch() : impl_(std::make_unique<Impl>()) {}
@@ -25,9 +29,9 @@ namespace {
 using detail::crc32c;
 
 constexpr uint8_t kMagic[4] = {'T', 'P', 'T', 'C'};
-constexpr size_t kHeaderSize = 172;
-constexpr size_t kHeaderCrcOffset = 168;
-constexpr size_t kIndexEntrySize = 16;
+constexpr size_t kHeaderSize = 56;
+constexpr size_t kHeaderCrcOffset = 52;
+constexpr size_t kMaxEntrySize = 5 + 4;  // varint payload size + CRC32C
 constexpr uint32_t kFlagBoundMaxError = 1;
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
@@ -47,6 +51,31 @@ uint64_t get_u64(const uint8_t* p) {
   for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
   return v;
 }
+// LEB128: 7 bits per byte, low groups first, high bit = more bytes follow.
+size_t put_varint(uint8_t* p, uint32_t v) {
+  size_t n = 0;
+  while (v >= 0x80) {
+    p[n++] = uint8_t(v | 0x80);
+    v >>= 7;
+  }
+  p[n++] = uint8_t(v);
+  return n;
+}
+// Reads a varint of at most 5 bytes from [p, end); false if it runs past end or exceeds 32 bits.
+bool get_varint(const uint8_t*& p, const uint8_t* end, uint32_t* v) {
+  uint64_t value = 0;
+  for (int shift = 0; shift < 35; shift += 7) {
+    if (p == end) return false;
+    const uint8_t byte = *p++;
+    value |= uint64_t(byte & 0x7F) << shift;
+    if (!(byte & 0x80)) {
+      if (value > UINT32_MAX) return false;
+      *v = uint32_t(value);
+      return true;
+    }
+  }
+  return false;
+}
 
 bool valid_tile_size(uint32_t t) { return t >= kMinTile && t <= kMaxTile && t % 16 == 0; }
 
@@ -58,7 +87,7 @@ int tile_extent(int64_t image_side, int64_t tile, int64_t index) {
 
 struct StreamLayout {
   int64_t tiles_x, tiles_y;
-  size_t index_offset, data_offset;
+  size_t index_bound;  // largest index (entries + CRC)
 };
 
 bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
@@ -67,8 +96,7 @@ bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
   out->tiles_y = ceil_div(h, tile);
   const unsigned __int128 n = (unsigned __int128)out->tiles_x * out->tiles_y;
   if (n > (unsigned __int128)(SIZE_MAX / 32)) return false;
-  out->index_offset = kHeaderSize;
-  out->data_offset = kHeaderSize + size_t(n) * kIndexEntrySize + 4;
+  out->index_bound = size_t(n) * kMaxEntrySize + 4;
   return true;
 }
 
@@ -97,7 +125,7 @@ size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options)
   const int64_t t = options.tile_size;
   const int64_t full_x = width / t, full_y = height / t;
   const int rest_x = int(width % t), rest_y = int(height % t);
-  unsigned __int128 total = layout.data_offset;
+  unsigned __int128 total = kHeaderSize + layout.index_bound;
   const auto add = [&](int64_t count, int w, int h) {
     if (count > 0 && w > 0 && h > 0) total += (unsigned __int128)count * detail::tile_payload_bound(w, h);
   };
@@ -129,7 +157,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
     for (int64_t x = 0; x < width; ++x)
       if (row[x] > kMaxAbsSample || row[x] < -kMaxAbsSample) return Status::ValueOutOfRange;
   }
-  if (dst_capacity < layout.data_offset) return Status::BufferTooSmall;
+  if (dst_capacity < kHeaderSize) return Status::BufferTooSmall;
 
   const uint32_t step_q8 = uint32_t(std::lround(step * 256.0));
   detail::TileParams params;
@@ -138,6 +166,42 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.steps = lossless ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
+
+  // Payloads first, then the index (its size depends on theirs), then the header that points at it.
+  detail::TileWork& work = scratch.impl().work;
+  const int64_t t = options.tile_size;
+  const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
+  if (scratch.impl().index.size() < tile_count) scratch.impl().index.resize(tile_count);
+  size_t pos = kHeaderSize;
+  for (int64_t ty = 0; ty < layout.tiles_y; ++ty)
+    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
+      const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+      const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+      const size_t size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, dst + pos,
+                                              dst_capacity - pos, recon != nullptr);
+      if (size == 0) return Status::BufferTooSmall;
+      scratch.impl().index[size_t(ty * layout.tiles_x + tx)] = {uint32_t(size), crc32c(dst + pos, size)};
+      pos += size;
+      if (recon) {
+        int32_t* out = recon + ty * t * recon_stride + tx * t;
+        for (int y = 0; y < th; ++y)
+          std::memcpy(out + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
+                      size_t(tw) * sizeof(int32_t));
+      }
+    }
+  const size_t index_offset = pos;
+  for (size_t i = 0; i < tile_count; ++i) {
+    uint8_t varint[5];
+    const size_t length = put_varint(varint, scratch.impl().index[i].size);
+    if (dst_capacity - pos < length + 4) return Status::BufferTooSmall;
+    std::memcpy(dst + pos, varint, length);
+    pos += length;
+    put_u32(dst + pos, scratch.impl().index[i].crc);
+    pos += 4;
+  }
+  if (dst_capacity - pos < 4) return Status::BufferTooSmall;
+  put_u32(dst + pos, crc32c(dst + index_offset, pos - index_offset));
+  pos += 4;
 
   uint8_t* h = dst;
   std::memset(h, 0, kHeaderSize);
@@ -150,35 +214,9 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   put_u32(h + 28, options.bound_max_error ? kFlagBoundMaxError : 0);
   put_u32(h + 32, step_q8);
   put_u32(h + 36, params.max_error);
-  for (int b = 0; b < detail::kBandCount; ++b) put_u32(h + 40 + 4 * b, params.steps.q8[b]);
-  put_u32(h + 164, uint32_t(params.fraction_bits));
+  put_u32(h + 40, uint32_t(params.fraction_bits));
+  put_u64(h + 44, index_offset);
   put_u32(h + kHeaderCrcOffset, crc32c(h, kHeaderCrcOffset));
-
-  detail::TileWork& work = scratch.impl().work;
-  const int64_t t = options.tile_size;
-  size_t pos = layout.data_offset;
-  uint8_t* index = dst + layout.index_offset;
-  for (int64_t ty = 0; ty < layout.tiles_y; ++ty)
-    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
-      const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
-      const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-      const size_t size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, dst + pos,
-                                              dst_capacity - pos, recon != nullptr);
-      if (size == 0) return Status::BufferTooSmall;
-      uint8_t* entry = index + size_t(ty * layout.tiles_x + tx) * kIndexEntrySize;
-      put_u64(entry, pos);
-      put_u32(entry + 8, uint32_t(size));
-      put_u32(entry + 12, crc32c(dst + pos, size));
-      pos += size;
-      if (recon) {
-        int32_t* out = recon + ty * t * recon_stride + tx * t;
-        for (int y = 0; y < th; ++y)
-          std::memcpy(out + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
-                      size_t(tw) * sizeof(int32_t));
-      }
-    }
-  const size_t index_bytes = layout.data_offset - 4 - layout.index_offset;
-  put_u32(dst + layout.data_offset - 4, crc32c(index, index_bytes));
   *bytes_written = pos;
   return Status::Ok;
 }
@@ -208,40 +246,49 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   info.bound_max_error = (flags & kFlagBoundMaxError) != 0;
   if (info.max_error > uint32_t(kMaxAbsSample) || (!info.bound_max_error && info.max_error != 0))
     return Status::Corrupt;
-  for (int b = 0; b < detail::kBandCount; ++b) {
-    const uint32_t s = get_u32(data + 40 + 4 * b);
-    if (s < detail::kStepOne || s > detail::kMaxBandStep) return Status::Corrupt;
-  }
-  if (get_u32(data + 164) > uint32_t(detail::kLossyFractionBits)) return Status::Corrupt;
+  if (step_q8 > uint32_t(kMaxAbsSample) * 256u) return Status::Corrupt;
+  // Lossless streams (step 1) have 0 fraction bits, lossy ones kLossyFractionBits: nothing else.
+  const uint32_t fraction_bits = get_u32(data + 40);
+  if (fraction_bits != (step_q8 <= detail::kStepOne ? 0u : uint32_t(detail::kLossyFractionBits)))
+    return Status::Corrupt;
+  const uint64_t index_offset = get_u64(data + 44);
+  if (index_offset < kHeaderSize || index_offset > SIZE_MAX / 2) return Status::Corrupt;
   info.step = step_q8 / 256.0;
   info.tiles_x = layout.tiles_x;
   info.tiles_y = layout.tiles_y;
-  info.index_offset = layout.index_offset;
-  info.data_offset = layout.data_offset;
+  info.index_offset = size_t(index_offset);
+  info.data_offset = kHeaderSize;
   *header = info;
   return Status::Ok;
 }
 
 Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries) {
   assert(data && entries);
-  if (size < header.data_offset) return Status::Truncated;
-  const uint8_t* index = data + header.index_offset;
-  const size_t index_bytes = header.data_offset - 4 - header.index_offset;
-  if (crc32c(index, index_bytes) != get_u32(data + header.data_offset - 4)) return Status::ChecksumMismatch;
+  if (size < header.index_offset) return Status::Truncated;
+  const uint8_t* p = data + header.index_offset;
+  const uint8_t* const end = data + size;
   const int64_t t = header.tile_size;
+  uint64_t offset = header.data_offset;
   for (int64_t ty = 0; ty < header.tiles_y; ++ty)
     for (int64_t tx = 0; tx < header.tiles_x; ++tx) {
-      const size_t i = size_t(ty * header.tiles_x + tx);
-      const uint8_t* e = index + i * kIndexEntrySize;
       TileEntry entry;
-      entry.offset = get_u64(e);
-      entry.size = get_u32(e + 8);
-      entry.crc = get_u32(e + 12);
+      uint32_t tile_size = 0;
+      if (!get_varint(p, end, &tile_size)) return p == end ? Status::Truncated : Status::Corrupt;
+      if (end - p < 4) return Status::Truncated;
+      entry.crc = get_u32(p);
+      p += 4;
+      entry.offset = offset;
+      entry.size = tile_size;
       const size_t bound = detail::tile_payload_bound(tile_extent(header.width, t, tx), tile_extent(header.height, t, ty));
-      if (entry.offset < header.data_offset || entry.size < 1 || entry.size > bound) return Status::Corrupt;
-      if (entry.offset > size || size - entry.offset < entry.size) return Status::Truncated;
-      entries[i] = entry;
+      if (entry.size < 1 || entry.size > bound) return Status::Corrupt;
+      offset += entry.size;
+      if (offset > header.index_offset) return Status::Corrupt;
+      entries[size_t(ty * header.tiles_x + tx)] = entry;
     }
+  if (offset != header.index_offset) return Status::Corrupt;  // payloads are back to back
+  if (end - p < 4) return Status::Truncated;
+  if (crc32c(data + header.index_offset, size_t(p - (data + header.index_offset))) != get_u32(p))
+    return Status::ChecksumMismatch;
   return Status::Ok;
 }
 
@@ -252,7 +299,6 @@ Status Decoder::open(const uint8_t* data, size_t size) {
   HeaderInfo header;
   Status s = read_header(data, size, &header);
   if (s != Status::Ok) return s;
-  if (size < header.data_offset) return Status::Truncated;
   std::vector<TileEntry> index(size_t(header.tile_count()));
   s = read_tile_index(data, size, header, index.data());
   if (s != Status::Ok) return s;
@@ -270,8 +316,9 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
       rect.y > header_.height - rect.height)
     return Status::InvalidArgument;
   detail::TileParams params;
-  for (int b = 0; b < detail::kBandCount; ++b) params.steps.q8[b] = get_u32(data_ + 40 + 4 * b);
-  params.fraction_bits = int(get_u32(data_ + 164));
+  params.fraction_bits = int(get_u32(data_ + 40));
+  const uint32_t step_q8 = get_u32(data_ + 32);
+  params.steps = params.fraction_bits == 0 ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
   detail::TileWork& work = scratch.impl().work;

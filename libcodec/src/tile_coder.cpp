@@ -38,6 +38,10 @@ constexpr BandMap make_band_map() {
 }
 constexpr BandMap kBandMap = make_band_map();
 
+// LP values are rarely zero and large at the low positions, so their coder starts in Golomb-Rice mode
+// with k_R = 5 rather than the default (measured: 2-3% fewer LP bits on SRTM tiles).
+constexpr RlgrState kLpStart{0, 40};
+
 inline int32_t saturate(int64_t v) { return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX)); }
 
 inline int64_t med_predict(int64_t left, int64_t top, int64_t top_left) {
@@ -79,14 +83,15 @@ void code_bands(BitWriter& out, int32_t* tile, int pw, int ph, const BandSteps& 
   for (int my = 0; my < mby; ++my)
     for (int mx = 0; mx < mbx; ++mx)
       seq[n++] = int32_t(tile[size_t(my) * 16 * pw + size_t(mx) * 16] - dc_prediction(tile, pw, mx, my));
+  gamma_encode(out, seq[0]);
   RlgrState dc_state;
-  rlgr_encode(out, seq, n, dc_state);
+  rlgr_encode(out, seq + 1, n - 1, dc_state);
 
   n = 0;
   for (const Position& pos : kScan)
     for (int my = 0; my < mby; ++my)
       for (int mx = 0; mx < mbx; ++mx) seq[n++] = tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u];
-  RlgrState lp_state;
+  RlgrState lp_state = kLpStart;
   rlgr_encode(out, seq, n, lp_state);
 
   n = 0;
@@ -122,8 +127,9 @@ bool dequantize_run(int32_t* values, size_t n, uint32_t step_q8) {
 bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps& steps, int32_t* seq) {
   const int mbx = pw / 16, mby = ph / 16, bx_count = pw / 4, by_count = ph / 4;
   size_t n = size_t(mbx) * mby;
+  if (!gamma_decode(in, &seq[0])) return false;
   RlgrState dc_state;
-  if (!rlgr_decode(in, seq, n, dc_state)) return false;
+  if (!rlgr_decode(in, seq + 1, n - 1, dc_state)) return false;
   // DC prediction runs on quantised values, so keep them in the tile until all DCs are known.
   size_t i = 0;
   for (int my = 0; my < mby; ++my)
@@ -141,7 +147,7 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
     }
 
   n = size_t(mbx) * mby * 15;
-  RlgrState lp_state;
+  RlgrState lp_state = kLpStart;
   if (!rlgr_decode(in, seq, n, lp_state)) return false;
   i = 0;
   for (int s = 0; s < 15; ++s) {
@@ -191,21 +197,22 @@ inline int64_t floor_div(int64_t a, int64_t b) {
 // Transform-mode payload; leaves the decoder's output in work.reconstruction.
 size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, const TileParams& params,
                         TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
-  if (capacity < 1) return 0;
+  const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
+  if (capacity < head) return 0;
   const int pw = padded_side(w), ph = padded_side(h);
   int32_t* tile = work.coefficients.data();
-  out[0] = uint8_t(TileMode::Transform);
-  BitWriter bits(out + 1, capacity - 1);
+  if (head) out[0] = uint8_t(TileMode::Transform);
+  BitWriter bits(out + head, capacity - head);
   load_padded(src, stride, w, h, pw, ph, tile);
   scale_up(tile, size_t(pw) * ph, params.fraction_bits);
-  forward_lapped(tile, pw, ph);
+  forward_lapped(tile, pw, ph, params.fraction_bits > 0);
   code_bands(bits, tile, pw, ph, params.steps, work.sequence.data());
   if (!want_reconstruction && !params.bound_max_error) {
     const size_t size = bits.finish();
-    return bits.overflow() ? 0 : size + 1;
+    return bits.overflow() ? 0 : size + head;
   }
   dequantize_tile(tile, pw, ph, params.steps);
-  inverse_lapped(tile, pw, ph);
+  inverse_lapped(tile, pw, ph, params.fraction_bits > 0);
   int32_t* recon = work.reconstruction.data();
   crop(tile, pw, w, h, recon);
   scale_down(recon, size_t(w) * h, params.fraction_bits);
@@ -223,7 +230,7 @@ size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, cons
     rlgr_encode(bits, corrections, size_t(w) * h, state);
   }
   const size_t size = bits.finish();
-  return bits.overflow() ? 0 : size + 1;
+  return bits.overflow() ? 0 : size + head;
 }
 
 // Spatial-quantisation payload (max-error mode): q = floor((x + E) / (2E + 1)) coded losslessly.
@@ -239,7 +246,7 @@ size_t encode_spatial(const int32_t* src, ptrdiff_t stride, int w, int h, const 
   BitWriter bits(out + 1, capacity - 1);
   int32_t* tile = work.coefficients.data();
   load_padded(quantized, w, w, h, pw, ph, tile);
-  forward_lapped(tile, pw, ph);
+  forward_lapped(tile, pw, ph, false);
   code_bands(bits, tile, pw, ph, unit_band_steps(), work.sequence.data());
   for (size_t i = 0; i < size_t(w) * h; ++i) quantized[i] = saturate(int64_t(quantized[i]) * bin);
   const size_t size = bits.finish();
@@ -286,17 +293,18 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
 
 TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const TileParams& params,
                        TileWork& work) {
+  const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
   if (size < 1) return TileResult::Corrupt;
   const int pw = padded_side(w), ph = padded_side(h);
   work.reserve(pw, ph, w, h, 0);
-  const uint8_t mode = payload[0];
+  const uint8_t mode = head ? payload[0] : uint8_t(TileMode::Transform);
   const bool spatial = mode == uint8_t(TileMode::SpatialQuantized);
-  if (mode != uint8_t(TileMode::Transform) && !(spatial && params.bound_max_error)) return TileResult::Corrupt;
-  BitReader bits(payload + 1, size - 1);
+  if (mode != uint8_t(TileMode::Transform) && !spatial) return TileResult::Corrupt;
+  BitReader bits(payload + head, size - head);
   int32_t* tile = work.coefficients.data();
   if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work.sequence.data()))
     return TileResult::Corrupt;
-  inverse_lapped(tile, pw, ph);
+  inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
   int32_t* recon = work.reconstruction.data();
   const size_t n = size_t(w) * h;
   if (spatial || params.fraction_bits == 0) {
