@@ -70,7 +70,14 @@ Result measure(Peer& peer, const Image16& img, const Setting& setting, double mi
 }
 
 double bits_at_error(std::vector<RatePoint> points, double target) {
-  std::erase_if(points, [](const RatePoint& p) { return !(p.error > 0) || !(p.bits > 0); });
+  // A lossless point (error 0) meets every target: it caps the rate and dominates any lossy point
+  // that costs more.
+  double lossless = -1;
+  for (const RatePoint& p : points)
+    if (p.error == 0 && p.bits > 0 && (lossless < 0 || p.bits < lossless)) lossless = p.bits;
+  std::erase_if(points, [lossless](const RatePoint& p) {
+    return !(p.error > 0) || !(p.bits > 0) || (lossless > 0 && p.bits >= lossless);
+  });
   std::sort(points.begin(), points.end(), [](const RatePoint& a, const RatePoint& b) {
     return a.error < b.error || (a.error == b.error && a.bits < b.bits);
   });
@@ -78,7 +85,9 @@ double bits_at_error(std::vector<RatePoint> points, double target) {
   std::vector<RatePoint> envelope;
   for (const RatePoint& p : points)
     if (envelope.empty() || p.bits < envelope.back().bits) envelope.push_back(p);
-  if (envelope.empty() || target < envelope.front().error || target > envelope.back().error) return -1;
+  if (!(target > 0)) return lossless;
+  if (envelope.empty() || target < envelope.front().error) return lossless;  // -1 without one
+  if (target > envelope.back().error) return -1;
   for (size_t i = 0; i < envelope.size(); ++i) {
     if (envelope[i].error == target) return envelope[i].bits;
     if (i + 1 < envelope.size() && target < envelope[i + 1].error) {

@@ -129,8 +129,9 @@ struct RatePoint {
   double bits = 0;
 };
 // Bits/sample needed for `target` error, log-log interpolated on the lower envelope of points (those
-// with error > 0; a point with error <= target exactly at a sweep point returns its rate). Returns a
-// negative value when target lies outside the envelope's error range.
+// with error > 0; a point with error <= target exactly at a sweep point returns its rate). A target
+// below the smallest non-zero error is met by the lossless point (error 0) when there is one: its
+// rate is returned. Returns a negative value when target lies outside what the points can show.
 double bits_at_error(std::vector<RatePoint> points, double target);
 
 }  // namespace peers
