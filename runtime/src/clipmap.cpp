@@ -88,10 +88,13 @@ int64_t Clipmap::exposed_samples(const Level& L, int64_t x0, int64_t y0) const {
 void Clipmap::fill_rect(int level, const Rect& r) {
   Level& L = levels_[size_t(level)];
   source_.fill(source_level(level), r, scratch_.data(), r.width);
+  // Each row lands in at most two contiguous runs of the toroidal storage.
+  const int64_t tx = wrap(r.x0), run1 = std::min<int64_t>(r.width, n_ - tx);
   for (int64_t y = 0; y < r.height; ++y) {
     const float* src = scratch_.data() + y * r.width;
     float* row = L.z.data() + wrap(r.y0 + y) * n_;
-    for (int64_t x = 0; x < r.width; ++x) row[wrap(r.x0 + x)] = src[x];
+    std::copy_n(src, run1, row + tx);
+    std::copy_n(src + run1, r.width - run1, row);
   }
 }
 
@@ -109,11 +112,12 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
   // columns of cx and cx + 1 for every fine column, computed once per call.
   auto ccol = [&](int64_t cx) { return int32_t(wrap(std::clamp(cx, C.clip_x0, C.clip_x0 + n_ - 1))); };
   auto crow = [&](int64_t cy) { return C.z.data() + wrap(std::clamp(cy, C.clip_y0, C.clip_y0 + n_ - 1)) * n_; };
-  up_cols_.resize(size_t(2 * r.width));
+  up_cols_.resize(size_t(3 * r.width));
   for (int64_t i = 0; i < r.width; ++i) {
     const int64_t cx = (r.x0 + i) >> 1;
-    up_cols_[size_t(2 * i)] = ccol(cx);
-    up_cols_[size_t(2 * i + 1)] = ccol(cx + 1);
+    up_cols_[size_t(3 * i)] = ccol(cx);
+    up_cols_[size_t(3 * i + 1)] = ccol(cx + 1);
+    up_cols_[size_t(3 * i + 2)] = int32_t(wrap(r.x0 + i));
   }
   // The coarse surface at a fine vertex: the coarse vertex, the midpoint of the coarse edge, or the
   // midpoint of the quad diagonal (x0, y0)-(x1, y1) that the renderer's triangulation uses.
@@ -123,11 +127,12 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
     float* out = L.zc.data() + wrap(y) * n_;
     for (int64_t i = 0; i < r.width; ++i) {
       const int64_t x = r.x0 + i;
-      const int32_t a = up_cols_[size_t(2 * i)], b = up_cols_[size_t(2 * i + 1)];
+      const int32_t* col = up_cols_.data() + 3 * i;
+      const int32_t a = col[0], b = col[1];
       float v;
       if ((x & 1) == 0) v = (y & 1) ? 0.5f * (c0[a] + c1[a]) : c0[a];
       else v = 0.5f * (c0[a] + ((y & 1) ? c1[b] : c0[b]));
-      out[wrap(x)] = v;
+      out[col[2]] = v;
     }
   }
 }
