@@ -16,6 +16,7 @@
 #include "runtime/container.h"
 #include "runtime/region_decoder.h"
 #include "runtime/renderer.h"
+#include "runtime/synthesis.h"
 #include "codec/codec.h"
 #include "pyramid/pyramid.h"
 
@@ -175,7 +176,8 @@ int run_bench(const std::shared_ptr<const PyramidFile>& file, double spacing, Cl
 int run(int argc, char** argv) {
   std::string pyramid, out_dir = "clipmap-frames", path_file, reference, original;
   std::optional<double> original_vscale;
-  int bench = 0;
+  int bench = 0, synth_levels = 0;
+  double synth_detail = 1.0;
   int width = 640, height = 480, n = 255, levels = 0, frames = 300, png_every = 1;
   int64_t budget = 0;
   double fov = 60;
@@ -223,6 +225,14 @@ int run(int argc, char** argv) {
            "decoder cache each time), timing region decode, zc, normal map and z bounds; then U and the\n"
            "residual decode of one n x n window separately",
            [&](const std::string& v) { bench = int(cli::parse_int("--bench", v, 1, 1000)); });
+  p.option("--synth-levels", "K",
+           "synthesise K levels finer than the pyramid's finest (U + Gaussian noise whose variance is\n"
+           "extrapolated from the stored residual statistics; docs/synthesis.md)",
+           [&](const std::string& v) { synth_levels = int(cli::parse_int("--synth-levels", v, 1, SynthesisOptions::kMaxLevels)); });
+  p.option("--synth-detail", "F", "scale of the synthesised noise (default 1; 0 = zero detail, U alone)", [&](const std::string& v) {
+    synth_detail = cli::parse_double("--synth-detail", v);
+    if (!(synth_detail >= 0 && synth_detail <= 100)) throw cli::UsageError("--synth-detail must be in [0, 100]");
+  });
   p.flag("--no-transitions", "disable the transition morph (to see popping)", &no_transitions);
   p.flag("--no-culling", "disable view-frustum culling", &no_culling);
   p.add_common(common, false);
@@ -245,14 +255,28 @@ int run(int argc, char** argv) {
   const double spacing = info.horizontal_units == "arc-second" ? info.spacing_x * 30.87 : info.spacing_x;
   auto decoder = std::make_shared<const RegionDecoder>(file);
   RegionDecoderSource source(decoder, spacing);
-  if (levels > source.level_count())
-    throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the pyramid's " + std::to_string(source.level_count()));
+  std::unique_ptr<SynthesisSource> synth;
+  if (synth_levels > 0) {
+    if (!reference.empty() || !original.empty() || bench > 0)
+      throw cli::UsageError("--synth-levels cannot be combined with --reference, --original or --bench");
+    ResidualFit fit;
+    synth = std::make_unique<SynthesisSource>(source, synthesis_options_for(*file, synth_levels, 1, synth_detail, &fit));
+    if (!common.quiet) {
+      std::cerr << "clipmap-view: synthesis: " << fit.note << ", log2 variance slope " << fit.slope << " per level (fitted "
+                << fit.slope_fitted << "); noise std";
+      for (int l = source.level_count(); l < synth->level_count(); ++l) std::cerr << ' ' << synth->noise_std_m(l);
+      std::cerr << " m\n";
+    }
+  }
+  HeightSource& heights = synth ? static_cast<HeightSource&>(*synth) : source;
+  if (levels > heights.level_count())
+    throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the source's " + std::to_string(heights.level_count()));
   ClipmapOptions copt;
   copt.n = n;
   copt.levels = levels;
   copt.budget = budget;
   if (bench > 0) return run_bench(file, spacing, copt, bench, common.quiet);
-  Clipmap clipmap(source, copt);
+  Clipmap clipmap(heights, copt);
   const int finest_level = source.level_count() - 1;
 
   // The reference flight: same clipmap options over another pyramid or the original input.
