@@ -14,19 +14,34 @@
 using namespace terrain;
 using namespace terrain::runtime;
 
+namespace {
+
+// A synthetic terrain written as <dir>/t.raw (with its sidecar); returns it.
+Heightmap write_terrain(const iotest::TempDir& dir, int64_t width, int64_t height, uint64_t seed) {
+  SynthOptions so;
+  so.width = width;
+  so.height = height;
+  so.seed = seed;
+  Heightmap map = synthesize_terrain(so);
+  write_raw(dir.file("t.raw"), map);
+  return map;
+}
+
+BuildFileOptions build_options(int levels) {
+  BuildFileOptions bo;
+  bo.levels = levels;
+  bo.threads = 1;
+  return bo;
+}
+
+}  // namespace
+
 TEST_CASE("clipmap: a decoded pyramid fills the levels with the decoder's samples", "[clipmap]") {
   iotest::TempDir dir;
-  SynthOptions so;
-  so.width = 300;
-  so.height = 260;
-  so.seed = 5;
-  const Heightmap map = synthesize_terrain(so);
-  write_raw(dir.file("t.raw"), map);
-  BuildFileOptions bo;
+  write_terrain(dir, 300, 260, 5);
+  BuildFileOptions bo = build_options(4);
   bo.target = ErrorTarget::Step;
   bo.target_metres = 4.0;
-  bo.levels = 4;
-  bo.threads = 1;
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("t.pyr"), bo);
   auto file = PyramidFile::open(dir.file("t.pyr"));
   auto decoder = std::make_shared<const RegionDecoder>(file);
@@ -65,15 +80,8 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   // decoded level must equal it exactly, and the finest level's screen-space error must be 0. For a
   // lossy file the finest level's error is the compression error, and coarser levels err more.
   iotest::TempDir dir;
-  SynthOptions so;
-  so.width = 200;
-  so.height = 170;
-  so.seed = 11;
-  const Heightmap map = synthesize_terrain(so);
-  write_raw(dir.file("t.raw"), map);
-  BuildFileOptions bo;
-  bo.levels = 3;
-  bo.threads = 1;
+  const Heightmap map = write_terrain(dir, 200, 170, 11);
+  BuildFileOptions bo = build_options(3);
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossless.pyr"), bo);
   bo.target = ErrorTarget::Step;
   bo.target_metres = 8.0;
