@@ -103,8 +103,11 @@ void main() {
   // Texel T of the normal map sits at level position T / 2: position p is texture coordinate (2 p + 0.5) / 2n.
   float n2 = 2.0 * float(u_n);
   vec2 sf = texture(u_normal, vec3((2.0 * v_grid + 0.5) / n2, float(u_level))).rg;
-  vec2 sc = texture(u_normal, vec3((2.0 * u_coarse_scale * v_grid + 0.5) / n2, float(u_coarse_layer))).rg;
-  vec2 s = mix(sf, sc, v_alpha);
+  vec2 s = sf;
+  if (v_alpha > 0.0) {  // only the transition band needs the coarser level's normal
+    vec2 sc = texture(u_normal, vec3((2.0 * u_coarse_scale * v_grid + 0.5) / n2, float(u_coarse_layer))).rg;
+    s = mix(sf, sc, v_alpha);
+  }
   vec3 normal = normalize(vec3(-s, 1.0));
   float diffuse = max(dot(normal, normalize(u_light)), 0.0);
   float t = clamp((v_height - u_zrange.x) / max(u_zrange.y - u_zrange.x, 1e-3), 0.0, 1.0);
