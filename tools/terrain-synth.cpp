@@ -1,12 +1,50 @@
 // terrain-synth: write a deterministic synthetic terrain (pyramid/synth.h) in the format the
 // output's extension names.
+#include <algorithm>
+#include <cmath>
 #include <iostream>
 
 #include "cli.h"
 #include "pyramid/heightmap.h"
 #include "pyramid/synth.h"
+#include "runtime/synthesis.h"
 
 namespace {
+
+// The terrain at 2^-K of the size (coarse_extent K times, spacing 2^K times), amplified by K
+// synthesised levels of Gaussian detail (runtime/synthesis.h, docs/synthesis.md) and cropped to
+// the requested size. Whole metres, sea (<= 0) kept flat, unless float output keeps the fractions.
+terrain::Heightmap amplified_terrain(const terrain::SynthOptions& synth, int levels, double std0_m, double hurst,
+                                     bool whole_metres) {
+  terrain::SynthOptions base_options = synth;
+  for (int k = 0; k < levels; ++k)
+    base_options.width = terrain::coarse_extent(base_options.width),
+    base_options.height = terrain::coarse_extent(base_options.height);
+  base_options.spacing_m = std::ldexp(synth.spacing_m, levels);
+  const terrain::Heightmap base = terrain::synthesize_terrain(base_options);
+  terrain::runtime::FunctionHeightSource coarse(
+      1, terrain::GridSize{base.width(), base.height()}, base_options.spacing_m,
+      [&](int, int64_t x, int64_t y) { return float(base.metres(x, y)); }, false);
+  terrain::runtime::SynthesisOptions o;
+  o.levels = levels;
+  o.std_m = terrain::runtime::fractal_std(std0_m, hurst, levels);
+  o.seed = synth.seed;
+  terrain::runtime::SynthesisSource source(coarse, o);
+  std::vector<float> z(size_t(synth.width * synth.height));
+  source.fill(levels, terrain::Rect{0, 0, synth.width, synth.height}, z.data(), synth.width);
+  terrain::Heightmap map;
+  map.info = base.info;
+  map.info.width = synth.width;
+  map.info.height = synth.height;
+  map.info.spacing_x = map.info.spacing_y = synth.spacing_m;
+  if (!whole_metres) map.info.sample_type = terrain::SampleType::Float32;
+  map.values.resize(z.size());
+  for (size_t i = 0; i < z.size(); ++i) {
+    const double v = std::max(0.0, double(z[i]));
+    map.values[i] = whole_metres ? std::min(32767.0, std::round(v)) : v;
+  }
+  return map;
+}
 
 int run(int argc, char** argv) {
   std::string out;
@@ -35,6 +73,21 @@ int run(int argc, char** argv) {
                   synth.spacing_m = cli::parse_double("--spacing", v);
                   if (!(synth.spacing_m > 0)) throw cli::UsageError("--spacing must be positive");
                 });
+  int detail_levels = 0;
+  double detail_std = -1, hurst = 0.8;
+  parser.option("--detail-levels", "K",
+                "generate at 2^-K of the size and add K levels of synthesised fractal detail (U + Gaussian\n"
+                "noise, the clipmap's synthesis; docs/synthesis.md)",
+                [&](const std::string& v) { detail_levels = int(cli::parse_int("--detail-levels", v, 1, 8)); });
+  parser.option("--detail-std", "M", "noise std of the first added level, metres (default 0.02 x its spacing)",
+                [&](const std::string& v) {
+                  detail_std = cli::parse_double("--detail-std", v);
+                  if (!(detail_std >= 0 && detail_std < 1e4)) throw cli::UsageError("--detail-std must be in [0, 10000)");
+                });
+  parser.option("--hurst", "H", "std falls by 2^-H per finer level (default 0.8)", [&](const std::string& v) {
+    hurst = cli::parse_double("--hurst", v);
+    if (!(hurst >= 0 && hurst <= 2)) throw cli::UsageError("--hurst must be in [0, 2]");
+  });
   parser.flag("--big-endian", "write .raw samples big-endian", &big_endian);
   parser.add_common(common, false);
   if (auto status = parser.parse(argc, argv)) return *status;
@@ -56,7 +109,10 @@ int run(int argc, char** argv) {
   else if (ends(".exr")) kind = Kind::Exr;
   else throw cli::UsageError("unknown output extension in " + out + " (use .raw, .png, .tif, .tiff or .exr)");
 
-  terrain::Heightmap map = terrain::synthesize_terrain(synth);
+  if (detail_std < 0) detail_std = 0.02 * std::ldexp(synth.spacing_m, detail_levels - 1);
+  terrain::Heightmap map = detail_levels > 0
+                               ? amplified_terrain(synth, detail_levels, detail_std, hurst, kind != Kind::Exr)
+                               : terrain::synthesize_terrain(synth);
   switch (kind) {
     case Kind::Raw: terrain::write_raw(out, map, big_endian); break;
     case Kind::Image16: terrain::write_image16(out, map); break;
