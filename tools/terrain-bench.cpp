@@ -587,9 +587,9 @@ std::vector<PyramidTarget> pyramid_sweep(bool quick) {
   using terrain::runtime::ErrorTarget;
   std::vector<PyramidTarget> t{{ErrorTarget::Lossless, 0}};
   const std::vector<double> rms = quick ? std::vector<double>{0.5, 1, 2, 4}
-                                        : std::vector<double>{0.25, 0.35, 0.5, 0.7, 1, 1.4, 2, 2.8, 4, 5.7, 8};
+                                        : std::vector<double>{0.25, 0.5, 1, 1.4, 2, 2.8, 4, 8};
   const std::vector<double> max = quick ? std::vector<double>{1, 2, 5}
-                                        : std::vector<double>{0.5, 0.7, 1, 1.4, 2, 3, 5, 8, 11, 16};
+                                        : std::vector<double>{0.5, 1, 2, 3, 5, 8, 16};
   for (double m : rms) t.push_back({ErrorTarget::Rms, m});
   for (double m : max) t.push_back({ErrorTarget::MaxError, m});
   return t;
@@ -687,7 +687,7 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
         decoder.clear_cache();
         decoder.decode_units(finest, whole, units.data(), map.width());
       },
-      opt.min_time, 20, &x.decode_reps, &x.decode_cpu_seconds);
+      opt.min_time, 5, &x.decode_reps, &x.decode_cpu_seconds);
   std::vector<double> decoded(units.size());
   const double scale = decoder.metres_per_unit(), offset = decoder.metres_offset();
   for (size_t i = 0; i < units.size(); ++i) decoded[i] = double(units[i]) * scale + offset;
@@ -696,7 +696,7 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   if (row.bound >= 0 && x.error.max_abs > row.bound * (1 + 1e-9))
     row.error = "max error " + fmt("%g", x.error.max_abs) + " m exceeds the requested bound " + fmt("%g", row.bound) + " m";
 
-  const RegionTiming t = time_cold_windows(decoder, finest, {map.width(), map.height()}, opt.quick ? 8 : 32, units.data());
+  const RegionTiming t = time_cold_windows(decoder, finest, {map.width(), map.height()}, opt.quick ? 8 : 16, units.data());
   row.region_seconds = t.seconds;
   row.region_cpu_seconds = t.cpu_seconds;
   row.region_samples = t.samples;
