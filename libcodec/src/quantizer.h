@@ -13,9 +13,14 @@ inline constexpr int kBandCount = 31;
 inline constexpr uint32_t kStepOne = 256;
 inline constexpr uint32_t kMaxBandStep = 1u << 30;
 inline constexpr int64_t kMaxCoefficient = int64_t(1) << 29;  // decoder rejects larger coefficients
-// Lossy tiles carry kLossyFractionBits extra bits of sample precision through the transform, so the
-// rounding inside the integer lifting steps adds little error at small steps (lossless tiles: 0).
-inline constexpr int kLossyFractionBits = 2;
+// Lossy tiles carry extra bits of sample precision through the transform, so the rounding inside the
+// integer lifting steps adds little error at small steps (lossless tiles: 0). Images whose samples all
+// lie within +-kFineRange get kFineFractionBits (rms 0.47 instead of 0.60 at step 1.25 on SRTM data,
+// and about 2% fewer bits at equal rms), others kWideFractionBits; either way the scaled samples stay
+// within +-2^22, the range the transform is designed for.
+inline constexpr int kFineFractionBits = 4;
+inline constexpr int kWideFractionBits = 2;
+inline constexpr int32_t kFineRange = 1 << 18;
 
 constexpr int lp_band(int position) { return position; }
 constexpr int hp_band(int position) { return 15 + position; }

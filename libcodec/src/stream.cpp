@@ -152,17 +152,22 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
                           ? std::clamp(2.0 * options.max_error, 1.0, double(kMaxAbsSample))
                           : options.step;
   if (!(step >= 1.0 && step <= double(kMaxAbsSample))) return Status::InvalidArgument;
+  int32_t lo = 0, hi = 0;
   for (int64_t y = 0; y < height; ++y) {
     const int32_t* row = src + y * src_stride;
-    for (int64_t x = 0; x < width; ++x)
-      if (row[x] > kMaxAbsSample || row[x] < -kMaxAbsSample) return Status::ValueOutOfRange;
+    for (int64_t x = 0; x < width; ++x) {
+      lo = std::min(lo, row[x]);
+      hi = std::max(hi, row[x]);
+    }
   }
+  if (hi > kMaxAbsSample || lo < -kMaxAbsSample) return Status::ValueOutOfRange;
   if (dst_capacity < kHeaderSize) return Status::BufferTooSmall;
 
   const uint32_t step_q8 = uint32_t(std::lround(step * 256.0));
   detail::TileParams params;
   const bool lossless = step_q8 <= detail::kStepOne;
-  params.fraction_bits = lossless ? 0 : detail::kLossyFractionBits;
+  const bool fine = hi <= detail::kFineRange && lo >= -detail::kFineRange;
+  params.fraction_bits = lossless ? 0 : fine ? detail::kFineFractionBits : detail::kWideFractionBits;
   params.steps = lossless ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
@@ -247,9 +252,12 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if (info.max_error > uint32_t(kMaxAbsSample) || (!info.bound_max_error && info.max_error != 0))
     return Status::Corrupt;
   if (step_q8 > uint32_t(kMaxAbsSample) * 256u) return Status::Corrupt;
-  // Lossless streams (step 1) have 0 fraction bits, lossy ones kLossyFractionBits: nothing else.
+  // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
+  // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
   const uint32_t fraction_bits = get_u32(data + 40);
-  if (fraction_bits != (step_q8 <= detail::kStepOne ? 0u : uint32_t(detail::kLossyFractionBits)))
+  if (step_q8 <= detail::kStepOne ? fraction_bits != 0
+                                   : fraction_bits != uint32_t(detail::kFineFractionBits) &&
+                                         fraction_bits != uint32_t(detail::kWideFractionBits))
     return Status::Corrupt;
   const uint64_t index_offset = get_u64(data + 44);
   if (index_offset < kHeaderSize || index_offset > SIZE_MAX / 2) return Status::Corrupt;

@@ -176,7 +176,7 @@ void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {
   for (int y = 0; y < h; ++y) std::memcpy(dst + size_t(y) * w, tile + size_t(y) * pw, size_t(w) * sizeof(int32_t));
 }
 
-// Inputs are within +-2^20 and fraction_bits <= 2, so the scaled samples fit easily.
+// The encoder picks fraction_bits so that the scaled samples stay within +-2^22 (quantizer.h).
 void scale_up(int32_t* v, size_t n, int bits) {
   if (bits == 0) return;
   for (size_t i = 0; i < n; ++i) v[i] = int32_t(uint32_t(v[i]) << bits);

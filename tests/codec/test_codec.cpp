@@ -156,6 +156,34 @@ TEST_CASE("lossless round trip on residual-like and extreme synthetic data", "[c
   CHECK(first_difference(decode_image(stream, checker), recon) == -1);
 }
 
+TEST_CASE("lossy coding of extreme data at both sample precisions stays close", "[codec]") {
+  // Samples at the edges of the two fraction-bit ranges (+-2^18: 4 bits, +-2^20: 2 bits) in the
+  // patterns with the largest transform intermediates: if any lifting step overflowed, the decoded
+  // error would be of the order of the samples rather than of the step.
+  for (int32_t range : {int32_t(1) << 18, codec::kMaxAbsSample}) {
+    Image checker{70, 50, std::vector<int32_t>(70 * 50)};
+    for (int64_t y = 0; y < 50; ++y)
+      for (int64_t x = 0; x < 70; ++x) checker.samples[size_t(y * 70 + x)] = ((x + y) & 1) ? range : -range;
+    Image stripes = checker;
+    for (int64_t y = 0; y < 50; ++y)
+      for (int64_t x = 0; x < 70; ++x)
+        stripes.samples[size_t(y * 70 + x)] = ((x / 2 + y / 3) & 1) ? range : -range;
+    Image noise = uniform_noise(70, 50, range, 11);
+    for (const Image* img : {&checker, &stripes, &noise})
+      for (double step : {1.5, 3.0, 64.0}) {
+        codec::EncodeOptions lossy;
+        lossy.step = step;
+        std::vector<int32_t> recon;
+        const auto stream = encode_image(*img, lossy, &recon);
+        const auto decoded = decode_image(stream, *img);
+        CHECK(first_difference(decoded, recon) == -1);
+        const ErrorStats e = error_stats(*img, decoded);
+        INFO("range " << range << " step " << step);
+        CHECK(e.max_abs <= 16 * step + 4);
+      }
+  }
+}
+
 TEST_CASE("odd sizes round trip losslessly and lossily", "[codec]") {
   std::vector<std::pair<int64_t, int64_t>> sizes;
   for (int64_t h = 1; h <= 7; ++h)
