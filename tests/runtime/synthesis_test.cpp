@@ -382,3 +382,41 @@ TEST_CASE("render: rings stay watertight where stored and synthesised levels mee
   CHECK(views_with_boundary == 16);
   CHECK(broken_background > 0);
 }
+
+TEST_CASE("synthesis: terrain-synth --detail-levels amplifies a coarser generator run", "[synthesis]") {
+  iotest::TempDir dir;
+  const std::vector<std::string> size{"--width", "70", "--height", "50", "--seed", "9", "-q"};
+  auto call = [&](const std::string& out, std::vector<std::string> extra) {
+    std::vector<std::string> args{"-o", dir.file(out)};
+    args.insert(args.end(), size.begin(), size.end());
+    args.insert(args.end(), extra.begin(), extra.end());
+    return iotest::Invocation{"terrain-synth", args};
+  };
+  const auto results = iotest::run_tools(dir, {call("a.raw", {"--detail-levels", "2"}), call("b.raw", {"--detail-levels", "2"}),
+                                               call("c.raw", {"--detail-levels", "2", "--detail-std", "-1"})});
+  REQUIRE(results[0].status == 0);
+  REQUIRE(results[1].status == 0);
+  CHECK(iotest::read_file(dir.file("a.raw")) == iotest::read_file(dir.file("b.raw")));  // reproducible
+  CHECK(results[2].status == 1);
+  const Heightmap out = read_heightmap(dir.file("a.raw"));
+  REQUIRE(out.width() == 70);
+  REQUIRE(out.height() == 50);
+  // The generator at 1/4 of the size (70 -> 35 -> 18, 50 -> 25 -> 13) shows through at every 4th
+  // sample, within the added noise (default std 0.02 x 60 m, then 2^-0.8 of that; 6 sigma each).
+  SynthOptions so;
+  so.width = 18;
+  so.height = 13;
+  so.seed = 9;
+  const Heightmap base = synthesize_terrain(so);
+  const double bound = 6.0 * 1.2 * (1.0 + std::exp2(-0.8)) + 1.0;
+  double worst = 0, moved = 0;
+  for (int64_t y = 0; y < 13; ++y)
+    for (int64_t x = 0; x < 18; ++x)
+      if (4 * x < 70 && 4 * y < 50) {
+        const double d = std::abs(out.metres(4 * x, 4 * y) - base.metres(x, y));
+        worst = std::max(worst, d);
+        moved += d;
+      }
+  CHECK(worst <= bound);
+  CHECK(moved > 0);  // detail was added
+}
