@@ -102,8 +102,12 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
   if (r.width <= 0 || r.height <= 0) return;
   Level& L = levels_[size_t(level)];
   if (level == 0) {  // no coarser level: the morph target is the level itself
-    for (int64_t y = r.y0; y < r.y0 + r.height; ++y)
-      for (int64_t x = r.x0; x < r.x0 + r.width; ++x) L.zc[index(x, y)] = L.z[index(x, y)];
+    const int64_t tx = wrap(r.x0), run1 = std::min<int64_t>(r.width, n_ - tx);
+    for (int64_t y = r.y0; y < r.y0 + r.height; ++y) {
+      const size_t row = size_t(wrap(y) * n_);
+      std::copy_n(L.z.data() + row + tx, run1, L.zc.data() + row + tx);
+      std::copy_n(L.z.data() + row, r.width - run1, L.zc.data() + row);
+    }
     return;
   }
   const Level& C = levels_[size_t(level) - 1];
