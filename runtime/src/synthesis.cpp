@@ -3,6 +3,7 @@
 #include "runtime/synthesis.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -185,6 +186,7 @@ double SynthesisSource::noise_std_m(int level) const {
 }
 
 int32_t SynthesisSource::noise_units(int level, int64_t x, int64_t y) const {
+  assert(level >= base_levels_ && level < level_count());
   const size_t k = size_t(level - base_levels_);
   // Floor of x * magnification (arithmetic shift), wrapped onto the table (two's complement & mask).
   const int64_t ix = (((x * mul_x_[k]) >> kMulShift) + off_x_[k]) & table_mask_;

@@ -69,7 +69,8 @@ struct SynthesisOptions {
 // A HeightSource with the base's P levels (passed through unchanged) and K synthesised levels
 // P .. P+K-1 finer than the base's finest. Synthesised level sizes double (2w - 1, so coarse sample
 // i sits on fine sample 2i and coarse_extent gives the base's size back); spacing_m() is the
-// base's divided by 2^K. Outside a level, fill() repeats its edge samples like every source.
+// base's divided by 2^K. Outside a level, fill() repeats its edge samples like every source
+// (synthesised levels are bounded by their level_size even over an unbounded base).
 // Throws std::invalid_argument for unusable options (K, std_m size or values, quantum, table size).
 // The base must outlive this object. Not thread-safe (one scratch), like every HeightSource.
 class SynthesisSource final : public HeightSource {
@@ -83,7 +84,8 @@ class SynthesisSource final : public HeightSource {
   // Synthesised levels in integer quanta (metres = units * quantum_m()); `rect` must lie inside
   // level `level` >= base_levels() - 1 (the base's finest comes out rounded to the quantum).
   void fill_units(int level, const Rect& rect, int32_t* out, int64_t out_stride);
-  // The noise added at sample (x, y) of synthesised level `level`, in quanta.
+  // The noise added at sample (x, y) of synthesised level `level` (base_levels() ..
+  // level_count() - 1; any x, y), in quanta.
   int32_t noise_units(int level, int64_t x, int64_t y) const;
   // Target noise standard deviation of `level` (metres; 0 for the base's levels).
   double noise_std_m(int level) const;
