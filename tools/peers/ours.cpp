@@ -26,7 +26,7 @@ class OursPeer final : public Peer {
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
     const std::vector<double> step_metres = quick ? std::vector<double>{2, 4, 8}
-                                                  : std::vector<double>{1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64};
+                                                  : std::vector<double>{1.25, 1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64};
     const std::vector<double> error_metres = quick ? std::vector<double>{1, 2, 5}
                                                    : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out{{"step=1 lossless", 1, kStep, 0}};
