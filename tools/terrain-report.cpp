@@ -103,7 +103,9 @@ int run(int argc, char** argv) {
     throw IoError(IoErrorCode::DimensionMismatch, input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
                                                       " does not match the pyramid's " + std::to_string(info.width) + "x" +
                                                       std::to_string(info.height));
-  const double mpu = info.vertical_scale, off = info.vertical_offset;
+  // The reference below is built without the builder's centring offset, so its units map to metres
+  // with the input's own offset.
+  const double mpu = info.vertical_scale, off = map.info.vertical_offset;
 
   // The source levels exactly as the builder formed them: a lossless build with the stored filter.
   BuildOptions bo;

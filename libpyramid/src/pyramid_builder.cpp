@@ -48,6 +48,8 @@ void validate(const BuildOptions& o, const GridInfo& info) {
   if (o.threads < 1 || o.threads > 256) throw std::invalid_argument("pyramid: threads must be 1..256");
   if (!(o.value_scale > 0) || !std::isfinite(o.value_scale))
     throw std::invalid_argument("pyramid: value_scale must be finite and > 0");
+  if (!(std::abs(o.value_offset) <= 2147483647.0) || o.value_offset != std::nearbyint(o.value_offset))
+    throw std::invalid_argument("pyramid: value_offset must be an integer within int32");
   if (o.fill_band_rows < 1) throw std::invalid_argument("pyramid: fill_band_rows must be >= 1");
   if (o.fit_rows < 1) throw std::invalid_argument("pyramid: fit_rows must be >= 1");
   if (o.level_count < 0) throw std::invalid_argument("pyramid: level_count must be >= 0");
@@ -61,7 +63,10 @@ void validate(const BuildOptions& o, const GridInfo& info) {
 class InputConverter {
  public:
   InputConverter(const BuildOptions& opt, const GridInfo& info)
-      : scale_(opt.value_scale), exact_(info.integer_valued() && opt.value_scale == 1.0), width_(info.width) {}
+      : scale_(opt.value_scale),
+        offset_(opt.value_offset),
+        exact_(info.integer_valued() && opt.value_scale == 1.0),
+        width_(info.width) {}
 
   // Returns the number of voids in the band.
   int64_t convert(const double* values, const uint8_t* valid, int64_t y, int64_t rows, int32_t* ints) {
@@ -74,11 +79,11 @@ class InputConverter {
         continue;
       }
       const double v = values[k] * scale_;
-      const double r = std::nearbyint(v);
+      const double r = std::nearbyint(v) - offset_;
       if (!(std::abs(r) <= double(std::numeric_limits<int32_t>::max())))
         throw std::invalid_argument("pyramid input: sample at row " + std::to_string(y + k / W) + ", column " +
                                     std::to_string(k % W) + " does not fit int32 after scaling");
-      if (exact_ && r != v)
+      if (exact_ && r + offset_ != v)
         throw std::invalid_argument("pyramid input: non-integer sample in an integer grid at row " +
                                     std::to_string(y + k / W) + ", column " + std::to_string(k % W));
       ints[k] = int32_t(r);
@@ -89,7 +94,7 @@ class InputConverter {
 
  private:
   static constexpr int64_t kFillTile = 256;
-  double scale_;
+  double scale_, offset_;
   bool exact_;
   int64_t width_;
   int32_t carry_ = 0;

@@ -104,6 +104,19 @@ Heightmap read_calibration_window(const std::string& input, const ReadOptions& r
   return map;
 }
 
+// Integer level-unit offset that centres the window's valid values when they reach beyond half of
+// libcodec's range; 0 otherwise.
+double centring_offset(const Heightmap& window, double value_scale) {
+  double lo = INFINITY, hi = -INFINITY;
+  for (size_t i = 0; i < window.values.size(); ++i)
+    if (window.valid.empty() || window.valid[i]) {
+      const double v = std::nearbyint(window.values[i] * value_scale);
+      lo = std::min(lo, v), hi = std::max(hi, v);
+    }
+  if (!(hi >= lo) || std::max(std::abs(lo), std::abs(hi)) <= double(codec::kMaxAbsSample / 2)) return 0;
+  return std::nearbyint(0.5 * (lo + hi));
+}
+
 struct Trial {
   double step = 1;
   double rms = 0;
@@ -153,6 +166,13 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.temp_dir = o.temp_dir.empty() ? directory_of(output) : o.temp_dir;
   bo.temp_name = output.substr(output.find_last_of('/') == std::string::npos ? 0 : output.find_last_of('/') + 1);
 
+  // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
+  // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
+  // the first rows' mid-range. Ordinary DEMs keep their native units (offset 0).
+  const Heightmap window = read_calibration_window(input, read_options, o);
+  bo.value_offset = centring_offset(window, units.value_scale);
+  const LevelUnits stored = LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
+
   PtcCoderOptions co;
   co.tile_size = o.tile_size;
   ErrorMode mode = ErrorMode::Lossless;
@@ -175,24 +195,39 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       if (!(o.target_metres > 0)) throw std::invalid_argument("rms target must be positive");
       const double target = o.target_metres / mpu;
       if (progress) progress("calibrating step", 0);
-      const Heightmap window = read_calibration_window(input, read_options, o);
       BuildOptions cal = bo;
       cal.temp_dir = bo.temp_dir;
-      // rms grows about linearly with the step: a few multiplicative corrections converge.
-      Trial best{};
+      // rms grows about linearly with the step, so multiplicative corrections converge fast; once a
+      // step above and one below the target are known, bisect (in log step) between them. The
+      // result is the largest step whose rms is within 2% above the target or below it: smooth or
+      // flat terrain, whose rms stays 0 up to a large step and then jumps, must not be given a step
+      // that overshoots the target.
+      Trial below{}, above{};  // largest step meeting the target; smallest step missing it
+      bool have_below = false, have_above = false;
       double step = std::max(1.0, codec::step_for_target_rms(target));
-      for (int i = 0; i < 8; ++i) {
+      for (int i = 0; i < 10; ++i) {
         co.step = step;
         const Trial t = trial_build(window, cal, co);
         out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " + std::to_string(t.rms * mpu) +
                                       " m, " + std::to_string(t.bytes) + " bytes");
-        if (i == 0 || std::abs(std::log(std::max(t.rms, 1e-9) / target)) < std::abs(std::log(std::max(best.rms, 1e-9) / target)))
-          best = t;
+        if (progress) progress("calibrating step", (i + 1) / 10.0);
+        if (t.rms <= 1.02 * target) {
+          if (!have_below || t.step > below.step) below = t, have_below = true;
+        } else if (!have_above || t.step < above.step) {
+          above = t, have_above = true;
+        }
         if (std::abs(t.rms / target - 1) < 0.02 || (step <= 1 && t.rms <= target)) break;
-        const double ratio = t.rms > 0 ? target / t.rms : 4.0;
-        step = std::max(1.0, step * std::clamp(ratio, 0.5, 4.0));
-        if (progress) progress("calibrating step", (i + 1) / 8.0);
+        const double previous = step;
+        if (have_below && have_above) {
+          if (above.step / below.step < 1.03) break;
+          step = std::sqrt(below.step * above.step);
+        } else {
+          const double ratio = t.rms > 0 ? target / t.rms : 4.0;
+          step = std::max(1.0, step * std::clamp(ratio, 0.5, 4.0));
+        }
+        if (step == previous) break;
       }
+      const Trial best = have_below ? below : above;
       co.step = best.step;
       break;
     }
@@ -210,7 +245,6 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       if (out.max_error_units > 0) {
         // The transform step that gives the fewest bytes under the bound depends on the terrain.
         if (progress) progress("calibrating step", 0);
-        const Heightmap window = read_calibration_window(input, read_options, o);
         Trial best{};
         for (double f : {1.0, 1.5, 2.0, 3.0, 4.0}) {
           co.step = std::max(1.0, f * out.max_error_units);
@@ -241,7 +275,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   info.horizontal_units = g.horizontal_units;
   info.vertical_units = "m";
   info.vertical_scale = mpu;
-  info.vertical_offset = units.offset_metres;
+  info.vertical_offset = stored.offset_metres;
   if (g.origin_x && g.origin_y)
     info.georeference = Georeference{*g.origin_x, *g.origin_y, g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
   info.quantisation.step_units = co.step;

@@ -211,6 +211,9 @@ struct BuildOptions {
   int64_t min_coarsest_side = 128;   // automatic level count stops before the longer side drops below
   double value_scale = 1.0;          // level value = round(native * value_scale); integer inputs must
                                      // give integers (else the build fails); float inputs are rounded
+  double value_offset = 0.0;         // an integer subtracted after scaling: level value =
+                                     // round(native * value_scale) - value_offset; keeps inputs far
+                                     // from zero (1e6 m, int32 millimetres) inside the coder's range
   bool use_fixed_filter = false;     // true: use `fixed_filter` instead of fitting D
   DownsampleFilter fixed_filter = DownsampleFilter::default_filter();
   FilterFitOptions fit;
