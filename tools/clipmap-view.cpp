@@ -193,7 +193,7 @@ int run(int argc, char** argv) {
   double fov = 60;
   bool no_transitions = false, no_culling = false;
   cli::CommonFlags common;
-  cli::ArgParser p("clipmap-view", "clipmap-view PYRAMID [options]",
+  cli::ArgParser p("clipmap-view", "PYRAMID [options]",
                    "Flies a camera over a compressed pyramid (.pyr) with the geometry clipmap, renders each frame\n"
                    "off-screen with OpenGL 4.5 core through EGL (Mesa llvmpipe when there is no GPU), and writes\n"
                    "PNG frames, stats.csv (one row per frame) and stats.json (summary) into --out.");
