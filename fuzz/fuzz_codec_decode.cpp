@@ -16,26 +16,37 @@
 
 namespace {
 
-uint32_t get_u32(const uint8_t* p) { return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24; }
-uint64_t get_u64(const uint8_t* p) { return uint64_t(get_u32(p)) | uint64_t(get_u32(p + 4)) << 32; }
 void put_u32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
 }
 
-// Rewrites header, index and tile CRCs in place (layout from docs/codec.md).
+// Rewrites header, tile and index CRCs in place (format v2 layout from docs/codec.md: 56-byte header
+// with its CRC at 52, payloads back to back, then per tile a varint size and a CRC, then the index CRC).
 void fix_checksums(std::vector<uint8_t>& s) {
-  if (s.size() < 172) return;
-  put_u32(s.data() + 168, codec::detail::crc32c(s.data(), 168));
+  constexpr size_t kHeaderCrcAt = 52;
+  if (s.size() < kHeaderCrcAt + 4) return;
+  put_u32(s.data() + kHeaderCrcAt, codec::detail::crc32c(s.data(), kHeaderCrcAt));
   codec::HeaderInfo h;
   if (codec::read_header(s.data(), s.size(), &h) != codec::Status::Ok) return;
-  if (s.size() < h.data_offset) return;
-  const size_t tiles = size_t(h.tile_count());
-  for (size_t i = 0; i < tiles; ++i) {
-    uint8_t* e = s.data() + h.index_offset + 16 * i;
-    const uint64_t offset = get_u64(e), size = get_u32(e + 8);
-    if (offset <= s.size() && size <= s.size() - offset) put_u32(e + 12, codec::detail::crc32c(s.data() + offset, size_t(size)));
+  if (h.index_offset > s.size()) return;
+  size_t p = h.index_offset;
+  uint64_t offset = h.data_offset;
+  for (int64_t i = 0; i < h.tile_count(); ++i) {
+    uint64_t size = 0;
+    for (int shift = 0;; shift += 7) {
+      if (p >= s.size() || shift > 28) return;
+      const uint8_t byte = s[p++];
+      size |= uint64_t(byte & 0x7F) << shift;
+      if (!(byte & 0x80)) break;
+    }
+    if (s.size() - p < 4) return;
+    if (offset <= h.index_offset && size <= h.index_offset - offset)
+      put_u32(s.data() + p, codec::detail::crc32c(s.data() + offset, size_t(size)));
+    p += 4;
+    offset += size;
   }
-  put_u32(s.data() + h.data_offset - 4, codec::detail::crc32c(s.data() + h.index_offset, h.data_offset - 4 - h.index_offset));
+  if (s.size() - p < 4) return;
+  put_u32(s.data() + p, codec::detail::crc32c(s.data() + h.index_offset, p - h.index_offset));
 }
 
 void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {

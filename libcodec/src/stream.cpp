@@ -307,6 +307,9 @@ Status Decoder::open(const uint8_t* data, size_t size) {
   HeaderInfo header;
   Status s = read_header(data, size, &header);
   if (s != Status::Ok) return s;
+  // Every tile takes at least 1 payload byte and 5 index bytes: reject impossible tile counts before
+  // allocating the index (a forged header could otherwise ask for terabytes).
+  if (uint64_t(header.tile_count()) > (size - header.data_offset) / 6) return Status::Truncated;
   std::vector<TileEntry> index(size_t(header.tile_count()));
   s = read_tile_index(data, size, header, index.data());
   if (s != Status::Ok) return s;

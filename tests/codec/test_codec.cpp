@@ -391,6 +391,22 @@ TEST_CASE("truncated and corrupted streams are rejected", "[codec]") {
     if (bad == stream) continue;
     CHECK(codec::decode(bad.data(), bad.size(), out.data(), img.width, scratch) != codec::Status::Ok);
   }
+  // A forged header (valid CRC) announcing 2^30 x 2^30 samples must be rejected before the decoder
+  // allocates an index for it.
+  auto forged = stream;
+  for (int i = 0; i < 8; ++i) forged[8 + i] = forged[16 + i] = uint8_t(i == 3 ? 0x40 : 0);
+  uint32_t crc = 0xFFFFFFFFu;  // CRC32C of the header's first 52 bytes, stored at 52
+  for (size_t i = 0; i < 52; ++i) {
+    crc ^= forged[i];
+    for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0x82F63B78u & (0u - (crc & 1)));
+  }
+  crc ^= 0xFFFFFFFFu;
+  for (int i = 0; i < 4; ++i) forged[52 + i] = uint8_t(crc >> (8 * i));
+  codec::HeaderInfo forged_header;
+  REQUIRE(codec::read_header(forged.data(), forged.size(), &forged_header) == codec::Status::Ok);
+  CHECK(forged_header.width == int64_t(1) << 30);
+  codec::Decoder forged_decoder;
+  CHECK(forged_decoder.open(forged.data(), forged.size()) == codec::Status::Truncated);
   auto wrong_version = stream;
   wrong_version[4] = 9;
   CHECK(codec::decode(wrong_version.data(), wrong_version.size(), out.data(), img.width, scratch) ==
