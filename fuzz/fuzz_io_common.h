@@ -16,16 +16,21 @@
 
 namespace fuzz_io {
 
-// A per-process directory, removed at exit.
+// A per-process directory, removed at exit. The path lives on the heap and is never freed: the
+// exit handler is registered while the path is being built, so it runs after any static string
+// would already have been destroyed.
 inline const std::string& scratch_dir() {
-  static const std::string dir = [] {
+  static const std::string* dir = [] {
     const char* tmp = std::getenv("TMPDIR");
-    std::string d = std::string(tmp && *tmp ? tmp : "/tmp") + "/terrain-fuzz-" + std::to_string(getpid());
-    std::filesystem::create_directories(d);
-    std::atexit([] { std::error_code ec; std::filesystem::remove_all(scratch_dir(), ec); });
+    auto* d = new std::string(std::string(tmp && *tmp ? tmp : "/tmp") + "/terrain-fuzz-" + std::to_string(getpid()));
+    std::filesystem::create_directories(*d);
+    std::atexit([] {
+      std::error_code ec;
+      std::filesystem::remove_all(*dir, ec);
+    });
     return d;
   }();
-  return dir;
+  return *dir;
 }
 
 inline std::string write_file(const std::string& name, const uint8_t* data, size_t size) {
