@@ -1,7 +1,8 @@
 // libcodec: PTC-style lapped-transform coder for integer images (terrain residuals and DEM levels).
 //
-// Pipeline per tile: 4-point overlap pre-filter across internal block edges -> reversible 4x4 integer
-// lifting transform -> second 4x4 stage on the block DCs of each 16x16 macroblock -> dead-zone
+// Pipeline per tile: 4-point overlap pre-filter across internal block edges (a stronger, expanding
+// one in lossy streams) -> reversible 4x4 integer lifting transform -> (lossy: overlap filter across
+// macroblock edges on the block DCs) -> second 4x4 stage on the block DCs of each macroblock -> dead-zone
 // quantiser with per-band steps -> adaptive run-length/Golomb-Rice (RLGR) coding of DC, LP and HP bands
 // with separate backward-adaptive states. Tiles are independent (hard tile edges), so any rectangle
 // decodes from the tiles it intersects. Bitstream: docs/codec.md.
@@ -14,7 +15,7 @@
 // For data whose coefficients are spread over many steps the sample-domain rms error is
 //   rms ~= S * sqrt(1/12 + 1/64) ~= 0.315 * S           (predicted_rms(S))
 // (the 1/64 comes from the dead zone: the quantiser rounds |c|/step + 3/8 down and reconstructs at
-// q * step, i.e. 1/8 step below the bin centre). Smooth data, where many coefficients fall in the dead
+// (|q| + 1/16) * step, i.e. 1/16 step below the bin centre). Smooth data, where many coefficients fall in the dead
 // zone, gets a lower rms. S = 1 is exactly lossless. Bands whose S / g_b is below 1 use step 1.
 //
 // Max-error mode guarantees |decoded - input| <= E at every sample: each tile is coded either by the
@@ -70,8 +71,8 @@ struct HeaderInfo {
   double step = 1.0;            // as recorded (1/256 resolution)
   bool bound_max_error = false;
   uint32_t max_error = 0;
-  size_t index_offset = 0;      // byte offset of the tile index
-  size_t data_offset = 0;       // first byte after the index
+  size_t index_offset = 0;      // byte offset of the tile index (it follows the payloads)
+  size_t data_offset = 0;       // byte offset of the first tile payload (end of the header)
   int64_t tile_count() const { return tiles_x * tiles_y; }
 };
 
@@ -113,7 +114,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
 // Parses and checks the header (magic, version, header CRC, sizes) without decoding.
 Status read_header(const uint8_t* data, size_t size, HeaderInfo* header);
 // Reads the tile index (row-major tiles) into entries[0 .. header.tile_count()) and checks the
-// index CRC and that every tile lies inside the stream.
+// index CRC, the sizes, and that the payloads fill [data_offset, index_offset) back to back. Offsets
+// are running sums of the stored sizes.
 Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries);
 
 // A parsed stream: header and index are validated once, then any number of regions decode from it.
