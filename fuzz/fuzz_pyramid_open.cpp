@@ -94,7 +94,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   decode_some(path);
   std::vector<uint8_t> copy(data, data + size);
   fix_checksums(copy);
-  if (std::memcmp(copy.data(), data, size) != 0) {
+  if (size > 0 && std::memcmp(copy.data(), data, size) != 0) {
     fuzz_io::write_file("input.pyr", copy.data(), copy.size());
     decode_some(path);
   }
