@@ -191,6 +191,29 @@ bool box_outside(const std::array<std::array<double, 4>, 6>& planes, const doubl
   return false;
 }
 
+bool contains(const Rect& outer, const Rect& inner) {
+  return inner.x0 >= outer.x0 && inner.y0 >= outer.y0 && inner.x0 + inner.width <= outer.x0 + outer.width &&
+         inner.y0 + inner.height <= outer.y0 + outer.height;
+}
+
+// Whether `dirty` (the clipmap's last update) holds every sample a level gained since the textures
+// showed clip region `before`: the exposed columns (whole height) and rows, as the refill writes them.
+// False when an update that moved the level was never uploaded: its samples are only in the clipmap.
+bool dirty_covers_move(const Rect& before, const Rect& now, const std::vector<Rect>& dirty) {
+  const int64_t n = now.width, dx = now.x0 - before.x0, dy = now.y0 - before.y0;
+  std::vector<Rect> gained;
+  if (std::abs(dx) >= n || std::abs(dy) >= n) {
+    gained.push_back(now);
+  } else {
+    if (dx != 0) gained.push_back(Rect{dx > 0 ? before.x0 + n : now.x0, now.y0, std::abs(dx), n});
+    if (dy != 0)
+      gained.push_back(Rect{std::max(now.x0, before.x0), dy > 0 ? before.y0 + n : now.y0, n - std::abs(dx), std::abs(dy)});
+  }
+  for (const Rect& g : gained)
+    if (std::none_of(dirty.begin(), dirty.end(), [&](const Rect& d) { return contains(d, g); })) return false;
+  return true;
+}
+
 }  // namespace
 
 struct ClipmapRenderer::Gl {
@@ -205,6 +228,10 @@ struct ClipmapRenderer::Gl {
     int cols = 0;         // local columns of quads
   };
   Footprint block, fixup, trim, stitch;
+  // Per level: the clip region the textures hold (valid once uploaded), so that an update whose
+  // dirty rectangles never reached upload() is noticed and the level sent whole.
+  std::vector<Rect> uploaded_clip;
+  std::vector<bool> uploaded;
   GLint u_origin = -1, u_extent = -1, u_transpose = -1, u_level = -1, u_n = -1, u_wrap_base = -1, u_g = -1,
         u_viewer = -1, u_active = -1, u_w = -1, u_transitions = -1, u_mvp = -1, u_coarse_layer = -1,
         u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1;
@@ -215,6 +242,8 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   if (width < 1 || height < 1 || width > 16384 || height > 16384)
     throw std::invalid_argument("clipmap renderer: frame size must be 1..16384 pixels a side");
   Gl& g = *gl_;
+  g.uploaded_clip.assign(size_t(levels), Rect{});
+  g.uploaded.assign(size_t(levels), false);
   const GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader), fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
   g.program = glCreateProgram();
   glAttachShader(g.program, vs);
@@ -333,10 +362,17 @@ void ClipmapRenderer::upload(const Clipmap& cm, bool everything) {
     if (!cm.has_data(l)) continue;
     std::vector<Rect> all;
     const std::vector<Rect>* rects = &cm.dirty_rects(l);
-    if (everything) {
-      all.push_back(cm.clip_region(l));
+    const Rect clip = cm.clip_region(l);
+    // Several updates between two uploads (or another clipmap) leave samples the last update's
+    // dirty rectangles do not name: the textures would keep stale heights that the culling bounds,
+    // taken from the clipmap, no longer describe. Such a level is uploaded whole.
+    const bool stale = !g.uploaded[size_t(l)] || !dirty_covers_move(g.uploaded_clip[size_t(l)], clip, *rects);
+    if (everything || stale) {
+      all.push_back(clip);
       rects = &all;
     }
+    g.uploaded[size_t(l)] = true;
+    g.uploaded_clip[size_t(l)] = clip;
     for (const Rect& r : *rects) {
       // A rectangle of the level maps to up to 2 x 2 pieces of the toroidal texture.
       const int64_t tx = cm.wrap(r.x0), ty = cm.wrap(r.y0);

@@ -158,6 +158,57 @@ TEST_CASE("render: frustum culling never removes a visible block", "[render]") {
   CHECK(culled > 0);  // and culling did skip some
 }
 
+TEST_CASE("render: frustum culling never removes visible terrain in low grazing views", "[render]") {
+  LeakCheckPause pause;
+  // Low cameras (32-48 m above the ground) looking down so that the top of the frame is 0.15 rad
+  // below the horizon, over a bounded source (edge repeat outside), a fresh clipmap per view: the
+  // frame reaches from below the camera to past a kilometre ahead where the ground falls away, across
+  // all six rings, so every pixel is terrain. Each view updates twice and uploads once, as a caller
+  // that skips an upload does: the second update's dirty rectangles are empty, and a renderer that
+  // trusted them alone drew the previous view's heights while culling against this view's bounds
+  // (background in 14 of 16 frames with culling on, none with it off).
+  constexpr int kGrazingLevels = 6, n = 31;
+  constexpr double spacing = 5.0;
+  FunctionHeightSource source(
+      kGrazingLevels, GridSize{2049, 1537}, spacing,
+      [](int level, int64_t x, int64_t y) {
+        const double s = std::ldexp(spacing, kGrazingLevels - 1 - level);
+        const double xm = double(x) * s, ym = double(y) * s;
+        return float(80.0 * std::sin(xm * 0.0013) * std::cos(ym * 0.0011) + 8.0 * std::sin(xm * 0.007 + ym * 0.005) +
+                     2.0 * std::cos(xm * 0.031 - ym * 0.023));
+      },
+      false);
+  ClipmapRenderer renderer((gl(), n), kGrazingLevels, kW, kH);
+  RenderOptions on = rendertest::crack_check_options(), off = on;
+  off.culling = false;
+  std::vector<uint8_t> culled_image, pixels;
+  int culled = 0, drawn = 0;
+  for (int i = 0; i < 16; ++i) {
+    ClipmapOptions o;
+    o.n = n;
+    o.budget = 1 << 30;
+    Clipmap clipmap(source, o);
+    const double x = 2400.0 + 83.3 * i, y = 1900.0 + 51.7 * i * (i % 3);
+    const Camera cam = rendertest::low_grazing_view(source, i, x, y);
+    clipmap.update(x, y, cam.position[2]);
+    clipmap.update(x, y, cam.position[2]);
+    renderer.upload(clipmap);
+    const RenderStats a = renderer.render(clipmap, cam, on);
+    renderer.read_rgba(culled_image);
+    renderer.render(clipmap, cam, off);
+    renderer.read_rgba(pixels);
+    culled += a.blocks_culled;
+    drawn += a.blocks_drawn;
+    INFO("view " << i << " at (" << x << ", " << y << "), culled " << a.blocks_culled << " of "
+                 << a.blocks_culled + a.blocks_drawn);
+    CHECK(rendertest::background_pixels(pixels) == 0);        // the whole frame is terrain
+    CHECK(rendertest::background_pixels(culled_image) == 0);
+    CHECK(culled_image == pixels);
+  }
+  CHECK(culled > 0);
+  WARN("low grazing views: culled " << culled << " of " << culled + drawn << " pieces");
+}
+
 TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") {
   LeakCheckPause pause;
   // A slow flight: the camera itself moves 0.6 m per frame (a small fraction of a pixel's

@@ -4,6 +4,7 @@
 // wholly on the terrain is a crack).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -56,6 +57,26 @@ inline terrain::runtime::RenderOptions cracked_options() {
   opt.snap_perimeter = false;
   opt.stitch = false;
   return opt;
+}
+
+// View i of the low grazing flights: the camera 32-48 m above the source's finest sample under
+// (x, y) metres, yaw 0.41 i, the top of the frame 0.15 rad below the horizon (the frame reaches from
+// below the camera to where the rays meet the ground, hundreds of metres ahead or more). The height
+// above that sample goes to *above_m when given.
+inline terrain::runtime::Camera low_grazing_view(terrain::runtime::HeightSource& source, int i, double x, double y,
+                                                 double* above_m = nullptr) {
+  float ground = 0;
+  const double g = source.spacing_m();
+  source.fill(source.level_count() - 1, terrain::Rect{int64_t(x / g), int64_t(y / g), 1, 1}, &ground, 1);
+  terrain::runtime::Camera cam;
+  cam.position[0] = x;
+  cam.position[1] = y;
+  const double above = 32.0 + 4.0 * (i % 5);
+  if (above_m) *above_m = above;
+  cam.position[2] = double(ground) + above;
+  cam.yaw = 0.41 * i;
+  cam.pitch = -0.15 - 0.5 * cam.fov_y_deg * M_PI / 180.0;
+  return cam;
 }
 
 // Background pixels of an RGBA frame rendered with crack_check_options().

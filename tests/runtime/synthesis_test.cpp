@@ -340,28 +340,17 @@ TEST_CASE("render: rings stay watertight where stored and synthesised levels mee
   Clipmap clipmap(source, o);
   constexpr int kW = 320, kH = 240;
   ClipmapRenderer renderer((rendertest::gl(), 31), clipmap.level_count(), kW, kH);
-  // Culling off: at these low views the renderer's frustum culling also drops visible coarse
-  // blocks over a plain 6-level source without synthesis (a culling problem, reported
-  // separately); this test is about the geometry where stored and synthesised levels meet.
   RenderOptions opt = rendertest::crack_check_options(), broken = rendertest::cracked_options();
-  opt.culling = broken.culling = false;
   const int first_synthesised = kBaseLevels;  // clipmap level = source level here
   std::vector<uint8_t> pixels;
   int64_t broken_background = 0;
   int views_with_boundary = 0;
   for (int i = 0; i < 16; ++i) {
     const double x = 2400.0 + 83.3 * i, y = 1900.0 + 51.7 * i * (i % 3);
-    float ground = 0;
-    source.fill(source.level_count() - 1, Rect{int64_t(x / source.spacing_m()), int64_t(y / source.spacing_m()), 1, 1},
-                &ground, 1);
-    Camera cam;
-    cam.position[0] = x;
-    cam.position[1] = y;
-    cam.position[2] = double(ground) + 32.0 + 4.0 * (i % 5);
-    cam.yaw = 0.41 * i;
     // The top of the frame looks 0.15 rad below the horizon: over this terrain (range < 200 m)
     // every ray meets the ground within the coarsest level, so a background pixel is a crack.
-    cam.pitch = -0.15 - 0.5 * cam.fov_y_deg * M_PI / 180.0;
+    double above = 0;
+    const Camera cam = rendertest::low_grazing_view(source, i, x, y, &above);
     clipmap.update(x, y, cam.position[2]);
     clipmap.update(x, y, cam.position[2]);
     REQUIRE(!clipmap.active_region(clipmap.level_count() - 1).empty());  // synthesised levels drawn
@@ -369,7 +358,7 @@ TEST_CASE("render: rings stay watertight where stored and synthesised levels mee
     // outer perimeter (its boundary with the finest stored level) lies within that.
     const LevelRegion a = clipmap.active_region(first_synthesised);
     const double half = 0.5 * double(a.x1 - a.x0) * clipmap.spacing(first_synthesised);
-    views_with_boundary += (cam.position[2] - double(ground)) / std::tan(0.15) > 1.2 * half;
+    views_with_boundary += above / std::tan(0.15) > 1.2 * half;
     renderer.upload(clipmap);
     renderer.render(clipmap, cam, opt);
     renderer.read_rgba(pixels);

@@ -84,8 +84,11 @@ class ClipmapRenderer {
   ClipmapRenderer(const ClipmapRenderer&) = delete;
   ClipmapRenderer& operator=(const ClipmapRenderer&) = delete;
 
-  // Uploads what the clipmap's last update wrote (dirty rectangles). Call after every update.
-  // `everything` uploads all levels with data (after creating the renderer on a filled clipmap).
+  // Uploads what the clipmap's last update wrote (dirty rectangles). Meant to follow every update;
+  // a level whose clip region moved by more than those rectangles cover since this renderer last
+  // uploaded it (updates without upload, a first upload, another clipmap) is uploaded whole, so the
+  // textures never keep heights that the culling bounds, taken from the clipmap, do not describe.
+  // `everything` uploads all levels with data.
   void upload(const Clipmap& clipmap, bool everything = false);
   // Draws the clipmap's active regions into the framebuffer and waits for the GPU.
   RenderStats render(const Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
