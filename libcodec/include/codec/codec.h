@@ -136,6 +136,12 @@ class Decoder {
   std::vector<TileEntry> index_;
 };
 
+// CRC-32C (Castagnoli) of data[0 .. size), the checksum used by the stream and by the pyramid
+// container; chain calls by passing the previous result as `crc`. Uses the SSE4.2 instruction when
+// the CPU has it; crc32c_portable is the table-driven path alone (identical results).
+uint32_t crc32c(const void* data, size_t size, uint32_t crc = 0);
+uint32_t crc32c_portable(const void* data, size_t size, uint32_t crc = 0);
+
 // Whole-image and one-shot region decodes (open + decode_region).
 Status decode(const uint8_t* data, size_t size, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch);
 Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst,

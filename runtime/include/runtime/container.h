@@ -11,6 +11,8 @@
 // dimension chain are validated on open, so bad input gives FormatError, never a crash.
 #pragma once
 
+#include "codec/codec.h"
+
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -52,10 +54,9 @@ class FormatError : public std::runtime_error {
 // Checksum used throughout the format: CRC-32C (Castagnoli, reflected polynomial 0x82F63B78,
 // initial value and final xor 0xFFFFFFFF). Exposed so tools and tests can check files independently.
 
-// CRC-32C of data; pass a previous result as `crc` to continue over a further chunk.
-uint32_t crc32c(const void* data, size_t size, uint32_t crc = 0);
-// The table-driven path alone (crc32c() uses SSE4.2 when the CPU has it); results are identical.
-uint32_t crc32c_portable(const void* data, size_t size, uint32_t crc = 0);
+// libcodec's implementation (one for the project): pass a previous result as `crc` to continue.
+using codec::crc32c;
+using codec::crc32c_portable;
 
 // ---------------------------------------------------------------------------------------------
 // Contents
