@@ -195,8 +195,6 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       if (!(o.target_metres > 0)) throw std::invalid_argument("rms target must be positive");
       const double target = o.target_metres / mpu;
       if (progress) progress("calibrating step", 0);
-      BuildOptions cal = bo;
-      cal.temp_dir = bo.temp_dir;
       // rms grows about linearly with the step, so multiplicative corrections converge fast; once a
       // step above and one below the target are known, bisect (in log step) between them. The
       // result is the largest step whose rms is within 2% above the target or below it: smooth or
@@ -207,7 +205,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       double step = std::max(1.0, codec::step_for_target_rms(target));
       for (int i = 0; i < 10; ++i) {
         co.step = step;
-        const Trial t = trial_build(window, cal, co);
+        const Trial t = trial_build(window, bo, co);
         out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " + std::to_string(t.rms * mpu) +
                                       " m, " + std::to_string(t.bytes) + " bytes");
         if (progress) progress("calibrating step", (i + 1) / 10.0);
