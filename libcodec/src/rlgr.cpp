@@ -9,22 +9,7 @@
 namespace codec::detail {
 namespace {
 
-constexpr int kKpMax = 80;
-constexpr int kUpRun = 4;     // after a complete run of 2^k zeros
-constexpr int kDownRun = 6;   // after a run ended by a non-zero value
-constexpr int kUpZero = 3;    // Golomb-Rice mode: after a zero
-constexpr int kDownZero = 3;  // Golomb-Rice mode: after a non-zero
-constexpr int kUnaryCap = 20;
-constexpr int kEscapeBits = 31;
-
-inline int clamp_kp(int kp) { return std::clamp(kp, 0, kKpMax); }
-
-// quotient 0: krp -= 2; 1: unchanged; > 1: krp += quotient. Written without branches because the
-// quotient is data-dependent and unpredictable.
-inline void adapt_rice(RlgrState& s, int quotient) {
-  const int delta = quotient - 2 * int(quotient == 0) - int(quotient == 1);
-  s.krp = clamp_kp(s.krp + delta);
-}
+using namespace rlgr;
 
 inline void put_rice(BitWriter& out, uint32_t u, RlgrState& s) {
   const int kr = s.krp >> 3;
@@ -93,65 +78,12 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
   }
 }
 
-bool rlgr_decode(BitReader& reader, int32_t* values, size_t count, RlgrState& state) {
-  // Local copies: stores into `values` could otherwise alias the state and the reader's counters,
-  // forcing reloads on every symbol.
-  BitReader in = reader;
-  RlgrState s = state;
-  std::fill(values, values + count, 0);  // runs then only advance the index
-  size_t i = 0;
-  bool ok = true;
-  // One refill per symbol: a symbol without escape needs at most 1 + 10 + 1 + 21 + 10 = 43 bits.
-  const auto rice = [&](int kr) -> uint32_t {
-    const int ones = in.leading_ones();
-    if (ones < kUnaryCap) {
-      in.skip(ones + 1);
-      adapt_rice(s, ones);
-      return (uint32_t(ones) << kr) | in.take(kr);
-    }
-    in.skip(kUnaryCap);
-    in.refill();
-    adapt_rice(s, kUnaryCap);
-    return in.take(kEscapeBits);
-  };
-  while (i < count) {
-    in.refill();
-    const int k = s.kp >> 3;
-    if (k == 0) {
-      const uint32_t mapped = rice(s.krp >> 3);
-      if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) {
-        ok = false;
-        break;
-      }
-      const int32_t half = int32_t((mapped + 1) >> 1);
-      values[i++] = (mapped & 1) ? -half : half;
-      s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
-      continue;
-    }
-    if (in.take(1) == 0) {
-      i += std::min(size_t(1) << k, count - i);
-      s.kp = clamp_kp(s.kp + kUpRun);
-      continue;
-    }
-    const size_t run = in.take(k);
-    if (run >= count - i) {
-      ok = false;
-      break;
-    }
-    i += run;
-    const uint32_t negative = in.take(1);
-    const uint32_t magnitude_minus_1 = rice(s.krp >> 3);
-    if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) {
-      ok = false;
-      break;
-    }
-    const int32_t magnitude = int32_t(magnitude_minus_1) + 1;
-    values[i++] = negative ? -magnitude : magnitude;
-    s.kp = clamp_kp(s.kp - kDownRun);
-  }
-  reader = in;
-  state = s;
-  return ok;
+bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& state) {
+  std::fill(values, values + count, 0);
+  return rlgr_decode_nonzero(in, count, state, [values](size_t i, int32_t v) {
+    values[i] = v;
+    return true;
+  });
 }
 
 }  // namespace codec::detail

@@ -5,6 +5,7 @@
 // kRlgrMaxCodeBits long whatever the input.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 
@@ -30,5 +31,99 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
 // Decodes exactly `count` values. Returns false when the bits describe an impossible sequence (a run
 // longer than the values left, an escape out of range); the caller also checks out.overrun().
 bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& state);
+
+// Adaptation constants shared by the coder and the decoder (see rlgr.cpp).
+namespace rlgr {
+inline constexpr int kKpMax = 80;
+inline constexpr int kUpRun = 4;     // after a complete run of 2^k zeros
+inline constexpr int kDownRun = 6;   // after a run ended by a non-zero value
+inline constexpr int kUpZero = 3;    // Golomb-Rice mode: after a zero
+inline constexpr int kDownZero = 3;  // Golomb-Rice mode: after a non-zero
+inline constexpr int kUnaryCap = 20;
+inline constexpr int kEscapeBits = 31;
+
+inline int clamp_kp(int kp) { return std::clamp(kp, 0, kKpMax); }
+// quotient 0: krp -= 2; 1: unchanged; > 1: krp += quotient. Written without branches because the
+// quotient is data-dependent and unpredictable.
+inline void adapt_rice(RlgrState& s, int quotient) {
+  const int delta = quotient - 2 * int(quotient == 0) - int(quotient == 1);
+  s.krp = clamp_kp(s.krp + delta);
+}
+}  // namespace rlgr
+
+// rlgr_decode without the output array: calls sink(index, value) for each non-zero value only (so
+// the cost follows the non-zeros, and the caller can put each value where it belongs); a sink that
+// returns false rejects the stream. Same bits, same checks as rlgr_decode.
+template <class Sink>
+bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
+  using namespace rlgr;
+  // Local copies: stores through the sink could otherwise alias the state and the reader's
+  // counters, forcing reloads on every symbol.
+  BitReader in = reader;
+  RlgrState s = state;
+  size_t i = 0;
+  bool ok = true;
+  // One refill per symbol: a symbol without escape needs at most 1 + 10 + 1 + 21 + 10 = 43 bits.
+  const auto rice = [&](int kr) -> uint32_t {
+    const int ones = in.leading_ones();
+    if (ones < kUnaryCap) [[likely]] {
+      in.skip(ones + 1);
+      adapt_rice(s, ones);
+      return (uint32_t(ones) << kr) | in.take(kr);
+    }
+    in.skip(kUnaryCap);
+    in.refill();
+    adapt_rice(s, kUnaryCap);
+    return in.take(kEscapeBits);
+  };
+  while (i < count) {
+    in.refill();
+    const int k = s.kp >> 3;
+    if (k == 0) {
+      const uint32_t mapped = rice(s.krp >> 3);
+      if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) [[unlikely]] {
+        ok = false;
+        break;
+      }
+      if (mapped != 0) {
+        const int32_t half = int32_t((mapped + 1) >> 1);
+        if (!sink(i, (mapped & 1) ? -half : half)) [[unlikely]] {
+          ok = false;
+          break;
+        }
+      }
+      ++i;
+      s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
+      continue;
+    }
+    if (in.take(1) == 0) {
+      i += std::min(size_t(1) << k, count - i);
+      s.kp = clamp_kp(s.kp + kUpRun);
+      continue;
+    }
+    const size_t run = in.take(k);
+    if (run >= count - i) [[unlikely]] {
+      ok = false;
+      break;
+    }
+    i += run;
+    const uint32_t negative = in.take(1);
+    const uint32_t magnitude_minus_1 = rice(s.krp >> 3);
+    if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) [[unlikely]] {
+      ok = false;
+      break;
+    }
+    const int32_t magnitude = int32_t(magnitude_minus_1) + 1;
+    if (!sink(i, negative ? -magnitude : magnitude)) [[unlikely]] {
+      ok = false;
+      break;
+    }
+    ++i;
+    s.kp = clamp_kp(s.kp - kDownRun);
+  }
+  reader = in;
+  state = s;
+  return ok;
+}
 
 }  // namespace codec::detail

@@ -110,26 +110,38 @@ void dequantize_tile(int32_t* tile, int pw, int ph, const BandSteps& steps) {
   }
 }
 
-// Dequantises n values in place; false if any leaves the range valid streams produce. Branch-free
-// so that it vectorises (RLGR already bounds |q| < 2^30, so the 64-bit product cannot overflow).
-bool dequantize_run(int32_t* values, size_t n, uint32_t step_q8) {
-  if (step_q8 == kStepOne) return true;
-  bool bad = false;
-  for (size_t j = 0; j < n; ++j) {
-    const int64_t v = dequantize(values[j], step_q8);
-    bad |= (v > kMaxCoefficient) | (v < -kMaxCoefficient);
-    values[j] = int32_t(v);
-  }
-  return !bad;
+const uint32_t* band_layout(TileWork& work, int pw, int ph) {
+  for (const BandLayout& layout : work.layouts)
+    if (layout.padded_width == pw && layout.padded_height == ph) return layout.slots.data();
+  BandLayout& layout = work.layouts[work.next_layout++ % work.layouts.size()];
+  const int mbx = pw / 16, mby = ph / 16, bx_count = pw / 4, by_count = ph / 4;
+  assert(size_t(pw) * ph <= (size_t(1) << kSlotOffsetBits));
+  layout.padded_width = pw;
+  layout.padded_height = ph;
+  layout.slots.resize(size_t(pw) * ph - size_t(mbx) * mby);
+  const auto slot = [](int band, size_t offset) { return uint32_t(band) << kSlotOffsetBits | uint32_t(offset); };
+  size_t n = 0;
+  for (const Position& pos : kScan)
+    for (int my = 0; my < mby; ++my)
+      for (int mx = 0; mx < mbx; ++mx)
+        layout.slots[n++] = slot(lp_band(pos.v * 4 + pos.u), size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u);
+  for (const Position& pos : kScan)
+    for (int by = 0; by < by_count; ++by)
+      for (int bx = 0; bx < bx_count; ++bx)
+        layout.slots[n++] = slot(hp_band(pos.v * 4 + pos.u), size_t(4 * by + pos.v) * pw + 4 * bx + pos.u);
+  return layout.slots.data();
 }
 
 // Reads the three bands and writes dequantised coefficients into the tile.
-bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps& steps, int32_t* seq) {
-  const int mbx = pw / 16, mby = ph / 16, bx_count = pw / 4, by_count = ph / 4;
-  size_t n = size_t(mbx) * mby;
+bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps& steps, TileWork& work) {
+  const int mbx = pw / 16, mby = ph / 16;
+  const size_t macroblocks = size_t(mbx) * mby;
+  int32_t* seq = work.sequence.data();
   if (!gamma_decode(in, &seq[0])) return false;
   RlgrState dc_state;
-  if (!rlgr_decode(in, seq + 1, n - 1, dc_state)) return false;
+  if (!rlgr_decode(in, seq + 1, macroblocks - 1, dc_state)) return false;
+  // Only non-zero values are written below.
+  std::memset(tile, 0, size_t(pw) * ph * sizeof(int32_t));
   // DC prediction runs on quantised values, so keep them in the tile until all DCs are known.
   size_t i = 0;
   for (int my = 0; my < mby; ++my)
@@ -146,30 +158,21 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
       c = int32_t(value);
     }
 
-  n = size_t(mbx) * mby * 15;
+  // LP then HP, in the order of band_layout's slots.
+  const uint32_t* slots = band_layout(work, pw, ph);
+  const auto place = [tile, &steps](uint32_t slot, int32_t q) {
+    const int64_t value = dequantize(q, steps.q8[slot >> kSlotOffsetBits]);
+    tile[slot & ((1u << kSlotOffsetBits) - 1)] = int32_t(value);
+    return value <= kMaxCoefficient && value >= -kMaxCoefficient;
+  };
+  const size_t lp_count = macroblocks * 15;
   RlgrState lp_state = kLpStart;
-  if (!rlgr_decode(in, seq, n, lp_state)) return false;
-  i = 0;
-  for (int s = 0; s < 15; ++s) {
-    const Position pos = kScan[s];
-    if (!dequantize_run(seq + i, size_t(mbx) * mby, steps.q8[lp_band(pos.v * 4 + pos.u)])) return false;
-    for (int my = 0; my < mby; ++my)
-      for (int mx = 0; mx < mbx; ++mx) tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u] = seq[i++];
-  }
-
-  n = size_t(bx_count) * by_count * 15;
+  if (!rlgr_decode_nonzero(in, lp_count, lp_state, [&](size_t j, int32_t q) { return place(slots[j], q); }))
+    return false;
+  const uint32_t* hp_slots = slots + lp_count;
   RlgrState hp_state;
-  if (!rlgr_decode(in, seq, n, hp_state)) return false;
-  i = 0;
-  for (int s = 0; s < 15; ++s) {
-    const Position pos = kScan[s];
-    if (!dequantize_run(seq + i, size_t(bx_count) * by_count, steps.q8[hp_band(pos.v * 4 + pos.u)])) return false;
-    for (int by = 0; by < by_count; ++by) {
-      int32_t* row = tile + size_t(4 * by + pos.v) * pw + pos.u;
-      for (int bx = 0; bx < bx_count; ++bx) row[4 * bx] = seq[i++];
-    }
-  }
-  return true;
+  return rlgr_decode_nonzero(in, size_t(pw) * ph - macroblocks - lp_count, hp_state,
+                             [&](size_t j, int32_t q) { return place(hp_slots[j], q); });
 }
 
 void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {
@@ -302,7 +305,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   if (mode != uint8_t(TileMode::Transform) && !spatial) return TileResult::Corrupt;
   BitReader bits(payload + head, size - head);
   int32_t* tile = work.coefficients.data();
-  if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work.sequence.data()))
+  if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work))
     return TileResult::Corrupt;
   inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
   int32_t* recon = work.reconstruction.data();

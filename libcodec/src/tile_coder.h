@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -22,8 +23,20 @@ struct TileParams {
   uint32_t max_error = 0;
 };
 
+// Where the LP and HP values of a padded_width x padded_height tile land, in coding order: tile
+// offset in the low kSlotOffsetBits, band above. Lets the decoder write each non-zero value straight
+// to its place instead of scattering whole bands.
+inline constexpr int kSlotOffsetBits = 24;  // padded tiles hold at most 4096 x 4096 samples
+struct BandLayout {
+  int padded_width = 0, padded_height = 0;
+  std::vector<uint32_t> slots;
+};
+
 // Working buffers for one tile, owned by the caller's Scratch and grown as needed.
 struct TileWork {
+  // A stream has at most four padded tile shapes (interior, right edge, bottom edge, corner).
+  std::array<BandLayout, 4> layouts;
+  size_t next_layout = 0;
   std::vector<int32_t> coefficients;  // padded tile
   std::vector<int32_t> sequence;      // one band's values in coding order
   std::vector<int32_t> reconstruction;  // width x height
