@@ -17,6 +17,14 @@ namespace codec::detail {
 
 // tile: width x height samples, row stride = width; width and height are multiples of 16.
 void forward_lapped(int32_t* tile, int width, int height, bool lossy);
+// Picks the widest implementation the CPU runs; all give identical results.
 void inverse_lapped(int32_t* tile, int width, int height, bool lossy);
+
+// The implementations behind inverse_lapped, for tests: the scalar reference, 4-lane vectors
+// (SSE2 on x86-64) and 8-lane AVX2 (call only where the CPU has it). The last two return false
+// when the compiler does not provide them.
+void inverse_lapped_scalar(int32_t* tile, int width, int height, bool lossy);
+bool inverse_lapped_vector(int32_t* tile, int width, int height, bool lossy);
+bool inverse_lapped_avx2(int32_t* tile, int width, int height, bool lossy);
 
 }  // namespace codec::detail

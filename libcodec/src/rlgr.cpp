@@ -80,8 +80,8 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
 
 bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& state) {
   std::fill(values, values + count, 0);
-  return rlgr_decode_nonzero(in, count, state, [values](size_t i, int32_t v) {
-    values[i] = v;
+  return rlgr_decode_nonzero(in, count, state, [values](size_t i, uint32_t magnitude, bool negative) {
+    values[i] = negative ? -int32_t(magnitude) : int32_t(magnitude);
     return true;
   });
 }

@@ -51,9 +51,10 @@ inline void adapt_rice(RlgrState& s, int quotient) {
 }
 }  // namespace rlgr
 
-// rlgr_decode without the output array: calls sink(index, value) for each non-zero value only (so
-// the cost follows the non-zeros, and the caller can put each value where it belongs); a sink that
-// returns false rejects the stream. Same bits, same checks as rlgr_decode.
+// rlgr_decode without the output array: calls sink(index, magnitude, negative) for each non-zero
+// value only (so the cost follows the non-zeros, and the caller can put each value where it
+// belongs); magnitude < kRlgrMaxMagnitude. A sink that returns false rejects the stream. Same bits,
+// same checks as rlgr_decode.
 template <class Sink>
 bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
   using namespace rlgr;
@@ -86,8 +87,7 @@ bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink
         break;
       }
       if (mapped != 0) {
-        const int32_t half = int32_t((mapped + 1) >> 1);
-        if (!sink(i, (mapped & 1) ? -half : half)) [[unlikely]] {
+        if (!sink(i, (mapped + 1) >> 1, (mapped & 1) != 0)) [[unlikely]] {
           ok = false;
           break;
         }
@@ -113,8 +113,7 @@ bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink
       ok = false;
       break;
     }
-    const int32_t magnitude = int32_t(magnitude_minus_1) + 1;
-    if (!sink(i, negative ? -magnitude : magnitude)) [[unlikely]] {
+    if (!sink(i, magnitude_minus_1 + 1, negative != 0)) [[unlikely]] {
       ok = false;
       break;
     }

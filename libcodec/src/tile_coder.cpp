@@ -140,8 +140,9 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
   if (!gamma_decode(in, &seq[0])) return false;
   RlgrState dc_state;
   if (!rlgr_decode(in, seq + 1, macroblocks - 1, dc_state)) return false;
-  // Only non-zero values are written below.
-  std::memset(tile, 0, size_t(pw) * ph * sizeof(int32_t));
+  // Only non-zero values are written below. Row by row: glibc clears a whole 64x64 tile with
+  // `rep stosb`, which measured 10% of the decode time, rows with vector stores.
+  for (int y = 0; y < ph; ++y) std::memset(tile + size_t(y) * pw, 0, size_t(pw) * sizeof(int32_t));
   // DC prediction runs on quantised values, so keep them in the tile until all DCs are known.
   size_t i = 0;
   for (int my = 0; my < mby; ++my)
@@ -160,19 +161,22 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
 
   // LP then HP, in the order of band_layout's slots.
   const uint32_t* slots = band_layout(work, pw, ph);
-  const auto place = [tile, &steps](uint32_t slot, int32_t q) {
-    const int64_t value = dequantize(q, steps.q8[slot >> kSlotOffsetBits]);
-    tile[slot & ((1u << kSlotOffsetBits) - 1)] = int32_t(value);
-    return value <= kMaxCoefficient && value >= -kMaxCoefficient;
+  // dequantize() for |q| < kRlgrMaxMagnitude: (16 |q| + 1) * step < 2^34 * kMaxBandStep = 2^64.
+  const auto place = [tile, &steps](uint32_t slot, uint32_t magnitude, bool negative) {
+    const uint64_t value = ((uint64_t(magnitude) * 16 + 1) * steps.q8[slot >> kSlotOffsetBits] + 2048) >> 12;
+    tile[slot & ((1u << kSlotOffsetBits) - 1)] = negative ? -int32_t(value) : int32_t(value);
+    return value <= uint64_t(kMaxCoefficient);
   };
+  static_assert(uint64_t(kRlgrMaxMagnitude) * 16 <= (uint64_t(1) << 34) && kMaxBandStep <= (1u << 30));
   const size_t lp_count = macroblocks * 15;
   RlgrState lp_state = kLpStart;
-  if (!rlgr_decode_nonzero(in, lp_count, lp_state, [&](size_t j, int32_t q) { return place(slots[j], q); }))
+  if (!rlgr_decode_nonzero(in, lp_count, lp_state,
+                           [&](size_t j, uint32_t m, bool negative) { return place(slots[j], m, negative); }))
     return false;
   const uint32_t* hp_slots = slots + lp_count;
   RlgrState hp_state;
   return rlgr_decode_nonzero(in, size_t(pw) * ph - macroblocks - lp_count, hp_state,
-                             [&](size_t j, int32_t q) { return place(hp_slots[j], q); });
+                             [&](size_t j, uint32_t m, bool negative) { return place(hp_slots[j], m, negative); });
 }
 
 void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {

@@ -12,6 +12,9 @@
 #include "codec/codec.h"
 #include "pyramid/heightmap.h"
 #include "shared_data.h"
+// Internal headers, for the SIMD == scalar checks of the inverse transform.
+#include "../../libcodec/src/lapped_kernels.h"
+#include "../../libcodec/src/lapped_transform.h"
 
 namespace {
 
@@ -461,3 +464,95 @@ TEST_CASE("encoding is deterministic and the encoder's reconstruction is the dec
   CHECK(first_difference(recon1, recon2) == -1);
   CHECK(first_difference(decode_image(a, img), recon1) == -1);
 }
+
+namespace {
+
+// Coefficient tiles that the vector inverse must treat exactly like the scalar one.
+std::vector<int32_t> coefficient_tile(int kind, int w, int h, bool lossy, std::mt19937& rng) {
+  std::vector<int32_t> tile(size_t(w) * h);
+  switch (kind) {
+    case 0: {  // any int32: wrapping arithmetic everywhere
+      std::uniform_int_distribution<int32_t> any(INT32_MIN, INT32_MAX);
+      for (auto& v : tile) v = any(rng);
+      break;
+    }
+    case 1: {  // extremes and the limits valid streams stay within
+      constexpr int32_t kValues[] = {INT32_MIN, INT32_MAX, 0, 1, -1, 1 << 25, -(1 << 25), 1 << 29, -(1 << 29), 255, -256};
+      std::uniform_int_distribution<size_t> pick(0, std::size(kValues) - 1);
+      for (auto& v : tile) v = kValues[pick(rng)];
+      break;
+    }
+    case 2: {  // sparse small coefficients, as a decoder sees them
+      std::uniform_int_distribution<int32_t> value(-4096, 4096), sparse(0, 3);
+      for (auto& v : tile) v = sparse(rng) == 0 ? value(rng) : 0;
+      break;
+    }
+    default: {  // transformed samples (+-2^22) with quantisation-like noise
+      std::uniform_int_distribution<int32_t> sample(-(1 << 22), 1 << 22), noise(-40, 40);
+      for (auto& v : tile) v = sample(rng);
+      codec::detail::forward_lapped(tile.data(), w, h, lossy);
+      for (auto& v : tile) v += noise(rng);
+      break;
+    }
+  }
+  return tile;
+}
+
+}  // namespace
+
+TEST_CASE("vector inverse transforms equal the scalar reference on random and extreme tiles", "[codec]") {
+  using namespace codec::detail;
+  std::mt19937 rng(1234);
+  bool vector_ran = false;
+  const bool avx2 =
+#if defined(__x86_64__)
+      __builtin_cpu_supports("avx2");
+#else
+      false;
+#endif
+  const int sizes[][2] = {{16, 16}, {32, 32}, {48, 16}, {16, 80}, {64, 64}, {96, 48}};
+  for (const auto& size : sizes)
+    for (const bool lossy : {false, true})
+      for (int kind = 0; kind < 4; ++kind)
+        for (int trial = 0; trial < 3; ++trial) {
+          const int w = size[0], h = size[1];
+          const std::vector<int32_t> input = coefficient_tile(kind, w, h, lossy, rng);
+          std::vector<int32_t> reference = input, vector = input, wide = input, dispatched = input;
+          inverse_lapped_scalar(reference.data(), w, h, lossy);
+          inverse_lapped(dispatched.data(), w, h, lossy);
+          INFO("size " << w << "x" << h << " lossy " << lossy << " kind " << kind);
+          CHECK(first_difference(dispatched, reference) == -1);
+          if (inverse_lapped_vector(vector.data(), w, h, lossy)) {
+            vector_ran = true;
+            CHECK(first_difference(vector, reference) == -1);
+          }
+          if (avx2 && inverse_lapped_avx2(wide.data(), w, h, lossy)) CHECK(first_difference(wide, reference) == -1);
+        }
+#if defined(__x86_64__) && defined(CODEC_VECTOR_TRANSFORM)
+  CHECK(vector_ran);
+#endif
+}
+
+#ifdef CODEC_VECTOR_TRANSFORM
+TEST_CASE("vector shrink (division-free) equals the scalar integer division", "[codec]") {
+  using namespace codec::detail;
+  // A sweep over all of int32 and a dense window around 0 (the full range was checked exhaustively
+  // once, by the same comparison, when the vector form was written).
+  const auto check = [](int64_t first, int64_t last, int64_t stride) {
+    int64_t bad = 0;
+    for (int64_t y = first; y + 3 * stride <= last; y += 4 * stride) {
+      const V4 v = {int32_t(y), int32_t(y + stride), int32_t(y + 2 * stride), int32_t(y + 3 * stride)};
+      const V4 inner = shrink<kExpandInner>(v), outer = shrink<kExpandOuter>(v);
+      for (int j = 0; j < 4; ++j) {
+        bad += inner[j] != shrink<kExpandInner>(v[j]);
+        bad += outer[j] != shrink<kExpandOuter>(v[j]);
+      }
+    }
+    return bad;
+  };
+  CHECK(check(INT32_MIN, INT32_MAX, 4099) == 0);
+  CHECK(check(-(1 << 18), 1 << 18, 1) == 0);
+  CHECK(check(INT32_MAX - 4096, INT32_MAX, 1) == 0);
+  CHECK(check(INT32_MIN, INT32_MIN + 4096, 1) == 0);
+}
+#endif
