@@ -1,7 +1,5 @@
 // terrain-report: how far a compressed pyramid is from its source: per-level and overall error in
 // metres, bits per finest sample, compression factor, build and decode speed, and an error heat-map.
-#include <OpenImageIO/imageio.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -12,6 +10,7 @@
 
 #include "cli.h"
 #include "json_writer.h"
+#include "pyramid/image8.h"
 #include "pyramid/pyramid.h"
 #include "runtime/pyramid_build.h"
 #include "runtime/region_decoder.h"
@@ -69,10 +68,11 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
       else heat_colour(scale_max > 0 ? m / scale_max : 0, p);
     }
   const std::string tmp = path + ".tmp.png";
-  auto out = OIIO::ImageOutput::create(tmp);
-  OIIO::ImageSpec spec(int(ow), int(oh), 3, OIIO::TypeDesc::UINT8);
-  if (!out || !out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) || !out->close())
-    throw IoError(IoErrorCode::WriteFailed, path + ": cannot write the heat-map");
+  try {
+    write_image8(tmp, int(ow), int(oh), 3, rgb.data());
+  } catch (const IoError& e) {
+    throw IoError(IoErrorCode::WriteFailed, path + ": cannot write the heat-map (" + e.what() + ")");
+  }
   std::filesystem::rename(tmp, path);
 }
 

@@ -98,8 +98,8 @@ inline ToolResult run_tool(const TempDir& dir, const Invocation& call, const std
   return r;
 }
 
-// Runs the invocations concurrently (process start-up, dominated by loading OpenImageIO's many shared
-// libraries, would otherwise dominate the test time). Results are in the order of `calls`.
+// Runs the invocations concurrently, so that process start-up (and, for image inputs, loading the
+// OpenImageIO plugin) overlaps. Results are in the order of `calls`.
 inline std::vector<ToolResult> run_tools(const TempDir& dir, const std::vector<Invocation>& calls) {
   std::vector<ToolResult> results(calls.size());
   std::vector<std::thread> threads;
