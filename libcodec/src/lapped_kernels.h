@@ -116,6 +116,7 @@ template <int K, class T> CODEC_INLINE T expand(T x) { return add(x, lift64(K, x
 // The inverse of expand: the unique x with expand(x) == y is ceil((64 y - 32) / (64 + K)), i.e.
 // floor(n / d) with d = 64 + K and n = 64 y - 32 + d - 1.
 template <int K, class T> CODEC_INLINE T shrink(T y) {
+  static_assert(K >= 1 && K <= 32, "the vector form needs d - 33 in 1..63");
   constexpr int64_t d = 64 + K;
   if constexpr (std::is_same_v<T, int32_t>) {
     const int64_t n = int64_t(y) * 64 - 32 + d - 1;
@@ -124,13 +125,13 @@ template <int K, class T> CODEC_INLINE T shrink(T y) {
   } else {
     // Lanes have no integer division. In doubles, x = n + 1/2 is exact (|n| < 2^38) and x / d lies at
     // least 1/(2d) > 2^-8 from every integer, while x * fl(1/d) is within |x / d| 2^-52 < 2^-20 of
-    // x / d: so truncating it and stepping down where that rounded up gives floor(n / d) exactly,
-    // for every int32 y (checked exhaustively against the scalar form).
+    // x / d: so truncating it gives trunc(x / d), and floor(n / d) is one less where n < 0, that is
+    // where y < 0 (d - 33 lies in 1..63). Exact for every int32 y (checked exhaustively against the
+    // scalar form).
     using D = typename DoublesOf<T>::type;
     const D x = __builtin_convertvector(y, D) * 64.0 + (double(d) - 33.0 + 0.5);
-    const D quotient = x * (1.0 / double(d));
-    const T truncated = __builtin_convertvector(quotient, T);  // |quotient| < 2^31
-    return truncated + __builtin_convertvector(__builtin_convertvector(truncated, D) > quotient, T);
+    const T truncated = __builtin_convertvector(x * (1.0 / double(d)), T);  // |x / d| < 2^31
+    return truncated + (y >> 31);
   }
 }
 
