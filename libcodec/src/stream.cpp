@@ -19,6 +19,19 @@ struct Scratch::Impl {
   };
   detail::TileWork work;
   std::vector<IndexEntry> index;  // encoder: entries until the index is written
+  // Decoder: band steps of the last (step, fraction bits) seen; computing them costs about as much as
+  // decoding a few hundred samples, and region decoders ask for one small tile at a time.
+  uint32_t steps_step_q8 = 0;
+  int steps_fraction_bits = -1;
+  detail::BandSteps steps{};
+  const detail::BandSteps& band_steps(uint32_t step_q8, int fraction_bits) {
+    if (step_q8 != steps_step_q8 || fraction_bits != steps_fraction_bits) {
+      steps = fraction_bits == 0 ? detail::unit_band_steps() : detail::band_steps_for(step_q8, fraction_bits);
+      steps_step_q8 = step_q8;
+      steps_fraction_bits = fraction_bits;
+    }
+    return steps;
+  }
 };
 
 Scratch::Scratch() : impl_(std::make_unique<Impl>()) {}
@@ -329,7 +342,7 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
   detail::TileParams params;
   params.fraction_bits = int(get_u32(data_ + 40));
   const uint32_t step_q8 = get_u32(data_ + 32);
-  params.steps = params.fraction_bits == 0 ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
+  params.steps = scratch.impl().band_steps(step_q8, params.fraction_bits);
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
   detail::TileWork& work = scratch.impl().work;
