@@ -115,15 +115,19 @@ int format_exit(const FormatError& e) {
 }
 
 // --bench: full refills of every clipmap level, one core, a fresh decoder (empty tile cache) for
-// every repetition, at positions spread over the terrain; then the two halves of the region
-// decode of one n x n window of the finest level measured apart: U of the coarser level and the
-// entropy decode of the residual.
+// every repetition, at positions spread over the terrain. Each level's refill is split as the
+// clipmap reports it: U of the coarser clipmap level, the residual (entropy decode and addition),
+// the rest of the fill (units to metres, edge replication, toroidal copies; for the coarsest level,
+// whose coarser level is not in the clipmap, the whole recursive region decode), zc, normals and z
+// bounds. Then the two halves of the region decode of one n x n window of the finest level measured
+// apart, straight from libcodec: U of the coarser level and the entropy decode of the residual.
 int run_bench(const std::shared_ptr<const PyramidFile>& file, double spacing, ClipmapOptions copt, int reps, bool quiet) {
   copt.budget = int64_t(1) << 40;
   copt.deactivate_by_height = false;
   const int levels = copt.levels > 0 ? copt.levels : file->level_count();
   const GridSize fs = file->level_size(file->level_count() - 1);
-  std::vector<std::array<std::vector<double>, 5>> t(static_cast<size_t>(levels));  // fill, zc, normals, bounds, total
+  enum Part { kUpsample, kResidual, kFillOther, kZc, kNormals, kBounds, kTotal, kParts };
+  std::vector<std::array<std::vector<double>, kParts>> t(static_cast<size_t>(levels));
   for (int r = 0; r < reps; ++r) {
     auto decoder = std::make_shared<const RegionDecoder>(file);
     RegionDecoderSource source(decoder, spacing);
@@ -132,21 +136,26 @@ int run_bench(const std::shared_ptr<const PyramidFile>& file, double spacing, Cl
     const ClipmapUpdateStats s = cm.update(fx * double(fs.width) * spacing, fy * double(fs.height) * spacing, 0.0);
     for (int l = 0; l < levels; ++l) {
       const auto& p = s.per_level[size_t(l)];
-      const double v[5] = {p.seconds_fill, p.seconds_coarse, p.seconds_normals, p.seconds_bounds,
-                           p.seconds_fill + p.seconds_coarse + p.seconds_normals + p.seconds_bounds};
-      for (int k = 0; k < 5; ++k) t[size_t(l)][size_t(k)].push_back(v[k] * 1e3);
+      const double v[kParts] = {p.seconds_upsample, p.seconds_residual,
+                                p.seconds_fill - p.seconds_upsample - p.seconds_residual, p.seconds_coarse,
+                                p.seconds_normals, p.seconds_bounds,
+                                p.seconds_fill + p.seconds_coarse + p.seconds_normals + p.seconds_bounds};
+      for (int k = 0; k < kParts; ++k) t[size_t(l)][size_t(k)].push_back(v[k] * 1e3);
     }
   }
-  std::printf("full %dx%d level refill, one core, median of %d (ms): decode = region decoder (U + residual), zc, normals "
-              "(2x normal map), z bounds; total = their sum; _min = the fastest repetition\n",
+  std::printf("full %dx%d level refill, one core, median of %d (ms): U = upsampling of the coarser clipmap level, "
+              "residual = residual decode + addition, fill+ = rest of the fill (level 0: its whole recursive decode), "
+              "zc, normals (2x normal map), z bounds; total = their sum; total_min = the fastest repetition\n",
               copt.n, copt.n, reps);
-  std::printf("%6s %8s %10s %8s %10s %8s %10s %10s %10s\n", "level", "source", "decode", "zc", "normals", "bounds", "total",
-              "decode_min", "total_min");
+  std::printf("%6s %7s %8s %9s %8s %7s %8s %7s %8s %10s\n", "level", "source", "U", "residual", "fill+", "zc", "normals",
+              "bounds", "total", "total_min");
   const int first = file->level_count() - levels;
-  for (int l = 0; l < levels; ++l)
-    std::printf("%6d %8d %10.3f %8.3f %10.3f %8.3f %10.3f %10.3f %10.3f\n", l, first + l, percentile(t[size_t(l)][0], 0.5),
-                percentile(t[size_t(l)][1], 0.5), percentile(t[size_t(l)][2], 0.5), percentile(t[size_t(l)][3], 0.5),
-                percentile(t[size_t(l)][4], 0.5), percentile(t[size_t(l)][0], 0.0), percentile(t[size_t(l)][4], 0.0));
+  for (int l = 0; l < levels; ++l) {
+    auto med = [&](int k) { return percentile(t[size_t(l)][size_t(k)], 0.5); };
+    std::printf("%6d %7d %8.3f %9.3f %8.3f %7.3f %8.3f %7.3f %8.3f %10.3f\n", l, first + l, med(kUpsample),
+                med(kResidual), med(kFillOther), med(kZc), med(kNormals), med(kBounds), med(kTotal),
+                percentile(t[size_t(l)][kTotal], 0.0));
+  }
 
   // The finest level's window, split: U (coarse window decoded beforehand, untimed) and residual.
   const int fl = file->level_count() - 1;
@@ -232,8 +241,8 @@ int run(int argc, char** argv) {
            [&](const std::string& v) { original_vscale = cli::parse_double("--original-vscale", v); });
   p.option("--bench", "K",
            "benchmark instead of a flight: K full n x n refills of each clipmap level on one core (fresh\n"
-           "decoder cache each time), timing region decode, zc, normal map and z bounds; then U and the\n"
-           "residual decode of one n x n window separately",
+           "decoder cache each time), timing U, residual decode, the rest of the fill, zc, normal map and\n"
+           "z bounds; then U and the residual entropy decode of one n x n window straight from libcodec",
            [&](const std::string& v) { bench = int(cli::parse_int("--bench", v, 1, 1000)); });
   p.option("--synth-levels", "K",
            "synthesise K levels finer than the pyramid's finest (U + Gaussian noise whose variance is\n"
@@ -246,8 +255,9 @@ int run(int argc, char** argv) {
   p.flag("--no-transitions", "disable the transition morph (to see popping)", &no_transitions);
   p.flag("--no-culling", "disable view-frustum culling", &no_culling);
   p.add_common(common, false);
-  p.epilog("Times in stats: update = region decode (fill; U + residual happen inside the decoder) + zc + normals +\n"
-           "z bounds; upload = texture uploads; render = draw + glFinish. The summary line gives the median and\n"
+  p.epilog("Times in stats: update = decode (the height source's fill, of which upsample = U of the coarser\n"
+           "clipmap level and residual = residual decode + addition) + zc + normals + z bounds; upload = texture\n"
+           "uploads; render = draw + glFinish. The summary line gives the median and\n"
            "99th percentile of update + upload + render per frame.");
   if (auto status = p.parse(argc, argv)) return *status;
 
@@ -328,7 +338,7 @@ int run(int argc, char** argv) {
   const std::string csv_path = out_dir + "/stats.csv", json_path = out_dir + "/stats.json";
   std::ofstream csv(csv_path + ".tmp");
   if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + csv_path);
-  csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,zc_ms,normals_ms,bounds_ms,upload_ms,render_ms,frame_ms,"
+  csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,residual_ms,zc_ms,normals_ms,bounds_ms,upload_ms,render_ms,frame_ms,"
          "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
          "samples_reconstructed,residual_samples_decoded,samples_uploaded,psnr_db\n";
 
@@ -362,6 +372,9 @@ int run(int argc, char** argv) {
   ropt.culling = !no_culling;
   std::vector<uint8_t> pixels;
   std::vector<double> frame_ms, update_ms, render_ms, upload_ms;
+  // The update's parts per frame, ms: decode (all of the fill), U, residual, zc, normals, bounds.
+  const char* const part_names[] = {"decode", "upsample", "residual", "zc", "normals", "bounds"};
+  std::array<std::vector<double>, 6> part_ms;
   int64_t triangles_total = 0;
   float ground_scratch = 0;
   std::vector<std::string> written;
@@ -415,11 +428,15 @@ int run(int argc, char** argv) {
     }
     frame_ms.push_back(total * 1e3);
     update_ms.push_back(upd * 1e3);
+    const double parts[6] = {us.seconds_fill, us.seconds_upsample, us.seconds_residual,
+                             us.seconds_coarse, us.seconds_normals, us.seconds_bounds};
+    for (size_t part = 0; part < part_ms.size(); ++part) part_ms[part].push_back(parts[part] * 1e3);
     render_ms.push_back(rs.seconds_render * 1e3);
     upload_ms.push_back(rs.seconds_upload * 1e3);
     triangles_total += rs.triangles;
     csv << f << ',' << cam.position[0] << ',' << cam.position[1] << ',' << cam.position[2] << ',' << upd * 1e3 << ','
-        << us.seconds_fill * 1e3 << ',' << us.seconds_coarse * 1e3 << ',' << us.seconds_normals * 1e3 << ','
+        << us.seconds_fill * 1e3 << ',' << us.seconds_upsample * 1e3 << ',' << us.seconds_residual * 1e3 << ','
+        << us.seconds_coarse * 1e3 << ',' << us.seconds_normals * 1e3 << ','
         << us.seconds_bounds * 1e3 << ',' << rs.seconds_upload * 1e3 << ',' << rs.seconds_render * 1e3 << ','
         << total * 1e3 << ',' << rs.triangles << ',' << rs.blocks_drawn << ',' << rs.blocks_culled << ','
         << rs.draw_calls << ',' << us.active_levels << ',' << us.levels_behind << ',' << us.samples_filled << ','
@@ -445,6 +462,10 @@ int run(int argc, char** argv) {
     j.field("frame_ms_median", med).field("frame_ms_p99", p99);
     j.field("fps_median", med > 0 ? 1e3 / med : 0.0).field("cpu_ms_per_frame", cpu_ms_per_frame);
     j.field("update_ms_median", percentile(update_ms, 0.5)).field("update_ms_p99", percentile(update_ms, 0.99));
+    for (size_t k = 0; k < part_ms.size(); ++k) {
+      j.field(std::string(part_names[k]) + "_ms_median", percentile(part_ms[k], 0.5));
+      j.field(std::string(part_names[k]) + "_ms_p99", percentile(part_ms[k], 0.99));
+    }
     j.field("upload_ms_median", percentile(upload_ms, 0.5)).field("upload_ms_p99", percentile(upload_ms, 0.99));
     j.field("render_ms_median", percentile(render_ms, 0.5)).field("render_ms_p99", percentile(render_ms, 0.99));
     j.field("triangles_mean", double(triangles_total) / frames);
@@ -477,6 +498,9 @@ int run(int argc, char** argv) {
               frames, width, height, med, med > 0 ? 1e3 / med : 0.0, p99, percentile(update_ms, 0.5),
               percentile(update_ms, 0.99), percentile(upload_ms, 0.5), percentile(render_ms, 0.5),
               double(triangles_total) / frames, cpu_ms_per_frame, out_dir.c_str());
+  std::printf("update parts, median ms: decode %.3f (U %.3f, residual %.3f), zc %.3f, normals %.3f, bounds %.3f\n",
+              percentile(part_ms[0], 0.5), percentile(part_ms[1], 0.5), percentile(part_ms[2], 0.5),
+              percentile(part_ms[3], 0.5), percentile(part_ms[4], 0.5), percentile(part_ms[5], 0.5));
   if (!psnr.empty())
     std::printf("image PSNR against %s: median %.2f dB, min %.2f dB (99 = identical)\n",
                 (ref_file ? reference : original).c_str(), percentile(psnr, 0.5), *std::min_element(psnr.begin(), psnr.end()));

@@ -38,35 +38,74 @@ int RegionDecoderSource::level_count() const { return decoder_->file().level_cou
 
 GridSize RegionDecoderSource::level_size(int level) const { return decoder_->file().level_size(level); }
 
+void HeightSource::fill_units(int, const Rect&, const HeldUnits*, float*, int32_t*, int64_t, FillSplit*) {
+  throw std::logic_error("HeightSource::fill_units: this source has no integer units (refines_units() is false)");
+}
+
 void RegionDecoderSource::fill(int level, const Rect& rect, float* out, int64_t out_stride) {
+  fill_units(level, rect, nullptr, out, nullptr, out_stride, nullptr);
+}
+
+void RegionDecoderSource::fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out,
+                                     int32_t* units_out, int64_t out_stride, FillSplit* split) {
   if (rect.width <= 0 || rect.height <= 0) return;
   const GridSize size = level_size(level);
   // Decode the part of the level nearest to rect (at least one sample), then replicate its edges.
   const int64_t cx0 = clamp64(rect.x0, 0, size.width - 1), cx1 = clamp64(rect.x0 + rect.width - 1, 0, size.width - 1);
   const int64_t cy0 = clamp64(rect.y0, 0, size.height - 1), cy1 = clamp64(rect.y0 + rect.height - 1, 0, size.height - 1);
   const int64_t w = cx1 - cx0 + 1, h = cy1 - cy0 + 1;
-  scratch_.resize(size_t(w * h));
+  const Rect inside{cx0, cy0, w, h};
+  units_.resize(size_t(w * h));
+  bool refined = false;
+  if (coarser && level > 0) {
+    // The caller's coarser level, when it holds U's whole window: no recursion, only the residual.
+    const Rect need = upsample_required_window(inside, size);
+    const Rect& held = coarser->region;
+    if (need.x0 >= held.x0 && need.y0 >= held.y0 && need.x0 + need.width <= held.x0 + held.width &&
+        need.y0 + need.height <= held.y0 + held.height) {
+      window_.resize(size_t(need.width * need.height));
+      const int64_t n = coarser->n, wx = ((need.x0 % n) + n) % n, run1 = std::min(need.width, n - wx);
+      for (int64_t y = 0; y < need.height; ++y) {
+        const int32_t* row = coarser->data + ((need.y0 + y) % n + n) % n * n;
+        int32_t* dst = window_.data() + y * need.width;
+        std::copy_n(row + wx, run1, dst);
+        std::copy_n(row, need.width - run1, dst + run1);
+      }
+      decoder_->decode_refined(level, inside, CoarseWindow{window_.data(), need.width, need, level_size(level - 1)},
+                               units_.data(), w, split ? &split->upsample : nullptr, split ? &split->residual : nullptr);
+      refined = true;
+    }
+  }
+  if (!refined) decoder_->decode_units(level, inside, units_.data(), w);
+  // Voids (NaN metres in the decoder's output) become 0 m.
   const bool voids = level == level_count() - 1 && decoder_->file().info().void_count > 0;
   if (voids) {
-    decoder_->decode_metres(level, Rect{cx0, cy0, w, h}, scratch_.data(), w);
-  } else {
-    // Units into a reused buffer, converted here: no per-call allocation (decode_metres makes one).
-    units_.resize(size_t(w * h));
-    decoder_->decode_units(level, Rect{cx0, cy0, w, h}, units_.data(), w);
-    const double scale = decoder_->metres_per_unit(), offset = decoder_->metres_offset();
-    for (size_t i = 0; i < units_.size(); ++i) scratch_[i] = float(units_[i] * scale + offset);
+    valid_.resize(size_t(h * size.width));
+    decoder_->file().container().mask_rows(uint64_t(cy0), uint64_t(h), valid_.data());
   }
+  const double scale = decoder_->metres_per_unit(), offset = decoder_->metres_offset();
+  // Rect columns inside0 .. inside1 - 1 lie in the level, at decoded column x + shift.
+  const int64_t inside0 = std::clamp<int64_t>(cx0 - rect.x0, 0, rect.width);
+  const int64_t inside1 = std::clamp<int64_t>(cx1 + 1 - rect.x0, 0, rect.width);
+  const int64_t shift = rect.x0 - cx0;
   for (int64_t y = 0; y < rect.height; ++y) {
-    const float* src = scratch_.data() + (clamp64(rect.y0 + y, cy0, cy1) - cy0) * w;
+    const int64_t sy = clamp64(rect.y0 + y, cy0, cy1) - cy0;
+    const int32_t* row = units_.data() + sy * w;
+    const uint8_t* ok = voids ? valid_.data() + sy * size.width + cx0 : nullptr;  // ok[i]: decoded column i
+    auto metres = [&](int64_t i) { return ok && !ok[i] ? 0.0f : float(row[i] * scale + offset); };
     float* o = out + y * out_stride;
-    const int64_t inside0 = std::clamp<int64_t>(cx0 - rect.x0, 0, rect.width);
-    const int64_t inside1 = std::clamp<int64_t>(cx1 + 1 - rect.x0, 0, rect.width);
-    for (int64_t x = 0; x < inside0; ++x) o[x] = src[0];
-    for (int64_t x = inside0; x < inside1; ++x) o[x] = src[rect.x0 + x - cx0];
-    for (int64_t x = inside1; x < rect.width; ++x) o[x] = src[w - 1];
-    if (voids)
-      for (int64_t x = 0; x < rect.width; ++x)
-        if (std::isnan(o[x])) o[x] = 0.0f;
+    for (int64_t x = inside0; x < inside1; ++x) o[x] = float(row[x + shift] * scale + offset);
+    if (ok)
+      for (int64_t x = inside0; x < inside1; ++x)
+        if (!ok[x + shift]) o[x] = 0.0f;
+    std::fill(o, o + inside0, metres(0));
+    std::fill(o + inside1, o + rect.width, metres(w - 1));
+    if (units_out) {
+      int32_t* u = units_out + y * out_stride;
+      std::fill(u, u + inside0, row[0]);
+      if (inside1 > inside0) std::copy(row + inside0 + shift, row + inside1 + shift, u + inside0);
+      std::fill(u + inside1, u + rect.width, row[w - 1]);
+    }
   }
 }
 

@@ -2,6 +2,7 @@
 #include "runtime/region_decoder.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -18,6 +19,8 @@ struct RegionDecoder::Band {
 };
 
 namespace {
+
+using Clock = std::chrono::steady_clock;
 
 codec::Scratch& thread_codec_scratch() {
   thread_local codec::Scratch s;
@@ -39,8 +42,13 @@ uint64_t tile_key(int level, size_t band, int64_t tile) {
   return (uint64_t(level) << 58) | (uint64_t(band) << 34) | uint64_t(tile);
 }
 
-int32_t saturate(int64_t v) {
-  return int32_t(std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
+// a + b clamped to the int32 range. In 32-bit lanes (no widening), so that the loop below
+// vectorises with plain SSE2: the sum overflowed iff both operands' signs differ from its sign,
+// and then the bound is the one on a's side.
+int32_t saturating_add(int32_t a, int32_t b) {
+  const int32_t sum = int32_t(uint32_t(a) + uint32_t(b));
+  const int32_t bound = (a >> 31) ^ std::numeric_limits<int32_t>::max();
+  return ((a ^ sum) & (b ^ sum)) < 0 ? bound : sum;
 }
 
 // out[rect] += residual (rows of `width` samples starting at `res`, `res_stride` apart).
@@ -48,13 +56,22 @@ void add_rows(int32_t* out, int64_t out_stride, const int32_t* res, int64_t res_
   for (int64_t y = 0; y < rows; ++y) {
     int32_t* o = out + y * out_stride;
     const int32_t* r = res + y * res_stride;
-    for (int64_t x = 0; x < width; ++x) o[x] = saturate(int64_t(o[x]) + r[x]);
+    for (int64_t x = 0; x < width; ++x) o[x] = saturating_add(o[x], r[x]);
   }
 }
 
 // Sum of the extents of the tiles [t0, t1] of size ts along an axis of length n.
 int64_t tiles_extent(int64_t t0, int64_t t1, int64_t ts, int64_t n) {
   return std::min(n, (t1 + 1) * ts) - t0 * ts;
+}
+
+// The size of `level`, after checking that rect lies inside it.
+GridSize checked_size(const PyramidFile& file, int level, const Rect& rect) {
+  const GridSize size = file.level_size(level);
+  if (rect.x0 < 0 || rect.y0 < 0 || rect.width < 0 || rect.height < 0 || rect.x0 + rect.width > size.width ||
+      rect.y0 + rect.height > size.height)
+    throw std::out_of_range("region decoder: rectangle outside level " + std::to_string(level));
+  return size;
 }
 
 }  // namespace
@@ -190,22 +207,39 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
 
 void RegionDecoder::decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const {
   if (level < 0 || level >= file_->level_count()) throw std::out_of_range("region decoder: no level " + std::to_string(level));
-  const GridSize size = file_->level_size(level);
-  if (rect.x0 < 0 || rect.y0 < 0 || rect.width < 0 || rect.height < 0 || rect.x0 + rect.width > size.width ||
-      rect.y0 + rect.height > size.height)
-    throw std::out_of_range("region decoder: rectangle outside level " + std::to_string(level));
+  const GridSize size = checked_size(*file_, level, rect);
   if (rect.width == 0 || rect.height == 0) return;
   if (level == 0) {
     for (int64_t y = 0; y < rect.height; ++y) std::fill_n(out + y * out_stride, rect.width, 0);
-  } else {
-    const Rect need = upsample_required_window(rect, size);
-    std::vector<int32_t>& coarse = thread_window(level - 1);
-    coarse.resize(size_t(need.width * need.height));
-    decode_units(level - 1, need, coarse.data(), need.width);
-    const CoarseWindow win{coarse.data(), need.width, need, file_->level_size(level - 1)};
-    upsample_region(win, size, rect, out, out_stride, thread_upsample_scratch());
+    add_residual(level, rect, out, out_stride);
+    samples_ += uint64_t(rect.width * rect.height);
+    return;
   }
+  // Exactly the window U needs on rect, reconstructed one level coarser (about 4/3 of the area in all).
+  const Rect need = upsample_required_window(rect, size);
+  std::vector<int32_t>& coarse = thread_window(level - 1);
+  coarse.resize(size_t(need.width * need.height));
+  decode_units(level - 1, need, coarse.data(), need.width);
+  decode_refined(level, rect, CoarseWindow{coarse.data(), need.width, need, file_->level_size(level - 1)}, out,
+                 out_stride);
+}
+
+void RegionDecoder::decode_refined(int level, const Rect& rect, const CoarseWindow& coarser, int32_t* out,
+                                   int64_t out_stride, double* seconds_upsample, double* seconds_residual) const {
+  if (level < 1 || level >= file_->level_count())
+    throw std::out_of_range("region decoder: no level " + std::to_string(level) + " above a coarser one");
+  const GridSize size = checked_size(*file_, level, rect);
+  if (rect.width == 0 || rect.height == 0) return;
+  const bool timed = seconds_upsample || seconds_residual;
+  const Clock::time_point t0 = timed ? Clock::now() : Clock::time_point{};
+  upsample_region(coarser, size, rect, out, out_stride, thread_upsample_scratch());
+  const Clock::time_point t1 = timed ? Clock::now() : Clock::time_point{};
   add_residual(level, rect, out, out_stride);
+  if (timed) {
+    const Clock::time_point t2 = Clock::now();
+    if (seconds_upsample) *seconds_upsample += std::chrono::duration<double>(t1 - t0).count();
+    if (seconds_residual) *seconds_residual += std::chrono::duration<double>(t2 - t1).count();
+  }
   samples_ += uint64_t(rect.width * rect.height);
 }
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "io/io_test_util.h"
 #include "pyramid/synth.h"
@@ -126,4 +127,64 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   CHECK(e[2].rms_px == Approx(e[2].rms_m * s_px / 30.0));
   CHECK(e[2].p999_px <= e[2].max_px);
   CHECK(e[0].spacing_m == 120.0);
+}
+
+TEST_CASE("clipmap: levels refined from the coarser clipmap level equal the decoder's, voids too", "[clipmap]") {
+  // The clipmap keeps each level's integer units and decodes only the residual of a finer level
+  // (U of its own coarser level + R^, paper §5). Whatever the path, every level must hold exactly
+  // the decoder's T^ (edges repeated outside the terrain, voids as 0 m), during a walk in and out.
+  iotest::TempDir dir;
+  Heightmap map = write_terrain(dir, 520, 500, 7);
+  map.info.nodata = -32768;
+  for (int64_t y = 200; y < 260; ++y)
+    for (int64_t x = 300; x < 330; ++x) map.values[size_t(y * map.width() + x)] = -32768;
+  write_raw(dir.file("t.raw"), map);
+  BuildFileOptions bo = build_options(4);
+  bo.target = ErrorTarget::Step;
+  bo.target_metres = 4.0;
+  build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("t.pyr"), bo);
+  auto file = PyramidFile::open(dir.file("t.pyr"));
+  REQUIRE(file->info().void_count == 60 * 30);
+  auto decoder = std::make_shared<RegionDecoder>(file, size_t(1) << 20);
+  RegionDecoderSource source(decoder, 30.0);
+  REQUIRE(source.refines_units());
+  std::vector<std::vector<float>> levels;
+  for (int l = 0; l < source.level_count(); ++l) {
+    const GridSize s = source.level_size(l);
+    levels.emplace_back(size_t(s.width * s.height));
+    decoder->decode_metres(l, Rect{0, 0, s.width, s.height}, levels.back().data(), s.width);
+    for (float& v : levels.back())
+      if (std::isnan(v)) v = 0.0f;
+  }
+  ClipmapOptions o;
+  o.n = 31;
+  o.budget = 1 << 30;
+  o.deactivate_by_height = false;
+  Clipmap cm(source, o);
+  // All clip regions inside the terrain: each level is decoded once, without recursion.
+  decoder->reset_stats();
+  const ClipmapUpdateStats first = cm.update(260 * 30.0, 250 * 30.0, 5000.0);
+  CHECK(first.samples_filled == 4 * 31 * 31);
+  CHECK(decoder->stats().samples_reconstructed == uint64_t(first.samples_filled));
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> step(-150.0, 150.0), jump(-6000.0, 6000.0);
+  double x = 260 * 30.0, y = 250 * 30.0;
+  for (int frame = 0; frame < 120; ++frame) {
+    if (frame % 40 == 39) x += jump(rng), y += jump(rng);
+    x = std::clamp(x + step(rng), -3000.0, 18000.0);
+    y = std::clamp(y + step(rng), -3000.0, 18000.0);
+    cm.update(x, y, 5000.0);
+    for (int l = 0; l < cm.level_count(); ++l) {
+      const GridSize size = source.level_size(l);
+      const Rect c = cm.clip_region(l);
+      bool same = true;
+      for (int64_t v = c.y0; v < c.y0 + c.height; ++v)
+        for (int64_t u = c.x0; u < c.x0 + c.width; ++u) {
+          const int64_t su = std::clamp<int64_t>(u, 0, size.width - 1), sv = std::clamp<int64_t>(v, 0, size.height - 1);
+          same = same && cm.heights(l)[cm.index(u, v)] == levels[size_t(l)][size_t(sv * size.width + su)];
+        }
+      INFO("frame " << frame << " level " << l);
+      REQUIRE(same);
+    }
+  }
 }

@@ -42,6 +42,20 @@ namespace terrain::runtime {
 
 class RegionDecoder;
 
+// Integer units of one level held by the caller (the clipmap) in toroidal storage: sample (x, y) of
+// `region` lives at data[wrap(y) * n + wrap(x)], wrap(v) = v mod n in 0..n-1.
+struct HeldUnits {
+  const int32_t* data = nullptr;
+  int64_t n = 0;
+  Rect region;
+};
+
+// Where the time of a fill went, for sources that can say (seconds, added to).
+struct FillSplit {
+  double upsample = 0;  // U of the coarser level
+  double residual = 0;  // the residual: entropy decode (or tile cache) and the addition
+};
+
 // Where the clipmap gets its heights from: one grid per pyramid level, level 0 coarsest, level l
 // sample i on level l+1 sample 2i.
 class HeightSource {
@@ -54,6 +68,18 @@ class HeightSource {
   // Heights (metres) of `level` on `rect`, which may reach beyond the level: such samples repeat
   // the nearest edge sample (a bounded terrain seen from outside is a flat apron). Not thread-safe.
   virtual void fill(int level, const Rect& rect, float* out, int64_t out_stride) = 0;
+
+  // Sources whose levels are integer grids related by level = U(coarser level) + residual (the
+  // compressed pyramid) say so here and implement fill_units; the clipmap then keeps each level's
+  // units and refines the finer level from them instead of having the source rebuild it.
+  virtual bool refines_units() const { return false; }
+  // fill(), also writing the level's integer units at the same positions (units_out, stride
+  // out_stride; edge samples repeat beyond the level like the heights). `coarser`, when not null,
+  // holds units of level - 1 as this source gives them; where it covers the window U needs, only
+  // the residual is decoded (split, when not null, receives the time of U and of the residual).
+  // Either way the output equals what fill() writes.
+  virtual void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
+                          int64_t out_stride, FillSplit* split);
 };
 
 // A compressed pyramid file through the region decoder. Voids (NaN) come out as 0 m.
@@ -65,12 +91,15 @@ class RegionDecoderSource final : public HeightSource {
   GridSize level_size(int level) const override;
   double spacing_m() const override { return spacing_m_; }
   void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
+  bool refines_units() const override { return true; }
+  void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
+                  int64_t out_stride, FillSplit* split) override;
 
  private:
   std::shared_ptr<const RegionDecoder> decoder_;
   double spacing_m_;
-  std::vector<float> scratch_;
-  std::vector<int32_t> units_;
+  std::vector<int32_t> units_, window_;  // the decoded part of the level; the coarser window gathered for U
+  std::vector<uint8_t> valid_;           // void mask rows of the finest level
 };
 
 // Heights from a function of (level, x, y); `unbounded` lets the function be evaluated anywhere
@@ -162,7 +191,14 @@ struct ClipmapOptions {
 };
 
 struct ClipmapUpdateStats {
-  double seconds_fill = 0;        // height source: region decode (U + residual inside decode_units)
+  // seconds_fill: the height source in all, including what it could not split (a recursive region
+  // decode when the coarser level is not in the clipmap, edge replication, units to metres) and the
+  // copy into the toroidal storage; for a source that refines units (the compressed pyramid) its
+  // parts seconds_upsample (U of the clipmap's coarser level) and seconds_residual (residual decode
+  // and addition) are also given.
+  double seconds_fill = 0;
+  double seconds_upsample = 0;
+  double seconds_residual = 0;
   double seconds_coarse = 0;      // zc: the coarser level's surface at each new vertex
   double seconds_normals = 0;     // normal map texels of the new samples and their neighbours
   double seconds_bounds = 0;      // per-tile z ranges
@@ -174,7 +210,8 @@ struct ClipmapUpdateStats {
   double viewer_height = 0;       // viewer height above the terrain used for switching levels, metres
   // The same split per clipmap level (index = level; levels beyond level_count() stay zero).
   struct Level {
-    double seconds_fill = 0, seconds_coarse = 0, seconds_normals = 0, seconds_bounds = 0;
+    double seconds_fill = 0, seconds_upsample = 0, seconds_residual = 0;
+    double seconds_coarse = 0, seconds_normals = 0, seconds_bounds = 0;
     int64_t samples_filled = 0;
   };
   std::array<Level, 32> per_level{};
@@ -242,6 +279,7 @@ class Clipmap {
     LevelRegion desired, active;
     double transition_width = 1;
     std::vector<float> z, zc, normal;
+    std::vector<int32_t> units;  // the source's integer units of z (sources that refine units only)
     // Toroidal tile table: tile (tx, ty) at wrap_tile(ty) * tiles + wrap_tile(tx).
     std::vector<ZRange> tile_range;
     std::vector<Rect> dirty;
@@ -250,7 +288,7 @@ class Clipmap {
   LevelRegion desired_for(int level, double x_m, double y_m) const;
   int64_t exposed_samples(const Level& L, int64_t x0, int64_t y0) const;
   void refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stats);
-  void fill_rect(int level, const Rect& r);
+  void fill_rect(int level, const Rect& r, FillSplit& split);
   void compute_coarse(int level, const Rect& r);
   void compute_normals(int level, const Rect& r);
   void compute_tiles(int level, const Rect& r);
@@ -265,9 +303,12 @@ class Clipmap {
   double viewer_[3] = {0, 0, 0};
   int tiles_;  // tile table side
   std::vector<Level> levels_;
+  bool refines_units_;          // source_.refines_units(): levels keep their units
   std::vector<float> scratch_;  // fill buffer, reused
-  std::vector<float> up_rows_, up_;  // normal map: the level upsampled by U (rows, then both axes)
-  std::vector<int32_t> up_cols_;     // normal map: storage column of each gathered sample column
+  std::vector<int32_t> unit_scratch_;
+  // Row buffers of zc, the normal map and the tile ranges, sized once for n-wide rectangles (no
+  // allocation per update).
+  std::vector<float> rows_;
 };
 
 }  // namespace terrain::runtime

@@ -45,6 +45,13 @@ class RegionDecoder {
   // T^_level on rect in level units (int32); rect must lie inside the level (else std::out_of_range).
   // Throws FormatError naming the file, level, band and libcodec status when data is damaged.
   void decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
+  // T^_level on rect from the caller's own T^_{level-1}: U(coarser) + the decoded residual, no
+  // recursion (the clipmap's update, paper §5: the coarser level is already in the clipmap).
+  // coarser.rect must contain upsample_required_window(rect, level size) and hold exactly what
+  // decode_units(level - 1, ...) gives there; then the result equals decode_units(level, rect).
+  // When seconds_upsample / seconds_residual are given, the time of each half is added to them.
+  void decode_refined(int level, const Rect& rect, const CoarseWindow& coarser, int32_t* out, int64_t out_stride,
+                      double* seconds_upsample = nullptr, double* seconds_residual = nullptr) const;
   // The same in metres; voids of the finest level (when the input had nodata) come out as NaN.
   void decode_metres(int level, const Rect& rect, float* out, int64_t out_stride) const;
   // Metres per level unit and offset: metres = units * scale + offset.
