@@ -1,0 +1,60 @@
+// The image plugin is loaded only when an image is read or written: with $TERRAIN_IMAGE_PLUGIN
+// naming a file that does not exist, non-image work still succeeds, and image work fails with the
+// documented status and a message naming the image, the plugin path and the loader's reason.
+#include <catch2/catch.hpp>
+
+#include <cstdlib>
+#include <optional>
+
+#include "io_test_util.h"
+
+namespace {
+
+// Sets an environment variable for the tools this test runs, restoring it afterwards so that
+// later test cases in the same process (which may load the plugin themselves) are unaffected.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : name_(name) {
+    if (const char* old = std::getenv(name)) old_ = old;
+    setenv(name, value.c_str(), 1);
+  }
+  ~ScopedEnv() {
+    if (old_) setenv(name_, old_->c_str(), 1);
+    else unsetenv(name_);
+  }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+  std::optional<std::string> old_;
+};
+
+}  // namespace
+
+TEST_CASE("the image plugin is loaded only for images, and a missing one is a clear error", "[io][plugin]") {
+  iotest::TempDir dir;
+  const std::string png = dir.file("grid.png"), raw = dir.file("grid.raw");
+  // Written with the real plugin, before it is taken away.
+  auto made = iotest::run_tools(dir, {{"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}},
+                                      {"terrain-synth", {"-o", raw, "--width", "20", "--height", "10", "-q"}}});
+  REQUIRE(made[0].status == 0);
+  REQUIRE(made[1].status == 0);
+
+  const std::string missing = dir.file("no-such-plugin.so");
+  ScopedEnv env("TERRAIN_IMAGE_PLUGIN", missing);
+  auto r = iotest::run_tools(dir, {{"terrain-info", {raw, "-q"}},
+                                   {"terrain-info", {png, "-q"}},
+                                   {"terrain-synth", {"-o", dir.file("out.png"), "--width", "5", "--height", "5", "-q"}}});
+  CHECK(r[0].status == 0);
+  INFO(r[1].err);
+  CHECK(r[1].status == 6);
+  CHECK(r[1].err.find(png) != std::string::npos);
+  CHECK(r[1].err.find("cannot load the image plugin " + missing) != std::string::npos);
+  CHECK(r[1].err.find("cannot open shared object file") != std::string::npos);  // dlerror()'s reason
+  INFO(r[2].err);
+  CHECK(r[2].status == 9);
+  CHECK(r[2].err.find("out.png") != std::string::npos);
+  CHECK(r[2].err.find("cannot load the image plugin " + missing) != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir.file("out.png")));
+}
