@@ -78,11 +78,13 @@ bool inverse_lapped_vector(int32_t* tile, int width, int height, bool lossy) {
 #endif
 }
 
+// Measured on a 64x64 tile (ns/sample, scalar / 4 lanes / AVX2): lossy 3.25 / 2.2 / 1.3, lossless
+// 1.27 / 1.45 / 0.77. The lossless scalar form auto-vectorises its column steps and beats 4 lanes.
 void inverse_lapped(int32_t* tile, int width, int height, bool lossy) {
 #if defined(CODEC_VECTOR_TRANSFORM) && defined(__x86_64__)
   if (cpu_has_avx2() && inverse_lapped_avx2(tile, width, height, lossy)) return;
 #endif
-  if (!inverse_lapped_vector(tile, width, height, lossy)) inverse_lapped_scalar(tile, width, height, lossy);
+  if (!lossy || !inverse_lapped_vector(tile, width, height, lossy)) inverse_lapped_scalar(tile, width, height, lossy);
 }
 
 }  // namespace codec::detail
