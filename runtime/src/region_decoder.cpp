@@ -153,17 +153,18 @@ std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int leve
   // Decoded outside the lock: two threads may race on the same tile; both get identical data.
   const int64_t ts = h.tile_size;
   const codec::Rect r{tx * ts, ty * ts, std::min(ts, h.width - tx * ts), std::min(ts, h.height - ty * ts)};
-  auto t = std::make_shared<Tile>(size_t(r.width * r.height));
-  const codec::Status s = bd.decoder.decode_region(r, t->data(), r.width, thread_codec_scratch());
+  std::shared_ptr<Tile> t = std::make_shared_for_overwrite<Tile>(size_t(r.width * r.height));
+  const codec::Status s = bd.decoder.decode_region(r, t.get(), r.width, thread_codec_scratch());
   if (s != codec::Status::Ok) throw_band_error(*file_, level, b, file_->bands(level)[b], r.x, r.width, s);
   count_decoded(level, 1, uint64_t(r.width * r.height));
   std::lock_guard<std::mutex> lock(mutex_);
   if (map_.find(key) == map_.end()) {
-    lru_.push_front(Entry{key, t});
+    const size_t bytes = size_t(r.width * r.height) * sizeof(int32_t);
+    lru_.push_front(Entry{key, t, bytes});
     map_[key] = lru_.begin();
-    cache_bytes_ += t->size() * sizeof(int32_t);
+    cache_bytes_ += bytes;
     while (cache_bytes_ > cache_capacity_ && lru_.size() > 1) {
-      cache_bytes_ -= lru_.back().tile->size() * sizeof(int32_t);
+      cache_bytes_ -= lru_.back().bytes;
       map_.erase(lru_.back().key);
       lru_.pop_back();
     }
@@ -200,7 +201,7 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
         const int64_t x0 = std::max(cr.x, tx * ts), x1 = std::min(cr.x + cr.width, tx * ts + tw);
         const int64_t ya = std::max(cr.y, ty * ts), yb = std::min(cr.y + cr.height, (ty + 1) * ts);
         add_rows(band_out + (ya - cr.y) * out_stride + (x0 - cr.x), out_stride,
-                 t->data() + (ya - ty * ts) * tw + (x0 - tx * ts), tw, x1 - x0, yb - ya);
+                 t.get() + (ya - ty * ts) * tw + (x0 - tx * ts), tw, x1 - x0, yb - ya);
       }
   }
 }

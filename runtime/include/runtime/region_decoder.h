@@ -4,7 +4,9 @@
 // U(T^_{level-1}) on the rectangle plus the decoded residual, recursively down to the coarsest
 // level. Each recursion step asks the coarser level for exactly the window that U needs on rect
 // (rect/2 plus the four-point support), so reconstruction costs about 4/3 of rect's area in all;
-// the residuals are entropy-decoded only for the libcodec tiles those windows intersect.
+// the residuals are entropy-decoded only for the libcodec tiles those windows intersect. A caller
+// that already holds T^_{level-1} around rect (the clipmap: its own coarser level) calls
+// decode_refined instead and pays for U and the residual of rect alone.
 // Decoded residual tiles are kept in a bounded LRU cache shared by all callers, so requests that
 // share tiles (the thin L-shaped strips of a moving clipmap, neighbouring windows) decode each
 // tile once.
@@ -65,7 +67,7 @@ class RegionDecoder {
 
  private:
   struct Band;  // a band's libcodec stream, opened (header + tile index parsed) on first use
-  using Tile = std::vector<int32_t>;
+  using Tile = int32_t[];  // a decoded tile's samples, row-major (allocated uninitialised: decode writes all)
   const Band& band(int level, size_t b) const;
   void add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
   std::shared_ptr<const Tile> residual_tile(int level, size_t b, const Band& band, int64_t tx, int64_t ty) const;
@@ -78,6 +80,7 @@ class RegionDecoder {
   struct Entry {
     uint64_t key;
     std::shared_ptr<const Tile> tile;
+    size_t bytes;
   };
   mutable std::mutex mutex_;
   mutable std::list<Entry> lru_;
