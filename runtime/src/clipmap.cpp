@@ -96,6 +96,15 @@ constexpr float kU9 = 9.0f / 16.0f, kU1 = 1.0f / 16.0f;
   }
 }
 
+// Per-column range of z and zc over one more row (min/max: exact, the same in both clones).
+[[gnu::target_clones("avx2", "default")]] void accumulate_range(const float* z, const float* zc, int64_t count,
+                                                                float* lo, float* hi) {
+  for (int64_t i = 0; i < count; ++i) {
+    lo[i] = std::min(lo[i], std::min(z[i], zc[i]));
+    hi[i] = std::max(hi[i], std::max(z[i], zc[i]));
+  }
+}
+
 }  // namespace
 
 Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(source), options_(options) {
@@ -295,12 +304,6 @@ void Clipmap::compute_tiles(int level, const Rect& r) {
   float* hi = lo + cols;
   // The columns are inside the clip region: two runs of the storage, the same for every row.
   const RowRuns runs(n_, colx0, cols);
-  auto accumulate = [](const float* z, const float* zc, int64_t count, float* lo_run, float* hi_run) {
-    for (int64_t i = 0; i < count; ++i) {
-      lo_run[i] = std::min(lo_run[i], std::min(z[i], zc[i]));
-      hi_run[i] = std::max(hi_run[i], std::max(z[i], zc[i]));
-    }
-  };
   for (int64_t ty = ty0; ty <= ty1; ++ty) {
     const int64_t y0 = std::max(ty * kTile, clip.y0), y1 = std::min((ty + 1) * kTile, clip.y0 + n_);
     std::fill_n(lo, cols, std::numeric_limits<float>::infinity());
@@ -308,8 +311,8 @@ void Clipmap::compute_tiles(int level, const Rect& r) {
     for (int64_t y = y0; y < y1; ++y) {
       const float* z = L.z.data() + wrap(y) * n_;
       const float* zc = L.zc.data() + wrap(y) * n_;
-      accumulate(z + runs.start, zc + runs.start, runs.run1, lo, hi);
-      accumulate(z, zc, cols - runs.run1, lo + runs.run1, hi + runs.run1);
+      accumulate_range(z + runs.start, zc + runs.start, runs.run1, lo, hi);
+      accumulate_range(z, zc, cols - runs.run1, lo + runs.run1, hi + runs.run1);
     }
     for (int64_t tx = tx0; tx <= tx1; ++tx) {
       const int64_t a = std::max(tx * kTile, colx0) - colx0, b = std::min((tx + 1) * kTile, colx1) - colx0;
