@@ -31,6 +31,23 @@ Rect intersect(const Rect& a, const Rect& b) {
 
 Rect dilate(const Rect& r, int64_t d) { return Rect{r.x0 - d, r.y0 - d, r.width + 2 * d, r.height + 2 * d}; }
 
+// `band` less the part `cut` covers, when that part spans the band across and reaches one of its
+// ends (a rectangle remains); otherwise band as it is. The clip-border bands less the new strips,
+// which are recomputed anyway (a strip is whole-height or whole-width and lies on the border).
+Rect trim(const Rect& band, const Rect& cut) {
+  const Rect in = intersect(band, cut);
+  if (in.width == 0 || in.height == 0) return band;
+  if (in.height == band.height) {
+    if (in.x0 == band.x0) return Rect{in.x0 + in.width, band.y0, band.width - in.width, band.height};
+    if (in.x0 + in.width == band.x0 + band.width) return Rect{band.x0, band.y0, band.width - in.width, band.height};
+  }
+  if (in.width == band.width) {
+    if (in.y0 == band.y0) return Rect{band.x0, in.y0 + in.height, band.width, band.height - in.height};
+    if (in.y0 + in.height == band.y0 + band.height) return Rect{band.x0, band.y0, band.width, band.height - in.height};
+  }
+  return band;
+}
+
 int64_t floor_div(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 // Where a run of level columns x0 .. x0 + count - 1, clamped to the clip region's columns c0 .. c1,
@@ -366,35 +383,38 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
   t0 = Clock::now();
   // A sample's texels depend on the samples within 2 of it (U's support), clamped to the clip
   // region: recompute a 2-sample ring around the new samples, and the 2-sample band along the clip
-  // border, where the clamp now reaches other samples than before.
-  for (const Rect& r : rects) compute_normals(level, intersect(dilate(r, 2), clip));
-  if (!full) {
-    compute_normals(level, Rect{x0, y0, n_, 2});
-    compute_normals(level, Rect{x0, y0 + n_ - 2, n_, 2});
-    compute_normals(level, Rect{x0, y0 + 2, 2, n_ - 4});
-    compute_normals(level, Rect{x0 + n_ - 2, y0 + 2, 2, n_ - 4});
-  }
+  // border, where the clamp now reaches other samples than before (less what the rings cover).
+  const size_t new_rects = rects.size();
+  std::array<Rect, 2> rings;
+  for (size_t i = 0; i < new_rects; ++i) rings[i] = intersect(dilate(rects[i], 2), clip);
+  std::array<Rect, 4> bands = {Rect{x0, y0, n_, 2}, Rect{x0, y0 + n_ - 2, n_, 2}, Rect{x0, y0 + 2, 2, n_ - 4},
+                               Rect{x0 + n_ - 2, y0 + 2, 2, n_ - 4}};
+  for (Rect& b : bands)
+    for (size_t i = 0; i < new_rects; ++i) b = trim(b, rings[i]);
+  for (size_t i = 0; i < new_rects; ++i) compute_normals(level, rings[i]);
+  if (!full)
+    for (const Rect& b : bands) compute_normals(level, b);
   mine.seconds_normals = since(t0);
   stats.seconds_normals += mine.seconds_normals;
   t0 = Clock::now();
   for (const Rect& r : rects) compute_tiles(level, r);
   // Tiles straddling the clip border lost or gained samples where the region moved away: refresh
-  // the border tiles so that the ranges equal those of a clipmap filled from scratch.
+  // the border tiles so that the ranges equal those of a clipmap filled from scratch (those of the
+  // new samples' tiles are fresh already).
   if (!full) {
-    compute_tiles(level, Rect{x0, y0, n_, kTile});
-    compute_tiles(level, Rect{x0, y0 + n_ - kTile, n_, kTile});
-    compute_tiles(level, Rect{x0, y0, kTile, n_});
-    compute_tiles(level, Rect{x0 + n_ - kTile, y0, kTile, n_});
+    for (Rect b : {Rect{x0, y0, n_, kTile}, Rect{x0, y0 + n_ - kTile, n_, kTile}, Rect{x0, y0, kTile, n_},
+                   Rect{x0 + n_ - kTile, y0, kTile, n_}}) {
+      for (size_t i = 0; i < new_rects; ++i) b = trim(b, rects[i]);
+      compute_tiles(level, b);
+    }
   }
   mine.seconds_bounds = since(t0);
   stats.seconds_bounds += mine.seconds_bounds;
   // Normals changed on the ring and on the clip border too: report them for upload.
   if (!full) {
-    for (Rect& r : rects) r = intersect(dilate(r, 2), clip);
-    rects.push_back(Rect{x0, y0, n_, 2});
-    rects.push_back(Rect{x0, y0 + n_ - 2, n_, 2});
-    rects.push_back(Rect{x0, y0 + 2, 2, n_ - 4});
-    rects.push_back(Rect{x0 + n_ - 2, y0 + 2, 2, n_ - 4});
+    for (size_t i = 0; i < new_rects; ++i) rects[i] = rings[i];
+    for (const Rect& b : bands)
+      if (b.width > 0 && b.height > 0) rects.push_back(b);
   }
 }
 
