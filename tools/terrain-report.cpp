@@ -168,9 +168,6 @@ int run(int argc, char** argv) {
   const int source_bits = map.info.sample_type == SampleType::Int16 || map.info.sample_type == SampleType::UInt16 ? 16
                           : map.info.sample_type == SampleType::TerrainRGB                                     ? 24
                                                                                                                : 32;
-  double build_seconds = -1;
-  const std::string meta(file->container().metadata_json());
-  if (auto p = meta.find("\"seconds_build\":"); p != std::string::npos) build_seconds = std::atof(meta.c_str() + p + 16);
 
   if (!heatmap.empty()) write_heatmap(heatmap, finest_err, map.width(), map.height(), finest.max);
 
@@ -187,8 +184,7 @@ int run(int argc, char** argv) {
     std::printf("%-6s %11s %10.4f %10.4f %10.4f %8.2f\n", "all", "", overall.rms, overall.max, overall.p999, overall.psnr);
     std::printf("size %llu bytes, %.4f bits per finest sample, compression factor %.2f (vs %d-bit source samples)\n",
                 (unsigned long long)bytes, bits, double(source_bits) / bits, source_bits);
-    std::printf("build %.3f s (%.1f Msamples/s), finest-level decode %.3f s (%.1f Msamples/s, one thread, cold cache)\n",
-                build_seconds, build_seconds > 0 ? samples / 1e6 / build_seconds : 0.0, decode_seconds,
+    std::printf("finest-level decode %.3f s (%.1f Msamples/s, one thread, cold cache)\n", decode_seconds,
                 samples / 1e6 / std::max(1e-9, decode_seconds));
   }
   if (!json_path.empty()) {
@@ -206,7 +202,7 @@ int run(int argc, char** argv) {
     j.field("input", input).field("pyramid", pyr_path).field("width", map.width()).field("height", map.height());
     j.field("bytes", int64_t(bytes)).field("bits_per_sample", bits).field("compression_factor", double(source_bits) / bits);
     j.field("zmin_m", zmin).field("zmax_m", zmax).field("voids_restored", voids_mismatch == 0);
-    j.field("build_seconds", build_seconds).field("decode_seconds", decode_seconds);
+    j.field("decode_seconds", decode_seconds);
     j.field("decode_msamples_per_s", samples / 1e6 / std::max(1e-9, decode_seconds));
     j.key("overall").begin_object();
     put(overall);

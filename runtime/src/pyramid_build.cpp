@@ -281,6 +281,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   info.quantisation.mode = mode;
   info.quantisation.target = o.target == ErrorTarget::Lossless ? 0 : o.target_metres;
 
+  // No timings or other run-dependent values in the file: the same input and options must give a
+  // byte-identical file whatever the thread count or machine load (build times go to --json).
   std::ostringstream meta;
   meta.precision(10);
   meta << "{\"tool\":\"pyramid-build\",\"version\":\"0.1.0\",\"source\":\"" << json_escape(input) << "\""
@@ -288,7 +290,6 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
        << "\",\"step_units\":" << co.step << ",\"max_error_units\":" << out.max_error_units
        << ",\"tile_size\":" << co.tile_size << ",\"band_rows\":" << coder.band_rows()
        << ",\"filter\":\"" << json_escape(out.build.filter_report.summary()) << "\""
-       << ",\"seconds_calibrate\":" << out.seconds_calibrate << ",\"seconds_build\":" << out.seconds_build
        << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
   writer.finish(out.build, info, meta.str());
   out.file_bytes = uint64_t(std::filesystem::file_size(output));

@@ -12,6 +12,8 @@
 #include <catch2/catch.hpp>
 
 #include <cstdint>
+#include <fstream>
+#include <iterator>
 #include <random>
 
 #include "stress_util.h"
@@ -340,4 +342,12 @@ TEST_CASE("stress: output is identical for 1 and 2 build threads on a pathologic
   const Outcome ob = build_and_measure(src, dir.file("b.pyr"), b);
   CHECK(oa.finest == ob.finest);
   CHECK(oa.bits_per_sample == ob.bits_per_sample);
+  // The whole file, metadata included: nothing run-dependent (timings, thread count) may be stored.
+  const auto bytes = [](const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  };
+  const std::string fa = bytes(dir.file("a.pyr")), fb = bytes(dir.file("b.pyr"));
+  REQUIRE(!fa.empty());
+  CHECK(fa == fb);
 }
