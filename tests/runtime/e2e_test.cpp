@@ -205,8 +205,10 @@ TEST_CASE("e2e: corrupted pyramid files are rejected or the damaged tile reporte
 TEST_CASE("e2e: pyramid-build fails cleanly on a truncated input and leaves no output", "[e2e]") {
   iotest::TempDir dir;
   const Heightmap map = synthesize_terrain(SynthOptions{.seed = 1, .width = 1201, .height = 1201});
-  std::vector<uint8_t> hgt = iotest::hgt_bytes(map);
-  hgt.resize(hgt.size() - 1000);
+  const std::vector<uint8_t> whole = iotest::hgt_bytes(map);
+  // A copy of the prefix rather than resize(): GCC 12 under ASan warns (-Wstringop-overflow) on the
+  // shrinking resize, a false positive.
+  const std::vector<uint8_t> hgt(whole.begin(), whole.end() - 1000);
   const std::string in = dir.file("N10E010.hgt");
   iotest::write_file(in, hgt);
   const std::string out = dir.file("out.pyr");
