@@ -2,7 +2,9 @@
 // integer arithmetic for the pyramid and in double for filter design. One implementation serves
 // both the encoder and the runtime region decoder, so prediction is bit-identical on both sides.
 #include <algorithm>
+#include <cstddef>
 #include <limits>
+#include <new>
 #include <stdexcept>
 #include <string>
 
@@ -54,8 +56,10 @@ void real_span(int64_t f0, int64_t f1, int64_t n, int64_t* lo, int64_t* hi) {
   *hi = std::clamp<int64_t>(std::max(rhi, std::min(ehi, n - 1)), 0, n - 1);
 }
 
-// Horizontal pass on one coarse row: h[x - fx0] = 16 * U_x(row)(x), exact in int64 (or double).
-// `row` points at coarse column `col0`.
+// Horizontal pass on one coarse row: h[x - fx0] = 16 * U_x(row)(x), exact in Acc (int32 only when
+// the caller has bounded the values, int64 or double otherwise). `row` points at coarse column `col0`.
+// Samples whose stencil stays inside the row take a branch-free loop over even/odd pairs (the one
+// that vectorises); the few near either edge go through extension().
 template <class In, class Acc>
 void horizontal_row(const In* row, int64_t col0, int64_t n, int64_t fx0, int64_t fw, Acc* h) {
   auto at = [&](int64_t e) -> Acc {
@@ -65,18 +69,34 @@ void horizontal_row(const In* row, int64_t col0, int64_t n, int64_t fx0, int64_t
     for (int t = 0; t < c.terms; ++t) v += Acc(c.weight[t]) * Acc(row[c.index[t] - col0]);
     return v;
   };
-  for (int64_t k = 0; k < fw; ++k) {
+  auto edge_sample = [&](int64_t k) {
     int64_t x = fx0 + k;
     int64_t i = x >> 1;
-    if ((x & 1) == 0) {
-      h[k] = Acc(16) * at(i);
-    } else if (i >= 1 && i + 2 < n) {
-      const In* p = row + (i - 1 - col0);
-      h[k] = Acc(9) * (Acc(p[1]) + Acc(p[2])) - Acc(p[0]) - Acc(p[3]);
-    } else {
-      h[k] = Acc(9) * (at(i) + at(i + 1)) - at(i - 1) - at(i + 2);
-    }
+    h[k] = (x & 1) == 0 ? Acc(16) * at(i) : Acc(9) * (at(i) + at(i + 1)) - at(i - 1) - at(i + 2);
+  };
+  // Fine x = 2i or 2i+1 reads only real samples i-1..i+2 when 1 <= i <= n-3, i.e. 2 <= x < 2n-4.
+  const int64_t k_lo = std::clamp<int64_t>(2 - fx0, 0, fw);
+  const int64_t k_hi = std::clamp<int64_t>(2 * n - 4 - fx0, k_lo, fw);
+  for (int64_t k = 0; k < k_lo; ++k) edge_sample(k);
+  int64_t k = k_lo;
+  if (k < k_hi && ((fx0 + k) & 1) != 0) {
+    const In* p = row + (((fx0 + k) >> 1) - 1 - col0);
+    h[k] = Acc(9) * (Acc(p[1]) + Acc(p[2])) - Acc(p[0]) - Acc(p[3]);
+    ++k;
   }
+  if (k < k_hi) {
+    // Pairs (2i, 2i+1) from coarse samples i-1..i+2; p points at i-1 of the first pair.
+    const int64_t pairs = (k_hi - k) / 2;
+    const In* p = row + (((fx0 + k) >> 1) - 1 - col0);
+    Acc* hp = h + k;
+    for (int64_t q = 0; q < pairs; ++q) {
+      hp[2 * q] = Acc(16) * Acc(p[q + 1]);
+      hp[2 * q + 1] = Acc(9) * (Acc(p[q + 1]) + Acc(p[q + 2])) - Acc(p[q]) - Acc(p[q + 3]);
+    }
+    k += 2 * pairs;
+    if (k < k_hi) h[k++] = Acc(16) * Acc(p[pairs + 1]);
+  }
+  for (; k < fw; ++k) edge_sample(k);
 }
 
 inline int32_t saturate_int32(int64_t v) {
@@ -88,24 +108,36 @@ struct IntegerFinish {
   static int32_t even(int64_t s) { return saturate_int32((s + 8) >> 4); }
   static int32_t odd(int64_t s) { return saturate_int32((s + 128) >> 8); }
 };
+// For the int32 path: the caller's bound keeps s + 128 inside int32 and the result needs no clamp.
+struct Int32Finish {
+  static int32_t even(int32_t s) { return (s + 8) >> 4; }
+  static int32_t odd(int32_t s) { return (s + 128) >> 8; }
+};
 struct RealFinish {
   static double even(double s) { return s / 16.0; }
   static double odd(double s) { return s / 256.0; }
 };
 
-template <class In, class Acc, class Out, class Finish>
-void upsample_generic(const In* data, int64_t stride, const Rect& have, GridSize clevel, GridSize flevel,
-                      const Rect& fine, Out* out, int64_t out_stride, std::vector<Acc>& scratch) {
-  if (fine.width <= 0 || fine.height <= 0) return;
+// Extended coarse rows [*lo, *hi] whose horizontal pass upsample_generic keeps.
+void horizontal_rows(const Rect& fine, GridSize clevel, int64_t* lo, int64_t* hi) {
   int64_t ely0, ely1, rly0, rly1;
   extended_span(fine.y0, fine.y0 + fine.height, &ely0, &ely1);
   real_span(fine.y0, fine.y0 + fine.height, clevel.height, &rly0, &rly1);
   // Extended rows near an edge combine real rows that may lie outside the extended span itself.
-  const int64_t row_lo = std::min(ely0, rly0), row_hi = std::max(ely1, rly1);
+  *lo = std::min(ely0, rly0);
+  *hi = std::max(ely1, rly1);
+}
+
+// `scratch` holds (row_hi - row_lo + 1) * fine.width values (horizontal_rows).
+template <class In, class Acc, class Out, class Finish>
+void upsample_generic(const In* data, int64_t stride, const Rect& have, GridSize clevel, const Rect& fine,
+                      Out* out, int64_t out_stride, Acc* scratch) {
+  if (fine.width <= 0 || fine.height <= 0) return;
+  int64_t ely0, ely1, row_lo, row_hi;
+  extended_span(fine.y0, fine.y0 + fine.height, &ely0, &ely1);
+  horizontal_rows(fine, clevel, &row_lo, &row_hi);
   const int64_t fw = fine.width;
-  scratch.resize(size_t((row_hi - row_lo + 1) * fw));
-  auto hrow = [&](int64_t e) { return scratch.data() + (e - row_lo) * fw; };
-  (void)flevel;
+  auto hrow = [&](int64_t e) { return scratch + (e - row_lo) * fw; };
   // Real rows first, then extended rows as combinations of real ones (U is linear).
   for (int64_t e = row_lo; e <= row_hi; ++e) {
     if (e < 0 || e >= clevel.height) continue;
@@ -153,6 +185,34 @@ void check_window(const CoarseWindow& coarse, GridSize fine_level, const Rect& f
     throw std::invalid_argument("upsample_region: coarse window does not cover the required samples");
 }
 
+// Largest |coarse value| for which no intermediate of the int32 path overflows. Along one axis a
+// 16x-scaled sample combines coarse values with absolute weights summing to at most 20 when its
+// stencil stays inside the level, and to at most 9*(1+3)+3+5 = 44 where extension() takes part
+// (extended values weigh 3 or 5: 2a-b, 3a-2b); an extended row of the vertical pass (5x at most)
+// feeds that same bound. The vertical pass multiplies the two gains; 128 is the rounding bias.
+int32_t int32_path_limit(const Rect& fine, GridSize clevel) {
+  // Fine samples [f0, f1) read only real coarse samples when 2 <= f0 and f1 <= 2n-4 (see horizontal_row).
+  auto gain = [](int64_t f0, int64_t f1, int64_t n) -> int64_t {
+    return f0 >= 2 && f1 <= 2 * n - 4 ? 20 : 44;
+  };
+  const int64_t g =
+      gain(fine.x0, fine.x0 + fine.width, clevel.width) * gain(fine.y0, fine.y0 + fine.height, clevel.height);
+  return int32_t((int64_t(std::numeric_limits<int32_t>::max()) - 128) / g);
+}
+
+// Whether all width x height values lie in [-limit, limit] (one min/max pass, vectorisable).
+bool within(const int32_t* data, int64_t stride, int64_t width, int64_t height, int32_t limit) {
+  int32_t lo = 0, hi = 0;
+  for (int64_t y = 0; y < height; ++y) {
+    const int32_t* row = data + y * stride;
+    for (int64_t x = 0; x < width; ++x) {
+      lo = std::min(lo, row[x]);
+      hi = std::max(hi, row[x]);
+    }
+  }
+  return lo >= -limit && hi <= limit;
+}
+
 }  // namespace
 
 std::vector<GridSize> pyramid_level_sizes(GridSize finest, int level_count, int64_t min_coarsest_side) {
@@ -186,23 +246,43 @@ void upsample_region(const CoarseWindow& coarse, GridSize fine_level, const Rect
                      int64_t out_stride, UpsampleScratch& scratch) {
   if (fine.width <= 0 || fine.height <= 0) return;
   check_window(coarse, fine_level, fine);
-  upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(coarse.data, coarse.stride, coarse.rect, coarse.level,
-                                                             fine_level, fine, out, out_stride, scratch.rows);
+  int64_t row_lo, row_hi;
+  horizontal_rows(fine, coarse.level, &row_lo, &row_hi);
+  const size_t count = size_t((row_hi - row_lo + 1) * fine.width);
+  const Rect need = upsample_required_window(fine, fine_level);
+  const int32_t* need_data =
+      coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
+  const int32_t limit = int32_path_limit(fine, coarse.level);
+  if (within(need_data, coarse.stride, need.width, need.height, limit)) {
+    // Same values in half the bytes: the int64 scratch's storage holds the int32 rows. Starting
+    // a std::byte array's lifetime there implicitly creates the int32 array (C++20 [intro.object]).
+    scratch.rows.resize((count + 1) / 2);
+    auto* h = reinterpret_cast<int32_t*>(new (scratch.rows.data()) std::byte[count * sizeof(int32_t)]);
+    upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(coarse.data, coarse.stride, coarse.rect,
+                                                             coarse.level, fine, out, out_stride, h);
+  } else {
+    scratch.rows.resize(count);
+    upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(
+        coarse.data, coarse.stride, coarse.rect, coarse.level, fine, out, out_stride, scratch.rows.data());
+  }
 }
 
 void upsample(const int32_t* coarse, GridSize fine_level, int32_t* fine) {
   GridSize c{coarse_extent(fine_level.width), coarse_extent(fine_level.height)};
   CoarseWindow w{coarse, c.width, Rect{0, 0, c.width, c.height}, c};
   UpsampleScratch scratch;
-  upsample_region(w, fine_level, Rect{0, 0, fine_level.width, fine_level.height}, fine, fine_level.width, scratch);
+  upsample_region(w, fine_level, Rect{0, 0, fine_level.width, fine_level.height}, fine, fine_level.width,
+                  scratch);
 }
 
 void upsample_real(const double* coarse, GridSize fine_level, double* fine) {
   GridSize c{coarse_extent(fine_level.width), coarse_extent(fine_level.height)};
-  std::vector<double> scratch;
-  upsample_generic<double, double, double, RealFinish>(coarse, c.width, Rect{0, 0, c.width, c.height}, c,
-                                                       fine_level, Rect{0, 0, fine_level.width, fine_level.height},
-                                                       fine, fine_level.width, scratch);
+  const Rect all{0, 0, fine_level.width, fine_level.height};
+  int64_t row_lo, row_hi;
+  horizontal_rows(all, c, &row_lo, &row_hi);
+  std::vector<double> scratch(size_t((row_hi - row_lo + 1) * all.width));
+  upsample_generic<double, double, double, RealFinish>(coarse, c.width, Rect{0, 0, c.width, c.height}, c, all,
+                                                       fine, fine_level.width, scratch.data());
 }
 
 }  // namespace terrain

@@ -1,8 +1,10 @@
 // U (four-point subdivision) and D (11x11 downsampling, least-squares optimal fit).
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <random>
 
 #include "pyramid/pyramid.h"
@@ -35,6 +37,61 @@ std::vector<int32_t> smooth_terrain(GridSize s, double amplitude = 800) {
           amplitude * (std::sin(x * 0.05) * std::cos(y * 0.041) + 0.3 * std::sin(x * 0.23 + y * 0.17) +
                        0.1 * std::cos(x * 0.71 - y * 0.53))));
   return g;
+}
+
+// A random non-empty rectangle inside a level.
+Rect random_rect(GridSize level, std::mt19937& rng) {
+  std::uniform_int_distribution<int64_t> dx(0, level.width - 1), dy(0, level.height - 1);
+  Rect r;
+  r.x0 = dx(rng), r.y0 = dy(rng);
+  r.width = std::uniform_int_distribution<int64_t>(1, level.width - r.x0)(rng);
+  r.height = std::uniform_int_distribution<int64_t>(1, level.height - r.y0)(rng);
+  return r;
+}
+
+// Just the window's samples, so that reading outside it would be caught by ASan.
+std::vector<int32_t> window_copy(const std::vector<int32_t>& c, GridSize cs, const Rect& window) {
+  std::vector<int32_t> win(size_t(window.width * window.height));
+  for (int64_t y = 0; y < window.height; ++y)
+    for (int64_t x = 0; x < window.width; ++x)
+      win[size_t(y * window.width + x)] = c[size_t((window.y0 + y) * cs.width + window.x0 + x)];
+  return win;
+}
+
+// Coefficients (coarse index -> weight) of the value at extended coarse index e of a level of n
+// samples: constant for n == 1, else point reflection about the edge sample, applied again when
+// the reflected index is itself outside (n == 2, e == n + 1).
+std::map<int64_t, int64_t> extended_value(int64_t e, int64_t n) {
+  if (n == 1) return {{0, 1}};
+  if (e >= 0 && e < n) return {{e, 1}};
+  const int64_t edge = e < 0 ? 0 : n - 1;
+  std::map<int64_t, int64_t> v{{edge, 2}};
+  for (auto [index, weight] : extended_value(2 * edge - e, n)) v[index] -= weight;
+  return v;
+}
+
+// 16 x the weights of fine sample x along one axis.
+std::map<int64_t, int64_t> axis_weights(int64_t x, int64_t n) {
+  const int64_t i = x / 2;
+  std::map<int64_t, int64_t> w;
+  auto add = [&](int64_t e, int64_t scale) {
+    for (auto [index, weight] : extended_value(e, n)) w[index] += scale * weight;
+  };
+  if (x % 2 == 0) {
+    add(i, 16);
+  } else {
+    add(i - 1, -1), add(i, 9), add(i + 1, 9), add(i + 2, -1);
+  }
+  return w;
+}
+
+// U at fine (x, y): the 256-scaled sum rounded half up once, saturated to int32.
+int32_t direct_u(const std::vector<int32_t>& c, GridSize cs, int64_t x, int64_t y) {
+  int64_t s = 0;
+  for (auto [cy, wy] : axis_weights(y, cs.height))
+    for (auto [cx, wx] : axis_weights(x, cs.width)) s += wx * wy * int64_t(c[size_t(cy * cs.width + cx)]);
+  const int64_t v = (s + 128) >> 8;
+  return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX));
 }
 
 }  // namespace
@@ -137,19 +194,11 @@ TEST_CASE("upsample_region matches whole-level U with only the required coarse w
     auto whole = upsampled(c, fine);
     UpsampleScratch scratch;
     for (int trial = 0; trial < 200; ++trial) {
-      std::uniform_int_distribution<int64_t> dx(0, fine.width - 1), dy(0, fine.height - 1);
-      Rect r;
-      r.x0 = dx(rng), r.y0 = dy(rng);
-      r.width = std::uniform_int_distribution<int64_t>(1, fine.width - r.x0)(rng);
-      r.height = std::uniform_int_distribution<int64_t>(1, fine.height - r.y0)(rng);
+      const Rect r = random_rect(fine, rng);
       Rect need = upsample_required_window(r, fine);
       REQUIRE(need.x0 >= 0);
       REQUIRE(need.x0 + need.width <= cs.width);
-      // Copy just the window, so reading outside it would be caught by ASan.
-      std::vector<int32_t> win(size_t(need.width * need.height));
-      for (int64_t y = 0; y < need.height; ++y)
-        for (int64_t x = 0; x < need.width; ++x)
-          win[size_t(y * need.width + x)] = c[size_t((need.y0 + y) * cs.width + need.x0 + x)];
+      std::vector<int32_t> win = window_copy(c, cs, need);
       CoarseWindow cw{win.data(), need.width, need, cs};
       std::vector<int32_t> out(size_t(r.width * r.height));
       upsample_region(cw, fine, r, out.data(), r.width, scratch);
@@ -169,6 +218,63 @@ TEST_CASE("upsample_region rejects a window that does not cover the rectangle") 
   CoarseWindow wrong_level{c.data(), 10, Rect{0, 0, 10, 10}, GridSize{11, 10}};
   CHECK_THROWS_AS(upsample_region(wrong_level, fine, Rect{0, 0, 20, 20}, out.data(), 20, scratch),
                   std::invalid_argument);
+}
+
+// The int32 fast path (taken when the coarse values are small enough) and the int64 path against a
+// direct evaluation of the U formula, on values on both sides of the fast path's bound.
+TEST_CASE("upsample_region equals the direct U formula on both sides of the int32 path's bound") {
+  std::mt19937 rng(11);
+  // 2^20 stays in the fast path for every rectangle, 5.3e6 only for interior ones, larger values
+  // take the int64 path (2^31 - 1 also saturates near edges). 2e6 and 8e6 overflow int32 on the
+  // sign patterns below, so a looser bound would fail here.
+  const int32_t magnitudes[] = {1000,    1 << 20, 1108000, 1200000, 2000000,
+                                5368000, 5400000, 8000000, 1 << 28, INT32_MAX};
+  const GridSize levels[] = {{1, 1}, {2, 2}, {3, 4}, {5, 7}, {8, 8}, {9, 13}, {40, 33}, {131, 70}};
+  for (GridSize fine : levels) {
+    GridSize cs{coarse_extent(fine.width), coarse_extent(fine.height)};
+    for (int32_t magnitude : magnitudes) {
+      for (int pattern = 0; pattern < 3; ++pattern) {
+        // Random values, half of them at the extremes; then the sign patterns that drive the stencils
+        // to their largest sums: alternating signs (edges, 25a - 10b + c) and - + + - (interior, 20x).
+        std::vector<int32_t> c(size_t(cs.width * cs.height));
+        std::uniform_int_distribution<int32_t> any(-magnitude, magnitude);
+        std::uniform_int_distribution<int> pick(0, 3);
+        for (int64_t y = 0; y < cs.height; ++y) {
+          for (int64_t x = 0; x < cs.width; ++x) {
+            int32_t& v = c[size_t(y * cs.width + x)];
+            if (pattern == 0) {
+              int p = pick(rng);
+              v = p == 0 ? magnitude : p == 1 ? -magnitude : any(rng);
+            } else if (pattern == 1) {
+              v = (x + y) % 2 == 0 ? magnitude : -magnitude;
+            } else {
+              auto inner = [](int64_t t) { return t % 4 == 1 || t % 4 == 2; };
+              v = inner(x) == inner(y) ? magnitude : -magnitude;
+            }
+          }
+        }
+        UpsampleScratch scratch;
+        for (int trial = 0; trial < 40; ++trial) {
+          const Rect r = trial == 0 ? Rect{0, 0, fine.width, fine.height} : random_rect(fine, rng);
+          const Rect need = upsample_required_window(r, fine);
+          std::vector<int32_t> win = window_copy(c, cs, need);
+          // Output rows wider than the rectangle: the stride is honoured and nothing beyond is written.
+          const int64_t out_stride = r.width + 3;
+          std::vector<int32_t> out(size_t(out_stride * r.height), 12345);
+          upsample_region(CoarseWindow{win.data(), need.width, need, cs}, fine, r, out.data(), out_stride,
+                          scratch);
+          for (int64_t y = 0; y < r.height; ++y) {
+            for (int64_t x = 0; x < r.width; ++x) {
+              INFO("level " << fine.width << "x" << fine.height << " magnitude " << magnitude << " pattern "
+                            << pattern << " at " << r.x0 + x << "," << r.y0 + y);
+              REQUIRE(out[size_t(y * out_stride + x)] == direct_u(c, cs, r.x0 + x, r.y0 + y));
+            }
+            for (int64_t x = r.width; x < out_stride; ++x) REQUIRE(out[size_t(y * out_stride + x)] == 12345);
+          }
+        }
+      }
+    }
+  }
 }
 
 TEST_CASE("D basics: impulse subsamples, constants stay constant, filters are normalised") {
