@@ -40,6 +40,7 @@ class BitWriter {
     return pos_;
   }
   bool overflow() const { return overflow_; }
+  size_t bit_count() const { return pos_ * 8 + size_t(n_); }  // bits put so far
 
  private:
   void flush32() {

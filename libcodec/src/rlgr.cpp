@@ -5,6 +5,7 @@
 #include "rlgr.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace codec::detail {
 namespace {
@@ -48,12 +49,17 @@ bool gamma_decode(BitReader& in, int32_t* v) {
   return true;
 }
 
-void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState& s) {
+namespace {
+
+// The encoder loop, with the value of each position supplied by `level(i, k)`, called once per
+// position in coding order; k is the run-length parameter there (0: Golomb-Rice mode).
+template <class Level>
+void encode_levels(BitWriter& out, size_t count, RlgrState& s, Level&& level) {
   size_t i = 0;
   while (i < count) {
     const int k = s.kp >> 3;
     if (k == 0) {
-      const int32_t v = values[i++];
+      const int32_t v = level(i++, 0);
       const uint32_t mapped = v >= 0 ? uint32_t(v) * 2 : uint32_t(-int64_t(v)) * 2 - 1;
       put_rice(out, mapped, s);
       s.kp = clamp_kp(mapped == 0 ? s.kp + kUpZero : s.kp - kDownZero);
@@ -61,7 +67,8 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
     }
     const size_t window = std::min(size_t(1) << k, count - i);
     size_t run = 0;
-    while (run < window && values[i + run] == 0) ++run;
+    int32_t v = 0;
+    while (run < window && (v = level(i + run, k)) == 0) ++run;
     if (run == window) {  // a full run, or the zeros that end the sequence
       out.put_bit(0);
       i += window;
@@ -70,12 +77,53 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
     }
     out.put_bit(1);
     out.put(uint32_t(run), k);
-    i += run;
-    const int32_t v = values[i++];
+    i += run + 1;
     out.put_bit(v < 0);
     put_rice(out, uint32_t(v < 0 ? -int64_t(v) : v) - 1, s);
     s.kp = clamp_kp(s.kp - kDownRun);
   }
+}
+
+constexpr int kMaxRunK = kKpMax >> 3;
+
+}  // namespace
+
+void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState& s) {
+  encode_levels(out, count, s, [values](size_t i, int) { return values[i]; });
+}
+
+void rlgr_encode_quantizing(BitWriter& out, int32_t* values, size_t count, size_t group_size,
+                            const double* group_inverse_step, const DeadZone& dead_zone, RlgrState& s) {
+  double offset[kMaxRunK + 1];
+  offset[0] = dead_zone.rice_offset;
+  for (int k = 1; k <= kMaxRunK; ++k)
+    offset[k] = std::max(dead_zone.min_run_offset, dead_zone.run_offset - dead_zone.run_offset_per_k * (k - 1));
+  // Magnitudes below zero_below[k] quantise to 0 in the current group: most values take this
+  // integer test only. encode_levels visits the positions in increasing order, so the group advances
+  // without a division.
+  int64_t zero_below[kMaxRunK + 1];
+  const auto enter_group = [&](const double* inverse) {
+    for (int k = 0; k <= kMaxRunK; ++k) zero_below[k] = int64_t(std::ceil((1.0 - offset[k]) / *inverse));
+  };
+  size_t group_end = group_size;
+  const double* inverse_step = group_inverse_step;
+  enter_group(inverse_step);
+  encode_levels(out, count, s, [&](size_t i, int k) {
+    while (i >= group_end) {
+      group_end += group_size;
+      enter_group(++inverse_step);
+    }
+    const int32_t c = values[i];
+    const int64_t magnitude = c < 0 ? -int64_t(c) : int64_t(c);
+    if (magnitude < zero_below[std::min(k, kMaxRunK)]) {
+      values[i] = 0;
+      return 0;
+    }
+    const double scaled = double(magnitude) * *inverse_step;
+    const int32_t q = int32_t(scaled + offset[std::min(k, kMaxRunK)]);
+    values[i] = c < 0 ? -q : q;
+    return values[i];
+  });
 }
 
 bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& state) {

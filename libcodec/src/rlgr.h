@@ -28,6 +28,21 @@ void gamma_encode(BitWriter& out, int32_t v);
 bool gamma_decode(BitReader& in, int32_t* v);
 
 void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState& state);
+// Rounding offsets of a dead-zone quantiser that depend on the coder's state at each position: in
+// run-length mode (k > 0) a non-zero value costs a run code, a sign and a Rice code and ends the run,
+// so small values are worth zeroing; the longer the runs (larger k), the more so.
+struct DeadZone {
+  double rice_offset;        // Golomb-Rice mode
+  double run_offset;         // run mode, k = 1
+  double run_offset_per_k;   // decrease per unit of k above 1
+  double min_run_offset;
+};
+// Quantises and codes in one pass (encoder only; the decoder is rlgr_decode): values[i], a
+// coefficient of group i / group_size, becomes sign(c) * floor(|c| * group_inverse_step[group] +
+// offset) with the DeadZone offset for the coder's state there, and values then hold the levels coded.
+// Offsets below 1 keep step-1 groups exact.
+void rlgr_encode_quantizing(BitWriter& out, int32_t* values, size_t count, size_t group_size,
+                            const double* group_inverse_step, const DeadZone& dead_zone, RlgrState& state);
 // Decodes exactly `count` values. Returns false when the bits describe an impossible sequence (a run
 // longer than the values left, an escape out of range); the caller also checks out.overrun().
 bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& state);

@@ -34,7 +34,7 @@
 namespace codec {
 
 inline constexpr int32_t kMaxAbsSample = 1 << 20;  // largest |input sample| the coder accepts
-inline constexpr uint32_t kFormatVersion = 2;
+inline constexpr uint32_t kFormatVersion = 3;
 
 enum class Status {
   Ok = 0,
