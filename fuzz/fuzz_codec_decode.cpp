@@ -20,7 +20,7 @@ void put_u32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
 }
 
-// Rewrites header, tile and index CRCs in place (format v2 layout from docs/codec.md: 56-byte header
+// Rewrites header, tile and index CRCs in place (stream layout of formats 2 and 3, docs/codec.md: 56-byte header
 // with its CRC at 52, payloads back to back, then per tile a varint size and a CRC, then the index CRC).
 void fix_checksums(std::vector<uint8_t>& s) {
   constexpr size_t kHeaderCrcAt = 52;
