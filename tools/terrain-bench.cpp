@@ -338,12 +338,22 @@ struct Curve {
 
 Curve curve_of(const std::vector<Row>& rows, const std::string& file, const std::string& codec) {
   Curve c;
+  // One family per sweep: the pyramid's target kind, or a peer setting label's parameter name
+  // ("step=3" and "maxerr=2" of libcodec are two sweeps; "9/7 1.50bps" is openjpeg's 9/7 sweep).
+  std::vector<std::string> family_names;
+  const auto family_of = [&](const Row& r) {
+    const std::string key = !r.target_kind.empty() ? r.target_kind : r.setting.substr(0, r.setting.find_first_of("= "));
+    auto it = std::find(family_names.begin(), family_names.end(), key);
+    if (it == family_names.end()) it = family_names.insert(family_names.end(), key);
+    return int(it - family_names.begin());
+  };
   for (const Row& r : rows) {
     if (r.file != file || r.codec != codec || !r.error.empty()) continue;
     c.any = true;
     const peers::Result& x = r.result;
-    c.by_rms.push_back({x.error.rms * r.unit_m, x.bits_per_sample});
-    c.by_max.push_back({x.error.max_abs * r.unit_m, x.bits_per_sample});
+    const int family = family_of(r);
+    c.by_rms.push_back({x.error.rms * r.unit_m, x.bits_per_sample, family});
+    c.by_max.push_back({x.error.max_abs * r.unit_m, x.bits_per_sample, family});
     const double n = double(r.width * r.height);
     if (x.error.max_abs == 0) {
       if (c.lossless < 0 || x.bits_per_sample < c.lossless) c.lossless = x.bits_per_sample;
@@ -411,11 +421,12 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
      << "* **Peers**: each codec on the same grid in int16 sample units, one thread, codec time only (no "
         "file I/O), best of N repetitions. `libcodec` is our residual coder alone on the single finest "
         "level (no pyramid); it is not counted as a peer.\n"
-     << "* Bits/sample at a target error is interpolated on each codec's lower envelope of (error, "
-        "bits/sample) points, linear in log(bits) against log(error); a target below a codec's smallest "
-        "non-zero error takes its lossless rate when it has one (lossless meets every target); '—' = the "
-        "sweep does not reach that error. The rms columns use every point of a codec's sweep (any mode), the max-error "
-        "columns the measured max |error|.\n"
+     << "* Bits/sample at a target error is interpolated on the lower envelope of (error, bits/sample) "
+        "points of each of a codec's sweeps (one per mode: libcodec's step and max-error sweeps, the pyramid's "
+        "rms and max-error targets), linear in log(bits) against log(error), and the cheapest sweep counts; "
+        "a target below a sweep's smallest non-zero error takes the codec's lossless rate when it has one "
+        "(lossless meets every target); '—' = no sweep reaches that error. The rms columns use the measured "
+        "rms of every sweep, the max-error columns the measured max |error|.\n"
      << "* Speeds are million finest samples per second of process CPU time (the machine is shared); "
         "build speed is the whole `build_pyramid_file` call, file read to file renamed (rms targets include "
         "the step calibration), as wall clock and per CPU-second of all build threads. Region decode = 256×256 windows of the "

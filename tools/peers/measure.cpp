@@ -69,15 +69,10 @@ Result measure(Peer& peer, const Image16& img, const Setting& setting, double mi
   return r;
 }
 
-double bits_at_error(std::vector<RatePoint> points, double target) {
-  // A lossless point (error 0) meets every target: it caps the rate and dominates any lossy point
-  // that costs more.
-  double lossless = -1;
-  for (const RatePoint& p : points)
-    if (p.error == 0 && p.bits > 0 && (lossless < 0 || p.bits < lossless)) lossless = p.bits;
-  std::erase_if(points, [lossless](const RatePoint& p) {
-    return !(p.error > 0) || !(p.bits > 0) || (lossless > 0 && p.bits >= lossless);
-  });
+namespace {
+
+// One family's lossy points (already without the lossless ones): bits at target on their lower envelope.
+double family_bits_at_error(std::vector<RatePoint> points, double target, double lossless) {
   std::sort(points.begin(), points.end(), [](const RatePoint& a, const RatePoint& b) {
     return a.error < b.error || (a.error == b.error && a.bits < b.bits);
   });
@@ -98,6 +93,32 @@ double bits_at_error(std::vector<RatePoint> points, double target) {
     }
   }
   return envelope.back().bits;
+}
+
+}  // namespace
+
+double bits_at_error(std::vector<RatePoint> points, double target) {
+  // A lossless point (error 0) meets every target: it caps the rate and dominates any lossy point
+  // that costs more.
+  double lossless = -1;
+  for (const RatePoint& p : points)
+    if (p.error == 0 && p.bits > 0 && (lossless < 0 || p.bits < lossless)) lossless = p.bits;
+  std::erase_if(points, [lossless](const RatePoint& p) {
+    return !(p.error > 0) || !(p.bits > 0) || (lossless > 0 && p.bits >= lossless);
+  });
+  std::vector<int> families;
+  for (const RatePoint& p : points)
+    if (std::find(families.begin(), families.end(), p.family) == families.end()) families.push_back(p.family);
+  if (families.empty()) return lossless;  // -1 without one
+  double best = -1;
+  for (int f : families) {
+    std::vector<RatePoint> mine;
+    for (const RatePoint& p : points)
+      if (p.family == f) mine.push_back(p);
+    const double b = family_bits_at_error(std::move(mine), target, lossless);
+    if (b > 0 && (best < 0 || b < best)) best = b;
+  }
+  return best;
 }
 
 }  // namespace peers

@@ -123,15 +123,18 @@ double best_time(Fn&& fn, double min_total_seconds, int max_reps, int* reps, dou
   return best;
 }
 
-// One (error, bits/sample) point of a sweep.
+// One (error, bits/sample) point of a sweep. Points of one family come from one parameter sweep of
+// one mode (e.g. libcodec's step sweep, or its max-error sweep).
 struct RatePoint {
   double error = 0;
   double bits = 0;
+  int family = 0;
 };
-// Bits/sample needed for `target` error, log-log interpolated on the lower envelope of points (those
-// with error > 0; a point with error <= target exactly at a sweep point returns its rate). A target
-// below the smallest non-zero error is met by the lossless point (error 0) when there is one: its
-// rate is returned. Returns a negative value when target lies outside what the points can show.
+// Bits/sample needed for `target` error: within each family, log-log interpolated on the lower
+// envelope of its points (those with error > 0; a point exactly at the target returns its rate);
+// the cheapest family wins, so one mode's points never raise another mode's curve. A target below a
+// family's smallest non-zero error is met by the lossless point (error 0, any family) when there is
+// one: its rate is returned. Returns a negative value when target lies outside what the points can show.
 double bits_at_error(std::vector<RatePoint> points, double target);
 
 }  // namespace peers
