@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cstddef>
 #include <limits>
-#include <new>
 #include <stdexcept>
 #include <string>
 
@@ -254,12 +253,10 @@ void upsample_region(const CoarseWindow& coarse, GridSize fine_level, const Rect
       coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
   const int32_t limit = int32_path_limit(fine, coarse.level);
   if (within(need_data, coarse.stride, need.width, need.height, limit)) {
-    // Same values in half the bytes: the int64 scratch's storage holds the int32 rows. Starting
-    // a std::byte array's lifetime there implicitly creates the int32 array (C++20 [intro.object]).
-    scratch.rows.resize((count + 1) / 2);
-    auto* h = reinterpret_cast<int32_t*>(new (scratch.rows.data()) std::byte[count * sizeof(int32_t)]);
+    scratch.rows32.resize(count);
     upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(coarse.data, coarse.stride, coarse.rect,
-                                                             coarse.level, fine, out, out_stride, h);
+                                                             coarse.level, fine, out, out_stride,
+                                                             scratch.rows32.data());
   } else {
     scratch.rows.resize(count);
     upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(

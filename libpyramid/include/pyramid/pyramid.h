@@ -71,7 +71,8 @@ Rect upsample_required_window(const Rect& fine, GridSize fine_level);
 
 // Reusable scratch of upsample_region (no allocation once warmed up).
 struct UpsampleScratch {
-  std::vector<int64_t> rows;
+  std::vector<int64_t> rows;    // horizontal pass, int64 path
+  std::vector<int32_t> rows32;  // horizontal pass, int32 path (values bounded, see upsample_region)
 };
 
 // Writes U(coarse) restricted to the fine rectangle `fine` into out (row stride out_stride).
