@@ -7,6 +7,7 @@
 
 #include "runtime/clipmap.h"
 #include "runtime/region_decoder.h"
+#include "toroidal_rows.h"
 
 namespace terrain::runtime {
 
@@ -71,13 +72,10 @@ void RegionDecoderSource::fill_units(int level, const Rect& rect, const HeldUnit
     if (need.x0 >= held.x0 && need.y0 >= held.y0 && need.x0 + need.width <= held.x0 + held.width &&
         need.y0 + need.height <= held.y0 + held.height) {
       window_.resize(size_t(need.width * need.height));
-      const int64_t n = coarser->n, wx = ((need.x0 % n) + n) % n, run1 = std::min(need.width, n - wx);
-      for (int64_t y = 0; y < need.height; ++y) {
-        const int32_t* row = coarser->data + ((need.y0 + y) % n + n) % n * n;
-        int32_t* dst = window_.data() + y * need.width;
-        std::copy_n(row + wx, run1, dst);
-        std::copy_n(row, need.width - run1, dst + run1);
-      }
+      const int64_t n = coarser->n;
+      const RowRuns runs(n, need.x0, need.width);
+      for (int64_t y = 0; y < need.height; ++y)
+        runs.gather(coarser->data + ((need.y0 + y) % n + n) % n * n, window_.data() + y * need.width);
       decoder_->decode_refined(level, inside, CoarseWindow{window_.data(), need.width, need, level_size(level - 1)},
                                units_.data(), w, split ? &split->upsample : nullptr, split ? &split->residual : nullptr);
       refined = true;
