@@ -277,6 +277,12 @@ template <class V, class Post, bool Two> void inverse_lanes(int32_t* tile, int w
     for (; edge < width; edge += 4) on_rows<Transposed<Post>, V4>(row + edge - 2, width);
   }
 }
+
+// inverse_lanes with the post-filter of a lossy or a lossless tile.
+template <class V> void inverse_lanes(int32_t* tile, int width, int height, bool lossy) {
+  if (lossy) inverse_lanes<V, LossyPost4, true>(tile, width, height);
+  else inverse_lanes<V, Post4, false>(tile, width, height);
+}
 #endif
 
 }  // namespace

@@ -69,8 +69,7 @@ void inverse_lapped_scalar(int32_t* tile, int width, int height, bool lossy) {
 
 bool inverse_lapped_vector(int32_t* tile, int width, int height, bool lossy) {
 #ifdef CODEC_VECTOR_TRANSFORM
-  if (lossy) inverse_lanes<V4, LossyPost4, true>(tile, width, height);
-  else inverse_lanes<V4, Post4, false>(tile, width, height);
+  inverse_lanes<V4>(tile, width, height, lossy);
   return true;
 #else
   (void)tile, (void)width, (void)height, (void)lossy;

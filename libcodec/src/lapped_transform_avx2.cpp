@@ -24,8 +24,7 @@ namespace codec::detail {
 
 bool inverse_lapped_avx2(int32_t* tile, int width, int height, bool lossy) {
 #ifdef CODEC_AVX2_TRANSFORM
-  if (lossy) inverse_lanes<V8, LossyPost4, true>(tile, width, height);
-  else inverse_lanes<V8, Post4, false>(tile, width, height);
+  inverse_lanes<V8>(tile, width, height, lossy);
   return true;
 #else
   (void)tile, (void)width, (void)height, (void)lossy;
