@@ -5,8 +5,10 @@
 // without checks and validate once per tile.
 #pragma once
 
+#include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 namespace codec::detail {
 
@@ -73,7 +75,7 @@ class BitReader {
  public:
   BitReader(const uint8_t* data, size_t size) : begin_(data), p_(data), end_(data + size) { refill(); }
 
-  // Guarantees at least 57 bits in the cache (zeros past the end).
+  // Guarantees at least 56 bits in the cache (zeros past the end).
   void refill() {
     if (count_ > 56) return;
     if (end_ - p_ >= 8) {
@@ -95,6 +97,20 @@ class BitReader {
       count_ += 8;
     }
   }
+  // refill() without its branches while at least 8 bytes remain (a symbol-per-iteration decoder
+  // then takes no data-dependent branch here); the same guarantee. False: call refill() instead.
+  bool refill_fast() {
+    if (end_ - p_ < 8) return false;
+    uint64_t v;
+    std::memcpy(&v, p_, 8);
+    if constexpr (std::endian::native == std::endian::little) v = __builtin_bswap64(v);
+    cache_ |= v >> count_;  // bits at and below count_ are the stream's own (see refill)
+    p_ += (63 - count_) >> 3;
+    count_ |= 56;
+    return true;
+  }
+  // The cached bits, most significant first (at least 56 valid after a refill).
+  uint64_t cache() const { return cache_; }
   // Next n bits (0 <= n <= 32) without consuming; the cache must hold them (call refill()).
   uint32_t peek(int n) const { return uint32_t((cache_ >> 32) >> (32 - n)); }
   // Consumes n bits (0 <= n <= 32) that refill() has made available.

@@ -16,9 +16,8 @@ inline void put_rice(BitWriter& out, uint32_t u, RlgrState& s) {
   const int kr = s.krp >> 3;
   const uint32_t quotient = u >> kr;
   if (quotient < uint32_t(kUnaryCap)) {
-    out.put_ones(int(quotient));
-    out.put_bit(0);
-    if (kr) out.put(u & ((1u << kr) - 1), kr);
+    // quotient ones, a zero, kr remainder bits: at most 19 + 1 + 10 = 30 bits, one put.
+    out.put((((1u << quotient) - 1) << (kr + 1)) | (u & ((1u << kr) - 1)), int(quotient) + 1 + kr);
     adapt_rice(s, int(quotient));
   } else {
     out.put_ones(kUnaryCap);
@@ -75,10 +74,8 @@ void encode_levels(BitWriter& out, size_t count, RlgrState& s, Level&& level) {
       s.kp = clamp_kp(s.kp + kUpRun);
       continue;
     }
-    out.put_bit(1);
-    out.put(uint32_t(run), k);
+    out.put((1u << (k + 1)) | uint32_t(run) << 1 | uint32_t(v < 0), k + 2);  // flag, run, sign
     i += run + 1;
-    out.put_bit(v < 0);
     put_rice(out, uint32_t(v < 0 ? -int64_t(v) : v) - 1, s);
     s.kp = clamp_kp(s.kp - kDownRun);
   }

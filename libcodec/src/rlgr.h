@@ -93,7 +93,7 @@ bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink
     return in.take(kEscapeBits);
   };
   while (i < count) {
-    in.refill();
+    if (!in.refill_fast()) in.refill();
     const int k = s.kp >> 3;
     if (k == 0) {
       const uint32_t mapped = rice(s.krp >> 3);
