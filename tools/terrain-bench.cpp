@@ -398,7 +398,72 @@ void write_summary(std::ostream& os, const std::vector<Row>& rows, const std::ve
         "CSV). The pyramid row's encode figure is the whole build (CPU time of all build threads).\n";
 }
 
-bool is_external_peer(const std::string& codec) { return codec != kPyramid && codec != "libcodec"; }
+bool is_ours(const std::string& codec) { return codec.rfind("libcodec", 0) == 0; }  // libcodec, libcodec-t256
+bool is_external_peer(const std::string& codec) { return codec != kPyramid && !is_ours(codec); }
+
+// Issue 4's goals for libcodec alone: bits against JPEG XR at equal rms, for each tile size run, and
+// encode/decode speed at the step-sweep point nearest 2 bits/sample.
+void write_codec_goals(std::ostream& os, const std::vector<Row>& rows, const std::vector<std::string>& file_order,
+                       const std::vector<std::string>& codec_order) {
+  std::vector<std::string> ours;
+  for (const std::string& c : codec_order)
+    if (is_ours(c)) ours.push_back(c);
+  if (ours.empty() || std::find(codec_order.begin(), codec_order.end(), "jpegxr") == codec_order.end()) return;
+  os << "## libcodec against JPEG XR (issue 4)\n\n"
+     << "Goals: at equal rms, fewer bits than JPEG XR (jxrlib) on every tile; decode ≥ 300 and encode ≥ 60 "
+        "Msamples/s per core at about 2 bits/sample. Cell: libcodec bits/sample ÷ JPEG XR bits/sample at "
+        "that rms (✓ when < 1), one per tile size run (";
+  for (size_t i = 0; i < ours.size(); ++i) os << (i ? " / " : "") << "`" << ours[i] << "`";
+  os << "). Speed: each run's step-sweep point nearest 2 bits/sample, CPU time, one thread; JPEG XR's "
+        "decode speed is the median over its sweep.\n\n"
+     << "| DEM | rms 0.5 m | rms 1 m | rms 2 m | rms 4 m | bits/sample (step) | encode Ms/s | decode Ms/s | "
+        "JPEG XR decode Ms/s |\n|---|---|---|---|---|---|---|---|---|\n";
+  std::map<std::string, int> wins, cells;
+  for (const std::string& file : file_order) {
+    const Curve jxr = curve_of(rows, file, "jpegxr");
+    if (!jxr.any) continue;
+    os << "| " << file;
+    for (double t : kRmsTargets) {
+      const double theirs = peers::bits_at_error(jxr.by_rms, t);
+      os << " |";
+      for (size_t i = 0; i < ours.size(); ++i) {
+        const double mine = peers::bits_at_error(curve_of(rows, file, ours[i]).by_rms, t);
+        os << (i ? " /" : "") << " ";
+        if (mine < 0 || theirs <= 0) {
+          os << "—";
+          continue;
+        }
+        const double r = mine / theirs;
+        ++cells[ours[i]];
+        if (r < 1) ++wins[ours[i]];
+        os << fmt("%.3f", r) << (r < 1 ? " ✓" : " ✗");
+      }
+    }
+    std::string near_bits, near_encode, near_decode;
+    for (size_t i = 0; i < ours.size(); ++i) {
+      const Row* near = nullptr;
+      for (const Row& r : rows)
+        if (r.file == file && r.codec == ours[i] && r.error.empty() && r.setting.rfind("step=", 0) == 0 &&
+            r.result.error.max_abs > 0 &&
+            (!near || std::abs(r.result.bits_per_sample - 2) < std::abs(near->result.bits_per_sample - 2)))
+          near = &r;
+      const std::string sep = i ? " / " : "";
+      if (!near) {
+        near_bits += sep + "—", near_encode += sep + "—", near_decode += sep + "—";
+        continue;
+      }
+      const double n = double(near->width * near->height);
+      near_bits += sep + fmt("%.2f", near->result.bits_per_sample) + " (" + near->setting + ")";
+      near_encode += sep + fmt("%.1f", msps(n, near->result.encode_cpu_seconds));
+      near_decode += sep + fmt("%.1f", msps(n, near->result.decode_cpu_seconds));
+    }
+    os << " | " << near_bits << " | " << near_encode << " | " << near_decode;
+    os << " | " << fmt("%.1f", median(jxr.decode_msps)) << " |\n";
+  }
+  os << "\nCells below 1 (fewer bits than JPEG XR):";
+  for (const std::string& c : ours) os << " `" << c << "` " << wins[c] << " of " << cells[c] << ";";
+  os << "\n\n";
+}
 
 // The generated BENCHMARKS.md: the pyramid against the best peer at each error point, the issue's
 // goals, lossless rates and speeds. Everything comes from `rows`; nothing is typed in by hand.
@@ -507,6 +572,8 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
   }
   os << "| **geometric mean** | " << cell(geomean(g[0])) << " | " << cell(geomean(g[1])) << " | "
      << cell(geomean(g[2])) << " | " << cell(geomean(g[3])) << " | | | | " << cell(geomean(g[4])) << " | | |\n\n";
+
+  write_codec_goals(os, rows, file_order, codec_order);
 
   // Table 3: every codec, every point.
   os << "## All codecs\n\n";

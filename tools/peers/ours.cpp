@@ -1,5 +1,7 @@
 // Our codec (libcodec) as one more peer, through its public API only: lossy at a quantiser step
-// (step 1 = lossless) and the max-error mode, default 64x64 tiles, one thread.
+// (step 1 = lossless) and the max-error mode, one thread; twice: with 64x64 tiles (the pyramid's
+// default, for region decoding) and with 256x256 tiles (whole-image use, as the single-tile peers
+// are run: fewer tile starts and index entries, which matter at low rates on smooth terrain).
 #include "peers.h"
 
 #include <codec/codec.h>
@@ -17,16 +19,20 @@ constexpr int kMaxError = 1;
 
 class OursPeer final : public Peer {
  public:
-  std::string name() const override { return "libcodec"; }
+  explicit OursPeer(uint32_t tile_size) : tile_size_(tile_size) {}
+  std::string name() const override {
+    return tile_size_ == codec::EncodeOptions{}.tile_size ? "libcodec" : "libcodec-t" + std::to_string(tile_size_);
+  }
   std::string configuration() const override {
-    return "libcodec format v" + std::to_string(codec::kFormatVersion) +
-           ": int32 input, tile_size 64, one thread; step sweep (step 1 = lossless) with "
+    return name() + ": libcodec format v" + std::to_string(codec::kFormatVersion) + ": int32 input, tile_size " +
+           std::to_string(tile_size_) +
+           ", one thread; step sweep (step 1 = lossless) with "
            "bound_max_error off, and max-error sweep (bound_max_error on, max_error = E)";
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
     const std::vector<double> step_metres = quick ? std::vector<double>{2, 4, 8}
-                                                  : std::vector<double>{1.25, 1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64};
+                                                  : std::vector<double>{1.25, 1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64, 90, 128, 181, 256};
     const std::vector<double> error_metres = quick ? std::vector<double>{1, 2, 5}
                                                    : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out{{"step=1 lossless", 1, kStep, 0}};
@@ -49,6 +55,7 @@ class OursPeer final : public Peer {
   void encode(const Image16& img, const Setting& setting, Bytes& out) override {
     samples_.assign(img.samples.begin(), img.samples.end());
     codec::EncodeOptions options;
+    options.tile_size = tile_size_;
     if (setting.mode == kStep) {
       options.step = setting.param;
     } else {
@@ -76,12 +83,13 @@ class OursPeer final : public Peer {
   }
 
  private:
+  uint32_t tile_size_;
   std::vector<int32_t> samples_;  // int32 copy of the input; reused across calls
   codec::Scratch scratch_;
 };
 
 }  // namespace
 
-std::unique_ptr<Peer> make_ours_peer() { return std::make_unique<OursPeer>(); }
+std::unique_ptr<Peer> make_ours_peer(uint32_t tile_size) { return std::make_unique<OursPeer>(tile_size); }
 
 }  // namespace peers
