@@ -58,3 +58,27 @@ TEST_CASE("the image plugin is loaded only for images, and a missing one is a cl
   CHECK(r[2].err.find("cannot load the image plugin " + missing) != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(dir.file("out.png")));
 }
+
+TEST_CASE("an installed tree loads its own image plugin, wherever it is moved", "[io][plugin]") {
+  iotest::TempDir dir;
+  const std::string png = dir.file("grid.png");
+  REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}}).status == 0);
+  const std::string prefix = dir.file("inst"), moved = dir.file("moved");
+  const std::string install = "cmake --install " + iotest::shell_quote(TERRAIN_BINARY_DIR) + " --prefix " +
+                              iotest::shell_quote(prefix) + " >" + iotest::shell_quote(dir.file("install.log")) + " 2>&1";
+  REQUIRE(std::system(install.c_str()) == 0);
+  std::filesystem::rename(prefix, moved);
+  // glibc's loader names every object it maps; the plugin must come from the moved tree.
+  const std::string run = "LD_DEBUG=files " + iotest::shell_quote(moved + "/bin/terrain-info") + " " +
+                          iotest::shell_quote(png) + " -q >/dev/null 2>" + iotest::shell_quote(dir.file("ld.log"));
+  CHECK(std::system(run.c_str()) == 0);
+  const auto log = iotest::read_file(dir.file("ld.log"));
+  const std::string text(log.begin(), log.end());
+  INFO(text.substr(0, 2000));
+  // bin/../<libdir>/terrain/ (libdir is lib, or lib/<multiarch> for a /usr prefix).
+  const size_t at = text.find("file=" + moved + "/");
+  REQUIRE(at != std::string::npos);
+  const std::string loaded = text.substr(at + 5, text.find_first_of(" \n", at) - at - 5);
+  CHECK(loaded.size() > moved.size());
+  CHECK(loaded.find("/terrain/libterrain_image_oiio.so") == loaded.size() - std::string("/terrain/libterrain_image_oiio.so").size());
+}
