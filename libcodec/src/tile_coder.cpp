@@ -197,10 +197,18 @@ void dequantize_tile(int32_t* tile, int pw, int ph, const BandSteps& steps) {
   }
 }
 
+constexpr size_t kLargeLayoutSamples = size_t(256) * 256;
+
 const uint32_t* band_layout(TileWork& work, int pw, int ph) {
   for (const BandLayout& layout : work.layouts)
     if (layout.padded_width == pw && layout.padded_height == ph) return layout.slots.data();
-  BandLayout& layout = work.layouts[work.next_layout++ % work.layouts.size()];
+  // Four shapes are cached, except for tiles above 256x256 samples: one table of 4096x4096 tiles
+  // is 64 MB, so those keep one table (rebuilt when the shape changes: a pass over the tile, small
+  // next to decoding it) and release the others.
+  const bool large = size_t(pw) * ph > kLargeLayoutSamples;
+  if (large)
+    for (size_t i = 1; i < work.layouts.size(); ++i) work.layouts[i] = BandLayout{};
+  BandLayout& layout = large ? work.layouts[0] : work.layouts[work.next_layout++ % work.layouts.size()];
   const int mbx = pw / 16, mby = ph / 16;
   assert(size_t(pw) * ph <= (size_t(1) << kSlotOffsetBits));
   layout.padded_width = pw;

@@ -138,6 +138,18 @@ TEST_CASE("lossless round trip on residual-like and extreme synthetic data", "[c
     const Image residual = residual_like(300, 211, 3.0, 7 + tile);
     CHECK(first_difference(decode_image(encode_image(residual, options), residual), residual.samples) == -1);
   }
+  {
+    // 512-sample tiles: four tile shapes, two of them above the decoder's cached-layout size (the
+    // decoder keeps one layout for those and rebuilds it when the shape changes).
+    codec::EncodeOptions options;
+    options.tile_size = 512;
+    const Image residual = residual_like(700, 600, 3.0, 11);
+    CHECK(first_difference(decode_image(encode_image(residual, options), residual), residual.samples) == -1);
+    options.step = 5;
+    std::vector<int32_t> recon;
+    const auto stream = encode_image(residual, options, &recon);
+    CHECK(first_difference(decode_image(stream, residual), recon) == -1);
+  }
   const Image noise = uniform_noise(97, 131, codec::kMaxAbsSample, 3);
   CHECK(first_difference(decode_image(encode_image(noise, {}), noise), noise.samples) == -1);
   // Largest possible steps between neighbours: +-2^20 checkerboard and stripes.
