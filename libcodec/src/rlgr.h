@@ -70,16 +70,13 @@ inline void adapt_rice(RlgrState& s, int quotient) {
 // value only (so the cost follows the non-zeros, and the caller can put each value where it
 // belongs); magnitude < kRlgrMaxMagnitude. A sink that returns false rejects the stream. Same bits,
 // same checks as rlgr_decode.
+// One codeword of rlgr_decode_nonzero: advances i past the values it codes, calling sink for a
+// non-zero one. Returns false for an impossible sequence or a value the sink rejects. in must hold
+// at least 56 bits (a codeword without escape needs at most 1 + 10 + 1 + 20 + 10 = 42).
 template <class Sink>
-bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
+[[gnu::always_inline]] inline bool rlgr_decode_codeword(BitReader& in, size_t count, RlgrState& s, size_t& i,
+                                                        Sink& sink) {
   using namespace rlgr;
-  // Local copies: stores through the sink could otherwise alias the state and the reader's
-  // counters, forcing reloads on every symbol.
-  BitReader in = reader;
-  RlgrState s = state;
-  size_t i = 0;
-  bool ok = true;
-  // One refill per symbol: a symbol without escape needs at most 1 + 10 + 1 + 21 + 10 = 43 bits.
   const auto rice = [&](int kr) -> uint32_t {
     const int ones = in.leading_ones();
     if (ones < kUnaryCap) [[likely]] {
@@ -92,48 +89,51 @@ bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink
     adapt_rice(s, kUnaryCap);
     return in.take(kEscapeBits);
   };
-  while (i < count) {
-    if (!in.refill_fast()) in.refill();
-    const int k = s.kp >> 3;
-    if (k == 0) {
-      const uint32_t mapped = rice(s.krp >> 3);
-      if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) [[unlikely]] {
-        ok = false;
-        break;
-      }
-      if (mapped != 0) {
-        if (!sink(i, (mapped + 1) >> 1, (mapped & 1) != 0)) [[unlikely]] {
-          ok = false;
-          break;
-        }
-      }
-      ++i;
-      s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
-      continue;
-    }
-    if (in.take(1) == 0) {
-      i += std::min(size_t(1) << k, count - i);
-      s.kp = clamp_kp(s.kp + kUpRun);
-      continue;
-    }
-    const size_t run = in.take(k);
-    if (run >= count - i) [[unlikely]] {
-      ok = false;
-      break;
-    }
-    i += run;
-    const uint32_t negative = in.take(1);
-    const uint32_t magnitude_minus_1 = rice(s.krp >> 3);
-    if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) [[unlikely]] {
-      ok = false;
-      break;
-    }
-    if (!sink(i, magnitude_minus_1 + 1, negative != 0)) [[unlikely]] {
-      ok = false;
-      break;
-    }
+  const int k = s.kp >> 3;
+  if (k == 0) {
+    const uint32_t mapped = rice(s.krp >> 3);
+    if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) [[unlikely]]
+      return false;
+    if (mapped != 0 && !sink(i, (mapped + 1) >> 1, (mapped & 1) != 0)) [[unlikely]]
+      return false;
     ++i;
-    s.kp = clamp_kp(s.kp - kDownRun);
+    s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
+    return true;
+  }
+  if (in.take(1) == 0) {
+    i += std::min(size_t(1) << k, count - i);
+    s.kp = clamp_kp(s.kp + kUpRun);
+    return true;
+  }
+  const size_t run = in.take(k);
+  if (run >= count - i) [[unlikely]]
+    return false;
+  i += run;
+  const uint32_t negative = in.take(1);
+  const uint32_t magnitude_minus_1 = rice(s.krp >> 3);
+  if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) [[unlikely]]
+    return false;
+  if (!sink(i, magnitude_minus_1 + 1, negative != 0)) [[unlikely]]
+    return false;
+  ++i;
+  s.kp = clamp_kp(s.kp - kDownRun);
+  return true;
+}
+
+template <class Sink>
+bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
+  // Local copies: stores through the sink could otherwise alias the state and the reader's
+  // counters, forcing reloads on every symbol.
+  BitReader in = reader;
+  RlgrState s = state;
+  size_t i = 0;
+  bool ok = true;
+  while (i < count) {
+    if (!in.refill_fast()) in.refill();  // one refill per codeword
+    if (!rlgr_decode_codeword(in, count, s, i, sink)) [[unlikely]] {
+      ok = false;
+      break;
+    }
   }
   reader = in;
   state = s;

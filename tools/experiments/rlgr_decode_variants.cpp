@@ -13,46 +13,16 @@
 #include <vector>
 using namespace codec::detail;
 
+// The library's per-codeword decoder, as rlgr_decode_nonzero runs it.
 template <class Sink>
 __attribute__((always_inline)) inline bool step(BitReader& in, size_t count, RlgrState& s, size_t& i, Sink&& sink) {
-  using namespace rlgr;
-  const auto rice = [&](int kr) -> uint32_t {
-    const int ones = in.leading_ones();
-    if (ones < kUnaryCap) [[likely]] {
-      in.skip(ones + 1);
-      adapt_rice(s, ones);
-      return (uint32_t(ones) << kr) | in.take(kr);
-    }
-    in.skip(kUnaryCap);
-    in.refill();
-    adapt_rice(s, kUnaryCap);
-    return in.take(kEscapeBits);
-  };
   if (!in.refill_fast()) in.refill();
-  const int k = s.kp >> 3;
-  if (k == 0) {
-    const uint32_t mapped = rice(s.krp >> 3);
-    if (mapped != 0) sink(i, (mapped + 1) >> 1, (mapped & 1) != 0);
-    ++i;
-    s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
+  auto accept = [&](size_t at, uint32_t m, bool neg) {
+    sink(at, m, neg);
     return true;
-  }
-  if (in.take(1) == 0) {
-    i += std::min(size_t(1) << k, count - i);
-    s.kp = clamp_kp(s.kp + kUpRun);
-    return true;
-  }
-  const size_t run = in.take(k);
-  if (run >= count - i) [[unlikely]] return false;
-  i += run;
-  const uint32_t negative = in.take(1);
-  const uint32_t m1 = rice(s.krp >> 3);
-  sink(i, m1 + 1, negative != 0);
-  ++i;
-  s.kp = clamp_kp(s.kp - kDownRun);
-  return true;
+  };
+  return rlgr_decode_codeword(in, count, s, i, accept);
 }
-
 
 template <class Sink>
 __attribute__((always_inline)) inline bool step_b(BitReader& in, size_t count, RlgrState& s, size_t& i, Sink&& sink) {
