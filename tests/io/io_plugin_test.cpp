@@ -4,6 +4,8 @@
 #include <catch2/catch.hpp>
 
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <optional>
 
 #include "io_test_util.h"
@@ -59,7 +61,8 @@ TEST_CASE("the image plugin is loaded only for images, and a missing one is a cl
   CHECK_FALSE(std::filesystem::exists(dir.file("out.png")));
 }
 
-TEST_CASE("an installed tree loads its own image plugin, wherever it is moved", "[io][plugin]") {
+TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and serves find_package(terrain)",
+          "[io][plugin][install]") {
   iotest::TempDir dir;
   const std::string png = dir.file("grid.png");
   REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}}).status == 0);
@@ -81,4 +84,33 @@ TEST_CASE("an installed tree loads its own image plugin, wherever it is moved", 
   const std::string loaded = text.substr(at + 5, text.find_first_of(" \n", at) - at - 5);
   CHECK(loaded.size() > moved.size());
   CHECK(loaded.find("/terrain/libterrain_image_oiio.so") == loaded.size() - std::string("/terrain/libterrain_image_oiio.so").size());
+
+  // A program that embeds the libraries through the installed CMake package.
+  const std::string project = dir.file("consumer");
+  std::filesystem::create_directories(project);
+  {
+    std::ofstream cm(project + "/CMakeLists.txt");
+    cm << "cmake_minimum_required(VERSION 3.22)\nproject(consumer CXX)\nset(CMAKE_CXX_STANDARD 20)\n"
+          "find_package(terrain REQUIRED)\nadd_executable(consumer main.cpp)\n"
+          "target_link_libraries(consumer PRIVATE terrain::runtime)\n";
+    std::ofstream main(project + "/main.cpp");
+    main << "#include <codec/codec.h>\n#include <pyramid/synth.h>\n"
+            "int main() {\n"
+            "  const terrain::Heightmap map = terrain::synthesize_terrain({.seed = 1, .width = 33, .height = 17});\n"
+            "  return map.width() == 33 && codec::encode_bound(33, 17, codec::EncodeOptions{}) > 0 ? 0 : 1;\n}\n";
+  }
+#ifdef TERRAIN_SANITIZED
+  const std::string flags = " -DCMAKE_CXX_FLAGS=-fsanitize=address,undefined";
+#else
+  const std::string flags;
+#endif
+  const std::string build = iotest::shell_quote(project + "/build");
+  const std::string to_log = " >>" + iotest::shell_quote(dir.file("consumer.log")) + " 2>&1";
+  const std::string configure = "cmake -S " + iotest::shell_quote(project) + " -B " + build +
+                                " -DCMAKE_PREFIX_PATH=" + iotest::shell_quote(moved) + flags + to_log;
+  const bool built = std::system(configure.c_str()) == 0 && std::system(("cmake --build " + build + to_log).c_str()) == 0;
+  const auto consumer_log = iotest::read_file(dir.file("consumer.log"));
+  INFO(std::string(consumer_log.begin(), consumer_log.end()).substr(0, 4000));
+  REQUIRE(built);
+  CHECK(std::system((build + "/consumer").c_str()) == 0);
 }
