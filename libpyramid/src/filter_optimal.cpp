@@ -68,7 +68,7 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   if (windows.size() != window_data.size()) throw std::invalid_argument("fit_optimal_filter: window count mismatch");
   const auto& orbits = symmetric_orbits();
 
-  // Count equations first so the design matrix is allocated once.
+  // Count the equations (the report's figure and the minimum for a fit).
   int64_t rows = 0;
   for (const Rect& r : windows)
     if (r.width > 2 * kMargin && r.height > 2 * kMargin) rows += (r.width - 2 * kMargin) * (r.height - 2 * kMargin);
@@ -78,10 +78,19 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   }
   if (rows < 4 * kUnknowns) return fallback(report, "too few samples to fit (grid smaller than 24x24)");
 
-  Eigen::MatrixXd A(rows, kUnknowns);
-  Eigen::VectorXd y(rows);
-  int64_t row = 0;
-  std::vector<double> coarse, pred0, predk;
+  // The design matrix [A | y] (rows x 21, 32 MB for the default 16 windows) is never formed: each
+  // window's rows are folded into R, the triangular factor of [A | y] = QR, by a QR of [R; rows]
+  // (tall-skinny QR, as stable as one QR of the whole matrix). Everything below needs only R:
+  // A = Q R_A with Q orthonormal, so column norms, A^T A and least-squares residuals are R's.
+  // Forming A took a third of a 1201x1201 build, half of it page faults on the fresh matrices.
+  constexpr int kCols = kUnknowns + 1;
+  Eigen::MatrixXd R = Eigen::MatrixXd::Zero(kCols, kCols);
+  Eigen::MatrixXd stacked;
+  std::vector<double> y_abs, row_max;  // per equation: |y| and max |A row|, for the activity test
+  y_abs.reserve(size_t(rows));
+  row_max.reserve(size_t(rows));
+  std::vector<double> coarse, pred0;
+  std::vector<std::vector<double>> predk(kOrbits);
   for (size_t wi = 0; wi < windows.size(); ++wi) {
     const Rect& r = windows[wi];
     if (r.width <= 2 * kMargin || r.height <= 2 * kMargin) continue;
@@ -90,52 +99,64 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
     if (int64_t(window_data[wi].size()) != r.width * r.height)
       throw std::invalid_argument("fit_optimal_filter: window data size mismatch");
     coarse.resize(size_t(cs.width * cs.height));
-    pred0.resize(size_t(r.width * r.height));
-    predk.resize(pred0.size());
     for (int k = 0; k < kOrbits; ++k) {
       std::array<double, kOrbits> unit{};
       unit[size_t(k)] = 1.0;
       const DownsampleFilter basis = DownsampleFilter::from_orbit_weights(unit, DownsampleFilter::Kind::Custom);
       detail::downsample_real(basis, window_data[wi].data(), fine, coarse.data());
-      upsample_real(coarse.data(), fine, k == 0 ? pred0.data() : predk.data());
-      if (k == 0) continue;
-      int64_t rr = row;
-      for (int64_t yy = kMargin; yy < r.height - kMargin; ++yy)
-        for (int64_t xx = kMargin; xx < r.width - kMargin; ++xx, ++rr) {
-          const size_t idx = size_t(yy * r.width + xx);
-          A(rr, k - 1) = predk[idx] - orbits[size_t(k)].count * pred0[idx];
-        }
+      predk[size_t(k)].resize(size_t(r.width * r.height));
+      upsample_real(coarse.data(), fine, predk[size_t(k)].data());
     }
+    const std::vector<double>& p0 = predk[0];
+    const int64_t inner = (r.width - 2 * kMargin) * (r.height - 2 * kMargin);
+    stacked.resize(kCols + inner, kCols);
+    stacked.topRows(kCols) = R;
+    int64_t rr = kCols;
     for (int64_t yy = kMargin; yy < r.height - kMargin; ++yy)
-      for (int64_t xx = kMargin; xx < r.width - kMargin; ++xx, ++row) {
+      for (int64_t xx = kMargin; xx < r.width - kMargin; ++xx, ++rr) {
         const size_t idx = size_t(yy * r.width + xx);
-        y(row) = double(window_data[wi][idx]) - pred0[idx];
+        double m = 0;
+        for (int k = 1; k < kOrbits; ++k) {
+          const double v = predk[size_t(k)][idx] - orbits[size_t(k)].count * p0[idx];
+          stacked(rr, k - 1) = v;
+          m = std::max(m, std::abs(v));
+        }
+        const double yv = double(window_data[wi][idx]) - p0[idx];
+        stacked(rr, kUnknowns) = yv;
+        y_abs.push_back(std::abs(yv));
+        row_max.push_back(m);
       }
+    Eigen::HouseholderQR<Eigen::MatrixXd> fold(stacked);
+    R = fold.matrixQR().topRows(kCols).triangularView<Eigen::Upper>();
   }
+  const Eigen::MatrixXd RA = R.topLeftCorner(kUnknowns, kUnknowns);
+  const Eigen::VectorXd z = R.col(kUnknowns).head(kUnknowns);  // Q^T y
+  const double rho2 = R(kUnknowns, kUnknowns) * R(kUnknowns, kUnknowns);  // ||y - A a||^2 at the optimum
 
   // A lone feature (a spike, a single ridge) can make the matrix full rank with only a few hundred
   // informative equations: the fit would then chase that feature. Require enough of them.
   {
-    const double tol = 1e-9 * std::max(1.0, y.cwiseAbs().maxCoeff());
+    const double y_max = y_abs.empty() ? 0.0 : *std::max_element(y_abs.begin(), y_abs.end());
+    const double tol = 1e-9 * std::max(1.0, y_max);
     int64_t active = 0;
-    for (int64_t r = 0; r < rows; ++r)
-      if (std::abs(y(r)) > tol || A.row(r).cwiseAbs().maxCoeff() > tol) ++active;
+    for (size_t r = 0; r < y_abs.size(); ++r)
+      if (y_abs[r] > tol || row_max[r] > tol) ++active;
     if (report) report->active_equations = active;
     if (active < options.min_active_equations)
       return fallback(report, "too few informative samples (" + std::to_string(active) + " non-flat equations)");
   }
   // Column scaling makes the rank/condition test about the shape of the data, not its amplitude.
-  Eigen::VectorXd norms = A.colwise().norm();
+  Eigen::VectorXd norms = RA.colwise().norm();
   const double max_norm = norms.maxCoeff();
   const double n = double(rows);
-  auto rms_of = [&](const Eigen::VectorXd& a) { return std::sqrt((y - A * a).squaredNorm() / n); };
+  auto rms_of = [&](const Eigen::VectorXd& a) { return std::sqrt(((z - RA * a).squaredNorm() + rho2) / n); };
   Eigen::VectorXd tent(kUnknowns);
   {
     auto w = default_orbit_weights();
     for (int k = 1; k < kOrbits; ++k) tent(k - 1) = w[size_t(k)];
   }
   if (report) {
-    report->rms_impulse = std::sqrt(y.squaredNorm() / n);
+    report->rms_impulse = std::sqrt((z.squaredNorm() + rho2) / n);
     report->rms_default = rms_of(tent);
   }
   if (!(max_norm > 0) || !std::isfinite(max_norm) || (report && report->active_equations == 0)) {
@@ -144,7 +165,9 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   }
   Eigen::VectorXd scale(kUnknowns);
   for (int k = 0; k < kUnknowns; ++k) scale(k) = norms(k) > 1e-12 * max_norm ? 1.0 / norms(k) : 0.0;
-  Eigen::MatrixXd As = A * scale.asDiagonal();
+  // A S = Q (R_A S): the pivoted QR of the small R_A S has the same R factor (rank) as that of A S,
+  // and (R_A S)^T (R_A S) = (A S)^T (A S).
+  const Eigen::MatrixXd As = RA * scale.asDiagonal();
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(As);
   qr.setThreshold(1e-10);
   const int rank = int(qr.rank());
@@ -159,7 +182,7 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   if (rank < kUnknowns) return fallback(report, "rank-deficient sample (rank " + std::to_string(rank) + ")");
   if (!(cond <= options.max_condition)) return fallback(report, "ill-conditioned sample");
 
-  Eigen::VectorXd a = scale.asDiagonal() * qr.solve(y);
+  Eigen::VectorXd a = scale.asDiagonal() * qr.solve(z);
   if (!a.allFinite()) return fallback(report, "non-finite solution");
   std::array<double, kOrbits> w{};
   double rest = 0;
