@@ -89,7 +89,7 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   std::vector<double> y_abs, row_max;  // per equation: |y| and max |A row|, for the activity test
   y_abs.reserve(size_t(rows));
   row_max.reserve(size_t(rows));
-  std::vector<double> coarse, pred0;
+  std::vector<double> coarse;
   std::vector<std::vector<double>> predk(kOrbits);
   for (size_t wi = 0; wi < windows.size(); ++wi) {
     const Rect& r = windows[wi];
