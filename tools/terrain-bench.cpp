@@ -422,12 +422,14 @@ void write_codec_goals(std::ostream& os, const std::vector<Row>& rows, const std
   for (const std::string& file : file_order) {
     const Curve jxr = curve_of(rows, file, "jpegxr");
     if (!jxr.any) continue;
+    std::vector<Curve> mine_curves;
+    for (const std::string& c : ours) mine_curves.push_back(curve_of(rows, file, c));
     os << "| " << file;
     for (double t : kRmsTargets) {
       const double theirs = peers::bits_at_error(jxr.by_rms, t);
       os << " |";
       for (size_t i = 0; i < ours.size(); ++i) {
-        const double mine = peers::bits_at_error(curve_of(rows, file, ours[i]).by_rms, t);
+        const double mine = peers::bits_at_error(mine_curves[i].by_rms, t);
         os << (i ? " /" : "") << " ";
         if (mine < 0 || theirs <= 0) {
           os << "—";

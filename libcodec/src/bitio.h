@@ -77,18 +77,7 @@ class BitReader {
 
   // Guarantees at least 56 bits in the cache (zeros past the end).
   void refill() {
-    if (count_ > 56) return;
-    if (end_ - p_ >= 8) {
-      uint64_t v = 0;
-      for (int i = 0; i < 8; ++i) v = (v << 8) | p_[i];
-      // Bits of a partly taken byte land below count_; they are that byte's true bits, so OR-ing
-      // the byte again later is harmless.
-      cache_ |= v >> count_;
-      const int take = (63 - count_) >> 3;
-      p_ += take;
-      count_ += take * 8;
-      return;
-    }
+    if (count_ > 56 || refill_fast()) return;
     while (count_ <= 56) {
       uint64_t byte = 0;
       if (p_ < end_) byte = *p_++;
@@ -97,14 +86,17 @@ class BitReader {
       count_ += 8;
     }
   }
-  // refill() without its branches while at least 8 bytes remain (a symbol-per-iteration decoder
-  // then takes no data-dependent branch here); the same guarantee. False: call refill() instead.
+  // refill() while at least 8 bytes remain, without a data-dependent branch (a codeword-per-
+  // iteration decoder calls it directly); the same guarantee. False: call refill() instead.
   bool refill_fast() {
     if (end_ - p_ < 8) return false;
     uint64_t v;
     std::memcpy(&v, p_, 8);
     if constexpr (std::endian::native == std::endian::little) v = __builtin_bswap64(v);
-    cache_ |= v >> count_;  // bits at and below count_ are the stream's own (see refill)
+    // Bits of a partly taken byte land below count_; they are that byte's true bits, so OR-ing the
+    // byte again later is harmless. Whole bytes are taken: count_ + 8 * ((63 - count_) >> 3) ==
+    // count_ | 56 for count_ < 64.
+    cache_ |= v >> count_;
     p_ += (63 - count_) >> 3;
     count_ |= 56;
     return true;
@@ -119,7 +111,7 @@ class BitReader {
     skip(n);
     return v;
   }
-  // Leading one bits in the cache (valid up to the cached count, at least 57 after refill()).
+  // Leading one bits in the cache (valid up to the cached count, at least 56 after refill()).
   int leading_ones() const {
     const uint64_t inverted = ~cache_;
     return inverted ? __builtin_clzll(inverted) : 64;

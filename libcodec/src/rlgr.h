@@ -66,10 +66,6 @@ inline void adapt_rice(RlgrState& s, int quotient) {
 }
 }  // namespace rlgr
 
-// rlgr_decode without the output array: calls sink(index, magnitude, negative) for each non-zero
-// value only (so the cost follows the non-zeros, and the caller can put each value where it
-// belongs); magnitude < kRlgrMaxMagnitude. A sink that returns false rejects the stream. Same bits,
-// same checks as rlgr_decode.
 // One codeword of rlgr_decode_nonzero: advances i past the values it codes, calling sink for a
 // non-zero one. Returns false for an impossible sequence or a value the sink rejects. in must hold
 // at least 56 bits (a codeword without escape needs at most 1 + 10 + 1 + 20 + 10 = 42).
@@ -120,6 +116,10 @@ template <class Sink>
   return true;
 }
 
+// rlgr_decode without the output array: calls sink(index, magnitude, negative) for each non-zero
+// value only (so the cost follows the non-zeros, and the caller can put each value where it
+// belongs); magnitude < kRlgrMaxMagnitude. A sink that returns false rejects the stream. Same bits,
+// same checks as rlgr_decode.
 template <class Sink>
 bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
   // Local copies: stores through the sink could otherwise alias the state and the reader's

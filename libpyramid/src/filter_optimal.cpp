@@ -86,9 +86,10 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   constexpr int kCols = kUnknowns + 1;
   Eigen::MatrixXd R = Eigen::MatrixXd::Zero(kCols, kCols);
   Eigen::MatrixXd stacked;
-  std::vector<double> y_abs, row_max;  // per equation: |y| and max |A row|, for the activity test
-  y_abs.reserve(size_t(rows));
-  row_max.reserve(size_t(rows));
+  // Per equation the largest of |y| and |A row|: the activity test below needs only that and max |y|.
+  std::vector<double> row_peak;
+  row_peak.reserve(size_t(rows));
+  double y_max = 0;
   std::vector<double> coarse;
   std::vector<std::vector<double>> predk(kOrbits);
   for (size_t wi = 0; wi < windows.size(); ++wi) {
@@ -115,16 +116,16 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
     for (int64_t yy = kMargin; yy < r.height - kMargin; ++yy)
       for (int64_t xx = kMargin; xx < r.width - kMargin; ++xx, ++rr) {
         const size_t idx = size_t(yy * r.width + xx);
-        double m = 0;
+        const double yv = double(window_data[wi][idx]) - p0[idx];
+        stacked(rr, kUnknowns) = yv;
+        y_max = std::max(y_max, std::abs(yv));
+        double peak = std::abs(yv);
         for (int k = 1; k < kOrbits; ++k) {
           const double v = predk[size_t(k)][idx] - orbits[size_t(k)].count * p0[idx];
           stacked(rr, k - 1) = v;
-          m = std::max(m, std::abs(v));
+          peak = std::max(peak, std::abs(v));
         }
-        const double yv = double(window_data[wi][idx]) - p0[idx];
-        stacked(rr, kUnknowns) = yv;
-        y_abs.push_back(std::abs(yv));
-        row_max.push_back(m);
+        row_peak.push_back(peak);
       }
     Eigen::HouseholderQR<Eigen::MatrixXd> fold(stacked);
     R = fold.matrixQR().topRows(kCols).triangularView<Eigen::Upper>();
@@ -136,11 +137,10 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
   // A lone feature (a spike, a single ridge) can make the matrix full rank with only a few hundred
   // informative equations: the fit would then chase that feature. Require enough of them.
   {
-    const double y_max = y_abs.empty() ? 0.0 : *std::max_element(y_abs.begin(), y_abs.end());
     const double tol = 1e-9 * std::max(1.0, y_max);
     int64_t active = 0;
-    for (size_t r = 0; r < y_abs.size(); ++r)
-      if (y_abs[r] > tol || row_max[r] > tol) ++active;
+    for (double peak : row_peak)
+      if (peak > tol) ++active;
     if (report) report->active_equations = active;
     if (active < options.min_active_equations)
       return fallback(report, "too few informative samples (" + std::to_string(active) + " non-flat equations)");

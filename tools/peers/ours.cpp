@@ -1,6 +1,6 @@
 // Our codec (libcodec) as one more peer, through its public API only: lossy at a quantiser step
-// (step 1 = lossless) and the max-error mode, one thread; twice: with 64x64 tiles (the pyramid's
-// default, for region decoding) and with 256x256 tiles (whole-image use, as the single-tile peers
+// (step 1 = lossless) and the max-error mode, one thread; twice: with 64x64 tiles (libcodec's
+// default; the pyramid uses 32 for region decoding) and with 256x256 tiles (whole-image use, as the single-tile peers
 // are run: fewer tile starts and index entries, which matter at low rates on smooth terrain).
 #include "peers.h"
 
