@@ -200,6 +200,8 @@ int run(int argc, char** argv) {
   int width = 640, height = 480, n = 255, levels = 0, frames = 300, png_every = 1;
   int64_t budget = 0;
   double fov = 60;
+  std::optional<double> max_screen_error;
+  bool n_given = false;
   bool no_transitions = false, no_culling = false;
   cli::CommonFlags common;
   cli::ArgParser p("clipmap-view", "PYRAMID [options]",
@@ -216,8 +218,19 @@ int run(int argc, char** argv) {
   p.option("--height", "PX", "frame height (default 480)", [&](const std::string& v) { height = int(cli::parse_int("--height", v, 16, 8192)); });
   p.option("--n", "N", "clipmap level size, 2^k-1 in 15..1023 (default 255)", [&](const std::string& v) {
     n = int(cli::parse_int("--n", v, 15, 1023));
+    n_given = true;
     if (((n + 1) & n) != 0) throw cli::UsageError("--n must be 2^k - 1, got " + v);
   });
+  p.option("--max-screen-error", "PX",
+           "choose n instead of --n: the smallest 2^k-1 (15..1023) whose 99.9th-percentile screen-space\n"
+           "geometric error (L&H 2004 Table 2, at this --width/--height/--fov) is at most PX pixels on\n"
+           "the worst rendered level, estimated from the pyramid's own finest level (so leaving out its\n"
+           "compression error; --original reports the true figures). Rugged 90 m DEMs need n = 511 for 1 px",
+           [&](const std::string& v) {
+             max_screen_error = cli::parse_double("--max-screen-error", v);
+             if (!(*max_screen_error > 0 && *max_screen_error <= 1000))
+               throw cli::UsageError("--max-screen-error must be in (0, 1000] pixels");
+           });
   p.option("--levels", "L", "clipmap levels (default: all pyramid levels)", [&](const std::string& v) { levels = int(cli::parse_int("--levels", v, 1, 30)); });
   p.option("--budget", "SAMPLES", "samples refilled per frame (default n*n)", [&](const std::string& v) { budget = cli::parse_int("--budget", v, 1, int64_t(1) << 40); });
   p.option("--fov", "DEG", "vertical field of view (default 60)", [&](const std::string& v) {
@@ -291,6 +304,20 @@ int run(int argc, char** argv) {
   HeightSource& heights = synth ? static_cast<HeightSource&>(*synth) : source;
   if (levels > heights.level_count())
     throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the source's " + std::to_string(heights.level_count()));
+  if (max_screen_error) {
+    if (n_given) throw cli::UsageError("give --n or --max-screen-error, not both");
+    if (synth) throw cli::UsageError("--max-screen-error cannot be combined with --synth-levels");
+    const int first_level = source.level_count() - (levels > 0 ? levels : source.level_count());
+    const double s_ref = triangle_size_px(width, height, fov, 255);
+    const auto t0 = Clock::now();
+    const ClipmapSizeChoice choice = clipmap_size_for_screen_error(estimate_screen_space_error(source, first_level, s_ref),
+                                                                   s_ref, width, height, fov, *max_screen_error);
+    n = choice.n;
+    if (!common.quiet)
+      std::fprintf(stderr, "clipmap-view: --max-screen-error %g px: n = %d, estimated p99.9 %.3f px on the worst level (%.2f s)%s\n",
+                   *max_screen_error, n, choice.p999_px, since(t0),
+                   choice.met ? "" : "; n = 1023 is the largest, so the tolerance is not met");
+  }
   ClipmapOptions copt;
   copt.n = n;
   copt.levels = levels;
@@ -457,6 +484,7 @@ int run(int argc, char** argv) {
     cli::JsonWriter j(js);
     j.begin_object();
     j.field("pyramid", pyramid).field("renderer", gl.renderer_name()).field("n", n).field("levels", clipmap.level_count());
+    if (max_screen_error) j.field("max_screen_error_px", *max_screen_error);
     j.field("width", width).field("height", height).field("fov_y_deg", fov).field("frames", frames);
     j.field("budget", clipmap.budget()).field("transitions", !no_transitions).field("culling", !no_culling);
     j.field("frame_ms_median", med).field("frame_ms_p99", p99);

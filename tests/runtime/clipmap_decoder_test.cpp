@@ -129,6 +129,57 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   CHECK(e[0].spacing_m == 120.0);
 }
 
+TEST_CASE("clipmap: the screen-space error estimate from the pyramid alone, and the clipmap size it picks",
+          "[clipmap]") {
+  // With a lossless pyramid the file's own finest level is the original, so the estimate over the
+  // whole level equals the analysis against the original; over windows (a subset of the samples)
+  // no level's maximum can exceed the whole level's.
+  iotest::TempDir dir;
+  const Heightmap map = write_terrain(dir, 300, 260, 5);
+  build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossless.pyr"), build_options(3));
+  auto file = PyramidFile::open(dir.file("lossless.pyr"));
+  const GridHeightSource original = original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(2), 3,
+                                                    file->info().filter, 30.0);
+  RegionDecoderSource source(std::make_shared<const RegionDecoder>(file), 30.0);
+  const double s_px = triangle_size_px(640, 480, 60, 255);
+  const auto truth = screen_space_error(source, original, 0, s_px);
+  const auto whole = estimate_screen_space_error(source, 0, s_px);
+  REQUIRE(whole.size() == 3);
+  for (size_t l = 0; l < 3; ++l) {
+    INFO("level " << l);
+    CHECK(whole[l].rms_m == truth[l].rms_m);
+    CHECK(whole[l].p999_px == truth[l].p999_px);
+    CHECK(whole[l].max_m == truth[l].max_m);
+  }
+  CHECK(whole[0].p999_px > 0.0);
+  CHECK(whole[2].max_m == 0.0);
+  const auto sampled = estimate_screen_space_error(source, 1, s_px, 256 * 256);  // one 256x256 window
+  REQUIRE(sampled.size() == 2);
+  CHECK(sampled[0].level == 1);
+  CHECK(sampled[0].rms_m > 0.0);
+  CHECK(sampled[0].max_m <= whole[1].max_m);
+
+  // The size: errors scale as s ~ 1/n; the smallest 2^k - 1 within the tolerance.
+  double worst = 0;
+  for (const auto& e : whole) worst = std::max(worst, e.p999_px / s_px);
+  for (double tolerance : {0.05, 0.2, 1.0}) {
+    const ClipmapSizeChoice c = clipmap_size_for_screen_error(whole, s_px, 640, 480, 60, tolerance);
+    INFO("tolerance " << tolerance << " n " << c.n);
+    CHECK(((c.n + 1) & c.n) == 0);
+    CHECK(c.p999_px == Approx(worst * triangle_size_px(640, 480, 60, c.n)));
+    if (c.met) {
+      CHECK(c.p999_px <= tolerance);
+      if (c.n > 15) CHECK(worst * triangle_size_px(640, 480, 60, c.n / 2) > tolerance);
+    } else {
+      CHECK(c.n == 1023);
+    }
+  }
+  CHECK(clipmap_size_for_screen_error(whole, s_px, 640, 480, 60, 1000.0).n == 15);
+  const ClipmapSizeChoice unreachable = clipmap_size_for_screen_error(whole, s_px, 640, 480, 60, 1e-9);
+  CHECK(!unreachable.met);
+  CHECK(unreachable.n == 1023);
+}
+
 TEST_CASE("clipmap: levels refined from the coarser clipmap level equal the decoder's, voids too", "[clipmap]") {
   // The clipmap keeps each level's integer units and decodes only the residual of a finer level
   // (U of its own coarser level + R^, paper §5). Whatever the path, every level must hold exactly

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include <sstream>
 
 #include "io/io_test_util.h"
 #include "pyramid/synth.h"
@@ -239,4 +240,47 @@ TEST_CASE("e2e: pyramid-build fails cleanly on a truncated input and leaves no o
   CHECK_FALSE(std::filesystem::exists(out));
   for (auto& e : std::filesystem::directory_iterator(std::filesystem::path(out).parent_path()))
     CHECK(e.path().filename().string().find("out.pyr") == std::string::npos);
+}
+
+TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the original confirms it", "[e2e]") {
+  // pyramid-build --rms 1, then clipmap-view with a 1-pixel tolerance: it must choose a size 2^k - 1,
+  // record it in stats.json, and the screen-space analysis against the original input must find
+  // every rendered level's 99.9th percentile within the tolerance. Usage errors come first.
+  iotest::TempDir dir;
+  const Heightmap map = synthesize_terrain(SynthOptions{.seed = 7, .width = 1201, .height = 1201});
+  const std::string in = dir.file("N20E020.hgt"), pyr = dir.file("t.pyr"), out = dir.file("frames");
+  iotest::write_file(in, iotest::hgt_bytes(map));
+  REQUIRE(iotest::run_tool(dir, {"pyramid-build", {in, "-o", pyr, "--rms", "1", "-q"}}).status == 0);
+  CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--n", "255", "--max-screen-error", "1"}}).status == 1);
+  CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--max-screen-error", "0"}}).status == 1);
+  // Mesa keeps allocations until exit; the tool's leak check is not what this test is about.
+  ::setenv("ASAN_OPTIONS", "detect_leaks=0", 1);
+  const auto r = iotest::run_tool(dir, {"clipmap-view", {pyr, "--original", in, "--max-screen-error", "1", "--fov",
+                                                          "73.74", "--frames", "1", "--png-every", "0", "--out", out}});
+  REQUIRE(r.status == 0);
+  const auto pos = r.err.find("--max-screen-error 1 px: n = ");
+  REQUIRE(pos != std::string::npos);
+  const int n = std::atoi(r.err.c_str() + pos + 29);
+  INFO(r.err << r.out);
+  CHECK(n >= 15);
+  CHECK(((n + 1) & n) == 0);
+  const std::vector<uint8_t> json = iotest::read_file(out + "/stats.json");
+  const std::string stats(json.begin(), json.end());
+  CHECK(stats.find("\"n\": " + std::to_string(n)) != std::string::npos);
+  CHECK(stats.find("\"max_screen_error_px\": 1") != std::string::npos);
+  // The table: "level spacing rms_m max_m rms_px p99.9_px max_px" rows after its header.
+  std::istringstream table(r.out.substr(r.out.find("p99.9_px")));
+  std::string line;
+  std::getline(table, line);
+  int rows = 0;
+  while (std::getline(table, line)) {
+    std::istringstream row(line);
+    int level;
+    double spacing, rms_m, max_m, rms_px, p999_px, max_px;
+    if (!(row >> level >> spacing >> rms_m >> max_m >> rms_px >> p999_px >> max_px)) break;
+    INFO("level " << level);
+    CHECK(p999_px <= 1.0);
+    ++rows;
+  }
+  CHECK(rows >= 3);
 }

@@ -170,6 +170,23 @@ double triangle_size_px(int width, int height, double fov_y_deg, int n);
 // finest level (same finest size); only samples valid in original.finest_valid count.
 std::vector<LevelScreenError> screen_space_error(HeightSource& rendered, const GridHeightSource& original,
                                                  int first_level, double s_px);
+// The same analysis without the original: `source`'s own finest level stands in for the truth, so
+// the figures leave out the finest level's compression error (level l's error against the data is at
+// most this plus that). Over the whole finest level when it has at most max_samples samples,
+// otherwise over a grid of 256x256 windows spread evenly over it, max_samples in all.
+std::vector<LevelScreenError> estimate_screen_space_error(HeightSource& source, int first_level, double s_px,
+                                                          int64_t max_samples = int64_t(1) << 22);
+
+// The smallest clipmap size n = 2^k - 1 (15..1023) whose worst level's p99.9 screen-space error is at
+// most tolerance_px, from `errors` computed at triangle size s_px (errors scale with s, s with 1/n;
+// L&H 2004 §9 suggest sizing the clipmap by the terrain's error). met = false: even n = 1023 exceeds it.
+struct ClipmapSizeChoice {
+  int n = 0;
+  double p999_px = 0;  // the worst level's p99.9 at that n
+  bool met = false;
+};
+ClipmapSizeChoice clipmap_size_for_screen_error(const std::vector<LevelScreenError>& errors, double s_px,
+                                                int width, int height, double fov_y_deg, double tolerance_px);
 
 // Inclusive vertex bounds on a level's grid; empty when x1 < x0 or y1 < y0.
 struct LevelRegion {
