@@ -39,6 +39,9 @@ typedef int32_t V8 __attribute__((vector_size(32)));
 typedef uint32_t U8 __attribute__((vector_size(32)));
 typedef double D4 __attribute__((vector_size(32)));
 typedef double D8 __attribute__((vector_size(64)));
+typedef int32_t V16 __attribute__((vector_size(64)));
+typedef uint32_t U16 __attribute__((vector_size(64)));
+typedef double D16 __attribute__((vector_size(128)));
 #endif
 template <class T> struct UnsignedOf { using type = uint32_t; };
 template <class T> struct DoublesOf {};
@@ -47,6 +50,8 @@ template <> struct UnsignedOf<V4> { using type = U4; };
 template <> struct UnsignedOf<V8> { using type = U8; };
 template <> struct DoublesOf<V4> { using type = D4; };
 template <> struct DoublesOf<V8> { using type = D8; };
+template <> struct UnsignedOf<V16> { using type = U16; };
+template <> struct DoublesOf<V16> { using type = D16; };
 #endif
 template <class T> using Unsigned = typename UnsignedOf<T>::type;
 
@@ -230,6 +235,16 @@ CODEC_INLINE void transpose4(V8& a, V8& b, V8& c, V8& d) {
   b = __builtin_shufflevector(t0, t2, 2, 3, 10, 11, 6, 7, 14, 15);
   c = __builtin_shufflevector(t1, t3, 0, 1, 8, 9, 4, 5, 12, 13);
   d = __builtin_shufflevector(t1, t3, 2, 3, 10, 11, 6, 7, 14, 15);
+}
+CODEC_INLINE void transpose4(V16& a, V16& b, V16& c, V16& d) {
+  const V16 t0 = __builtin_shufflevector(a, b, 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25, 12, 28, 13, 29);
+  const V16 t1 = __builtin_shufflevector(a, b, 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11, 27, 14, 30, 15, 31);
+  const V16 t2 = __builtin_shufflevector(c, d, 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25, 12, 28, 13, 29);
+  const V16 t3 = __builtin_shufflevector(c, d, 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11, 27, 14, 30, 15, 31);
+  a = __builtin_shufflevector(t0, t2, 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29);
+  b = __builtin_shufflevector(t0, t2, 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31);
+  c = __builtin_shufflevector(t1, t3, 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29);
+  d = __builtin_shufflevector(t1, t3, 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31);
 }
 
 // Op on the four rows at p (row stride `stride`), sizeof(V) / 4 columns.

@@ -26,5 +26,6 @@ void inverse_lapped(int32_t* tile, int width, int height, bool lossy);
 void inverse_lapped_scalar(int32_t* tile, int width, int height, bool lossy);
 bool inverse_lapped_vector(int32_t* tile, int width, int height, bool lossy);
 bool inverse_lapped_avx2(int32_t* tile, int width, int height, bool lossy);
+bool inverse_lapped_avx512(int32_t* tile, int width, int height, bool lossy);
 
 }  // namespace codec::detail

@@ -516,20 +516,21 @@ TEST_CASE("vector inverse transforms equal the scalar reference on random and ex
   using namespace codec::detail;
   std::mt19937 rng(1234);
   bool vector_ran = false;
-  const bool avx2 =
 #if defined(__x86_64__)
-      __builtin_cpu_supports("avx2");
+  const bool avx2 = __builtin_cpu_supports("avx2");
+  const bool avx512 = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+                      __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
 #else
-      false;
+  const bool avx2 = false, avx512 = false;
 #endif
-  const int sizes[][2] = {{16, 16}, {32, 32}, {48, 16}, {16, 80}, {64, 64}, {96, 48}};
+  const int sizes[][2] = {{16, 16}, {32, 32}, {48, 16}, {16, 80}, {64, 64}, {96, 48}, {272, 32}};
   for (const auto& size : sizes)
     for (const bool lossy : {false, true})
       for (int kind = 0; kind < 4; ++kind)
         for (int trial = 0; trial < 3; ++trial) {
           const int w = size[0], h = size[1];
           const std::vector<int32_t> input = coefficient_tile(kind, w, h, lossy, rng);
-          std::vector<int32_t> reference = input, vector = input, wide = input, dispatched = input;
+          std::vector<int32_t> reference = input, vector = input, wide = input, wider = input, dispatched = input;
           inverse_lapped_scalar(reference.data(), w, h, lossy);
           inverse_lapped(dispatched.data(), w, h, lossy);
           INFO("size " << w << "x" << h << " lossy " << lossy << " kind " << kind);
@@ -539,6 +540,7 @@ TEST_CASE("vector inverse transforms equal the scalar reference on random and ex
             CHECK(first_difference(vector, reference) == -1);
           }
           if (avx2 && inverse_lapped_avx2(wide.data(), w, h, lossy)) CHECK(first_difference(wide, reference) == -1);
+          if (avx512 && inverse_lapped_avx512(wider.data(), w, h, lossy)) CHECK(first_difference(wider, reference) == -1);
         }
 #if defined(__x86_64__) && defined(CODEC_VECTOR_TRANSFORM)
   CHECK(vector_ran);
