@@ -355,14 +355,12 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
       const uint8_t* payload = data_ + entry.offset;
       if (crc32c(payload, entry.size) != entry.crc) return Status::ChecksumMismatch;
       const int tw = tile_extent(header_.width, t, tx), th = tile_extent(header_.height, t, ty);
-      if (detail::decode_tile(payload, entry.size, tw, th, params, work) != detail::TileResult::Ok)
-        return Status::Corrupt;
       const int64_t x0 = std::max(rect.x, tx * t), x1 = std::min(rect.x + rect.width, tx * t + tw);
       const int64_t y0 = std::max(rect.y, ty * t), y1 = std::min(rect.y + rect.height, ty * t + th);
-      for (int64_t y = y0; y < y1; ++y)
-        std::memcpy(dst + (y - rect.y) * dst_stride + (x0 - rect.x),
-                    work.reconstruction.data() + size_t(y - ty * t) * tw + size_t(x0 - tx * t),
-                    size_t(x1 - x0) * sizeof(int32_t));
+      const detail::TileWindow window{int(x0 - tx * t), int(y0 - ty * t), int(x1 - tx * t), int(y1 - ty * t),
+                                      dst + (y0 - rect.y) * dst_stride + (x0 - rect.x), dst_stride};
+      if (detail::decode_tile(payload, entry.size, tw, th, params, work, window) != detail::TileResult::Ok)
+        return Status::Corrupt;
     }
   return Status::Ok;
 }

@@ -407,8 +407,10 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
   return spatial;
 }
 
-TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const TileParams& params,
-                       TileWork& work) {
+TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const TileParams& params, TileWork& work,
+                       const TileWindow& window) {
+  assert(0 <= window.x0 && window.x0 < window.x1 && window.x1 <= w && 0 <= window.y0 && window.y0 < window.y1 &&
+         window.y1 <= h);
   const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
   if (size < 1) return TileResult::Corrupt;
   const int pw = padded_side(w), ph = padded_side(h);
@@ -420,31 +422,35 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   int32_t* tile = work.coefficients.data();
   if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work))
     return TileResult::Corrupt;
+  const bool corrected = !spatial && params.bound_max_error;
+  const int32_t* corrections = work.sequence.data();
+  if (corrected) {  // the correction layer follows the bands; decoded whole, added inside the window
+    RlgrState state;
+    if (!rlgr_decode(bits, work.sequence.data(), size_t(w) * h, state)) return TileResult::Corrupt;
+  }
+  if (bits.overrun()) return TileResult::Corrupt;
   inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
-  int32_t* recon = work.reconstruction.data();
-  const size_t n = size_t(w) * h;
-  if (spatial || params.fraction_bits == 0) {
-    crop(tile, pw, w, h, recon);
-  } else {
-    const int shift = params.fraction_bits;
-    const int32_t half = int32_t(1) << (shift - 1);
-    for (int y = 0; y < h; ++y) {
-      const int32_t* from = tile + size_t(y) * pw;
-      int32_t* to = recon + size_t(y) * w;
-      // Wrapping add: garbage from a corrupt stream must not be undefined behaviour.
-      for (int x = 0; x < w; ++x) to[x] = int32_t(uint32_t(from[x]) + uint32_t(half)) >> shift;
+  // Straight from the padded tile into the caller's window: no intermediate copy.
+  const int shift = spatial ? 0 : params.fraction_bits;
+  const int32_t half = shift > 0 ? int32_t(1) << (shift - 1) : 0;
+  const int64_t bin = 2 * int64_t(params.max_error) + 1;
+  const int n = window.x1 - window.x0;
+  for (int y = window.y0; y < window.y1; ++y) {
+    const int32_t* from = tile + size_t(y) * pw + window.x0;
+    int32_t* to = window.dst + ptrdiff_t(y - window.y0) * window.stride;
+    if (spatial) {
+      for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);
+      continue;
+    }
+    if (shift == 0) std::memcpy(to, from, size_t(n) * sizeof(int32_t));
+    // Wrapping add: garbage from a corrupt stream must not be undefined behaviour.
+    else for (int x = 0; x < n; ++x) to[x] = int32_t(uint32_t(from[x]) + uint32_t(half)) >> shift;
+    if (corrected) {
+      const int32_t* c = corrections + size_t(y) * w + window.x0;
+      for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(to[x]) + c[x]);
     }
   }
-  if (spatial) {
-    const int64_t bin = 2 * int64_t(params.max_error) + 1;
-    for (size_t i = 0; i < n; ++i) recon[i] = saturate(int64_t(recon[i]) * bin);
-  } else if (params.bound_max_error) {
-    int32_t* corrections = work.sequence.data();
-    RlgrState state;
-    if (!rlgr_decode(bits, corrections, n, state)) return TileResult::Corrupt;
-    for (size_t i = 0; i < n; ++i) recon[i] = saturate(int64_t(recon[i]) + corrections[i]);
-  }
-  return bits.overrun() ? TileResult::Corrupt : TileResult::Ok;
+  return TileResult::Ok;
 }
 
 }  // namespace codec::detail

@@ -56,8 +56,16 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int heig
                    bool want_reconstruction);
 
 enum class TileResult { Ok, Corrupt };
-// Decodes a payload into work.reconstruction (width x height, row stride = width).
-TileResult decode_tile(const uint8_t* payload, size_t size, int width, int height,
-                       const TileParams& params, TileWork& work);
+// The part of a decoded tile the caller wants: samples [x0, x1) x [y0, y1) of the tile (inside
+// width x height), written to dst (the sample at (x0, y0)) with row stride `stride`.
+struct TileWindow {
+  int x0, y0, x1, y1;
+  int32_t* dst;
+  ptrdiff_t stride;
+};
+// Decodes a width x height payload and writes `window` of it. On Corrupt the window's contents are
+// unspecified.
+TileResult decode_tile(const uint8_t* payload, size_t size, int width, int height, const TileParams& params,
+                       TileWork& work, const TileWindow& window);
 
 }  // namespace codec::detail
