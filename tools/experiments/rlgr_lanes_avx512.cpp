@@ -3,21 +3,29 @@
 // RLGR stream (fresh state), the lanes concatenated at bit granularity. The decoder runs the 8 lanes
 // in lock-step, one 64-bit AVX-512 element each, without branches (window from a gather at each
 // lane's bit position, both RLGR modes computed, results selected by masks, non-zero values
-// scattered). Escapes are not handled (the larger-value cases stop with a mismatch). Results in
-// docs/codec.md ("Decoder implementation").
-//   g++ -O2 -std=c++20 -Ilibcodec/src tools/experiments/rlgr_lanes_avx512.cpp libcodec/src/rlgr.cpp -o /tmp/rlgr-lanes
-//   /tmp/rlgr-lanes [laplacian scale] [share of zeros] [B]
+// scattered; escapes read a second window). Results in docs/codec.md ("Decoder implementation").
+// Input: the LP and HP band groups of a real DEM coded by libcodec (captured from a decode: the
+// library's sources built with CODEC_BAND_CAPTURE). The decoders include the real decoder's sink:
+// each non-zero level's slot (tile offset and band), dequantisation, store; the lane decoder gathers
+// slots and band steps and scatters. Prints bits/value (one stream vs 8 lanes) and ns/value.
+//   g++ -O2 -std=c++20 -DCODEC_BAND_CAPTURE -Ilibcodec/src -Ilibcodec/include tools/experiments/rlgr_lanes_avx512.cpp libcodec/src/*.cpp -o /tmp/rlgr-lanes
+//   /tmp/rlgr-lanes ../shared/data/srtm3_N46W122_rainier_adams_cascades.hgt 6 256   (DEM, step, tile)
+#include "codec/codec.h"
 #include "rlgr.h"
+#include <fstream>
 #include <immintrin.h>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <random>
+#include <algorithm>
 #include <vector>
 using namespace codec::detail;
 using namespace codec::detail::rlgr;
+namespace codec::detail { extern std::vector<std::vector<int32_t>>* g_band_capture; }
 
 static size_t B = 1;
+static const uint32_t* g_slots; static const uint32_t* g_q8;
 struct Lanes { std::vector<uint8_t> bytes; uint64_t start[8]; size_t count[8]; };
 
 static Lanes encode_lanes(const std::vector<int32_t>& v) {
@@ -72,9 +80,25 @@ static bool decode_avx512(const Lanes& L, int32_t* out, size_t n) {
     __m512i m1 = _mm512_or_si512(_mm512_sllv_epi64(ones_r, kr), _mm512_srlv_epi64(after_r, _mm512_sub_epi64(c64, kr)));
     __m512i q = _mm512_mask_blend_epi64(gr, ones_r, ones);
     __mmask8 rice = gr | flag;
-    if (_mm512_mask_cmpge_epi64_mask(rice & active, q, _mm512_set1_epi64(kUnaryCap))) return false;  // escape: not in prototype
     __m512i len_gr = _mm512_add_epi64(_mm512_add_epi64(ones, one), kr);
     __m512i len_r = _mm512_mask_blend_epi64(flag, one, _mm512_add_epi64(_mm512_add_epi64(k, _mm512_set1_epi64(3)), _mm512_add_epi64(ones_r, kr)));
+    const __mmask8 esc = _mm512_mask_cmpge_epi64_mask(rice & active, q, _mm512_set1_epi64(kUnaryCap));
+    if (esc) [[unlikely]] {  // 20 ones, then a 31-bit value: read from a second window
+      const __m512i prefix = _mm512_maskz_add_epi64(~gr, k, _mm512_set1_epi64(2));
+      const __m512i at = _mm512_add_epi64(pos, _mm512_add_epi64(prefix, _mm512_set1_epi64(kUnaryCap)));
+      __m512i r2 = _mm512_mask_i64gather_epi64(zero, esc, _mm512_srli_epi64(at, 3), base, 1);
+      r2 = _mm512_sllv_epi64(_mm512_shuffle_epi8(r2, bswap), _mm512_and_si512(at, _mm512_set1_epi64(7)));
+      const __m512i escaped = _mm512_srli_epi64(r2, 64 - kEscapeBits);
+      const __m512i elen = _mm512_add_epi64(prefix, _mm512_set1_epi64(kUnaryCap + kEscapeBits));
+      val = _mm512_mask_mov_epi64(val, esc & gr, escaped);
+      m1 = _mm512_mask_mov_epi64(m1, esc & ~gr, escaped);
+      len_gr = _mm512_mask_mov_epi64(len_gr, esc & gr, elen);
+      len_r = _mm512_mask_mov_epi64(len_r, esc & ~gr, elen);
+      q = _mm512_mask_mov_epi64(q, esc, _mm512_set1_epi64(kUnaryCap));
+      if (_mm512_mask_cmpge_epu64_mask(esc & gr, val, _mm512_set1_epi64(2 * int64_t(kRlgrMaxMagnitude))) ||
+          _mm512_mask_cmpge_epu64_mask(esc & ~gr, m1, _mm512_set1_epi64(kRlgrMaxMagnitude)))
+        return false;
+    }
     __m512i len = _mm512_mask_blend_epi64(gr, len_r, len_gr);
     __mmask8 nz = (_mm512_mask_cmpneq_epi64_mask(gr, val, zero)) | (flag & ~gr);
     __m512i mag = _mm512_mask_blend_epi64(gr, _mm512_add_epi64(m1, one), _mm512_srli_epi64(_mm512_add_epi64(val, one), 1));
@@ -102,7 +126,13 @@ static bool decode_avx512(const Lanes& L, int32_t* out, size_t n) {
     if (B == 1) gidx = _mm512_add_epi64(_mm512_slli_epi64(opos, 3), lane);
     else { const __m512i bb = _mm512_set1_epi64(int64_t(B)); const __m512i blk = _mm512_srli_epi64(opos, __builtin_ctzll(B));
       gidx = _mm512_add_epi64(_mm512_mullo_epi64(_mm512_add_epi64(_mm512_slli_epi64(blk, 3), lane), bb), _mm512_and_si512(opos, _mm512_sub_epi64(bb, one))); }
-    _mm512_mask_i64scatter_epi32(out, store, gidx, _mm512_cvtepi64_epi32(signed_v), 4);
+    const __m256i slot = _mm512_mask_i64gather_epi32(_mm256_setzero_si256(), store, gidx, (const int*)g_slots, 4);
+    const __m256i q8 = _mm256_i32gather_epi32((const int*)g_q8, _mm256_srli_epi32(slot, 24), 4);
+    // value = ((mag * 16 + 1) * q8 + 2048) >> 12, signed
+    __m512i mq = _mm512_mul_epu32(_mm512_add_epi64(_mm512_slli_epi64(mag, 4), one), _mm512_cvtepu32_epi64(q8));
+    mq = _mm512_srli_epi64(_mm512_add_epi64(mq, _mm512_set1_epi64(2048)), 12);
+    const __m512i dv = _mm512_mask_sub_epi64(mq, _mm512_cmpneq_epi64_mask(sgn, zero), zero, mq);
+    _mm512_mask_i32scatter_epi32(out, store, _mm512_castsi256_si512(_mm256_and_si256(slot, _mm256_set1_epi32(0xFFFFFF))), _mm512_castsi256_si512(_mm512_cvtepi64_epi32(dv)), 4);
     i = _mm512_mask_add_epi64(i, active, i, adv);
     active = _mm512_cmplt_epu64_mask(i, cnt);
   }
@@ -110,30 +140,52 @@ static bool decode_avx512(const Lanes& L, int32_t* out, size_t n) {
   return true;
 }
 
+
 int main(int argc, char** argv) {
-  B = argc > 3 ? atoi(argv[3]) : 1; const double scale = argc > 1 ? atof(argv[1]) : 1.0, pzero = argc > 2 ? atof(argv[2]) : 0.6;
-  const size_t n = 4096 * 16;
-  std::mt19937 rng(1); std::vector<int32_t> a(n);
-  std::uniform_real_distribution<double> u(0, 1); std::exponential_distribution<double> e(1.0 / scale);
-  for (size_t i = 0; i < n; ++i) { const double pz = ((i / 256) % 4 == 0) ? 0.95 : pzero; a[i] = u(rng) < pz ? 0 : int32_t(1 + e(rng)) * (u(rng) < 0.5 ? -1 : 1); }
-  std::vector<uint8_t> b(n * 8); BitWriter w(b.data(), b.size()); RlgrState s0; rlgr_encode(w, a.data(), n, s0); const size_t bits1 = w.bit_count(); const size_t len1 = w.finish();
-  Lanes L = encode_lanes(a);
-  printf("bits/value single %.4f, 8 lanes %.4f\n", double(bits1) / n, 8.0 * double(L.bytes.size() - 16) / n);
-  std::vector<int32_t> o(n);
-  double t1 = 1e9, t8 = 1e9;
-  for (int rep = 0; rep < 100; ++rep) {
-    std::fill(o.begin(), o.end(), 0);
-    auto t0 = std::chrono::steady_clock::now();
-    { BitReader r(b.data(), len1); RlgrState s; rlgr_decode_nonzero(r, n, s, [&](size_t i, uint32_t m, bool ng) { o[i] = ng ? -int32_t(m) : int32_t(m); return true; }); }
-    auto tA = std::chrono::steady_clock::now();
-    if (rep == 0 && o != a) { printf("scalar mismatch\n"); return 1; }
-    std::fill(o.begin(), o.end(), 0);
-    auto tB = std::chrono::steady_clock::now();
-    bool ok = decode_avx512(L, o.data(), n);
-    auto tC = std::chrono::steady_clock::now();
-    if (rep == 0 && (!ok || o != a)) { printf("lanes mismatch ok=%d\n", ok); size_t bad=0; for (size_t i=0;i<n;++i) if (o[i]!=a[i]) {if (bad<5) printf(" at %zu: %d vs %d\n", i, o[i], a[i]); ++bad;} printf(" %zu bad\n", bad); return 1; }
-    t1 = std::min(t1, std::chrono::duration<double>(tA - t0).count());
-    t8 = std::min(t8, std::chrono::duration<double>(tC - tB).count());
+  if (argc < 4) { fprintf(stderr, "usage: %s DEM.hgt STEP TILE\n", argv[0]); return 1; }
+  std::ifstream in(argv[1], std::ios::binary);
+  const std::vector<unsigned char> hgt((std::istreambuf_iterator<char>(in)), {});
+  const int w = 1201, h = 1201;
+  if (hgt.size() != size_t(2 * w * h)) { fprintf(stderr, "%s: not a 1201x1201 .hgt\n", argv[1]); return 1; }
+  std::vector<int32_t> src(w * h);
+  for (int i = 0; i < w * h; ++i) { const int16_t v = int16_t((hgt[2 * i] << 8) | hgt[2 * i + 1]); src[i] = v == -32768 ? 0 : v; }
+  codec::EncodeOptions opt; opt.step = atof(argv[2]); opt.tile_size = uint32_t(atoi(argv[3]));
+  std::vector<uint8_t> stream(codec::encode_bound(w, h, opt)); size_t written = 0; codec::Scratch scratch;
+  if (codec::encode(src.data(), w, w, h, opt, stream.data(), stream.size(), &written, scratch) != codec::Status::Ok) return 1;
+  std::vector<std::vector<int32_t>> g; g_band_capture = &g;
+  std::vector<int32_t> decoded(w * h); codec::decode(stream.data(), written, decoded.data(), w, scratch); g_band_capture = nullptr;
+  printf("%s step %s tile %s: %.3f bits/sample, %zu band groups\n", argv[1], argv[2], argv[3], 8.0 * written / (w * h), g.size());
+  uint32_t q8[32]; for (int b = 0; b < 32; ++b) q8[b] = 256 * 6 + b * 40;
+  g_q8 = q8;
+  for (size_t Bv : {size_t(1), size_t(16), size_t(64)}) {
+    B = Bv;
+    size_t bits1 = 0, bits8 = 0, values = 0; double t1 = 0, t8 = 0; bool ok = true;
+    for (auto& v : g) {
+      const size_t n = v.size(); values += n;
+      std::vector<uint32_t> slots(n); for (size_t j = 0; j < n; ++j) slots[j] = uint32_t(j % 15) << 24 | uint32_t(j);
+      g_slots = slots.data();
+      std::vector<uint8_t> b(n * 8 + 64); BitWriter w(b.data(), b.size()); RlgrState s0; rlgr_encode(w, v.data(), n, s0);
+      bits1 += w.bit_count(); const size_t len1 = w.finish();
+      Lanes L = encode_lanes(v); bits8 += (L.bytes.size() - 16) * 8;
+      std::vector<int32_t> o1(n), o8(n);
+      double best1 = 1e9, best8 = 1e9;
+      for (int rep = 0; rep < 15; ++rep) {
+        std::fill(o1.begin(), o1.end(), 0); std::fill(o8.begin(), o8.end(), 0);
+        auto a = std::chrono::steady_clock::now();
+        { BitReader r(b.data(), len1); RlgrState s; rlgr_decode_nonzero(r, n, s, [&](size_t i, uint32_t m, bool ng) {
+            const uint32_t slot = slots[i]; const uint64_t val = ((uint64_t(m) * 16 + 1) * q8[slot >> 24] + 2048) >> 12;
+            o1[slot & 0xFFFFFF] = int32_t(ng ? 0u - uint32_t(val) : uint32_t(val)); return val <= (1u << 29); }); }
+        auto bb = std::chrono::steady_clock::now();
+        const bool okk = decode_avx512(L, o8.data(), n);
+        auto c = std::chrono::steady_clock::now();
+        if (rep == 0 && (!okk || o1 != o8)) ok = false;
+        best1 = std::min(best1, std::chrono::duration<double>(bb - a).count());
+        best8 = std::min(best8, std::chrono::duration<double>(c - bb).count());
+      }
+      t1 += best1; t8 += best8;
+    }
+    printf("B=%3zu: bits single %.4f b/v, 8 lanes %.4f b/v (+%.2f%%); decode ns/value single %.3f, lanes %.3f (x%.2f)%s\n", B,
+           double(bits1) / values, double(bits8) / values, 100.0 * (double(bits8) / bits1 - 1), t1 * 1e9 / values, t8 * 1e9 / values, t1 / t8,
+           ok ? "" : "  (MISMATCH or escape in some group)");
   }
-  printf("ns/value: scalar %.3f, 8 lanes avx512 %.3f (x%.2f)\n", t1 * 1e9 / n, t8 * 1e9 / n, t1 / t8);
 }
