@@ -94,10 +94,11 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
           "find_package(terrain REQUIRED)\nadd_executable(consumer main.cpp)\n"
           "target_link_libraries(consumer PRIVATE terrain::runtime)\n";
     std::ofstream main(project + "/main.cpp");
-    main << "#include <codec/codec.h>\n#include <pyramid/synth.h>\n"
+    main << "#include <codec/codec.h>\n#include <pyramid/synth.h>\n#include <runtime/clipmap.h>\n"
             "int main() {\n"
             "  const terrain::Heightmap map = terrain::synthesize_terrain({.seed = 1, .width = 33, .height = 17});\n"
-            "  return map.width() == 33 && codec::encode_bound(33, 17, codec::EncodeOptions{}) > 0 ? 0 : 1;\n}\n";
+            "  return map.width() == 33 && codec::encode_bound(33, 17, codec::EncodeOptions{}) > 0 &&\n"
+            "         terrain::runtime::triangle_size_px(640, 480, 60, 255) > 0 ? 0 : 1;\n}\n";
   }
 #ifdef TERRAIN_SANITIZED
   const std::string flags = " -DCMAKE_CXX_FLAGS=-fsanitize=address,undefined";
@@ -114,15 +115,7 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
   REQUIRE(built);
   CHECK(std::system((build + "/consumer").c_str()) == 0);
 
-  // The same program built with plain g++ and the installed pkg-config files, runtime included.
-  {
-    std::ofstream main(project + "/main_pc.cpp");
-    main << "#include <codec/codec.h>\n#include <pyramid/synth.h>\n#include <runtime/clipmap.h>\n"
-            "int main() {\n"
-            "  const terrain::Heightmap map = terrain::synthesize_terrain({.seed = 1, .width = 33, .height = 17});\n"
-            "  return map.width() == 33 && codec::encode_bound(33, 17, codec::EncodeOptions{}) > 0 &&\n"
-            "         terrain::runtime::triangle_size_px(640, 480, 60, 255) > 0 ? 0 : 1;\n}\n";
-  }
+  // The same program built with plain c++ and the installed pkg-config files.
 #ifdef TERRAIN_SANITIZED
   const std::string cxx_flags = " -fsanitize=address,undefined";
 #else
@@ -130,7 +123,7 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
 #endif
   const std::string pc_path = "PKG_CONFIG_PATH=" + iotest::shell_quote(moved + "/" + TERRAIN_INSTALL_LIBDIR + "/pkgconfig");
   const std::string pc_exe = iotest::shell_quote(project + "/consumer_pc");
-  const std::string compile = "c++ -std=c++20" + cxx_flags + " " + iotest::shell_quote(project + "/main_pc.cpp") + " -o " +
+  const std::string compile = "c++ -std=c++20" + cxx_flags + " " + iotest::shell_quote(project + "/main.cpp") + " -o " +
                               pc_exe + " $(" + pc_path + " pkg-config --cflags --libs terrain-runtime)" + to_log;
   const bool pc_built = std::system(compile.c_str()) == 0;
   const auto pc_log = iotest::read_file(dir.file("consumer.log"));
