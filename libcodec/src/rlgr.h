@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cassert>
 #include <cstddef>
 #include <cstdint>
 
@@ -58,11 +59,26 @@ inline constexpr int kUnaryCap = 20;
 inline constexpr int kEscapeBits = 31;
 
 inline int clamp_kp(int kp) { return std::clamp(kp, 0, kKpMax); }
-// quotient 0: krp -= 2; 1: unchanged; > 1: krp += quotient. Written without branches because the
-// quotient is data-dependent and unpredictable.
+// After a Rice code with quotient q (at most kUnaryCap, the escape): q = 0: krp -= 2; q = 1:
+// unchanged; q > 1: krp += q; clamped to [0, kKpMax]. Looked up in a table of the next krp for every
+// (krp, q), 1.7 KB: one L1 load in place of about ten compare and select instructions on each
+// codeword's path (decode +5-7%, Rainier step 6).
+struct RiceTable {
+  uint8_t next[kKpMax + 1][kUnaryCap + 1];
+};
+constexpr RiceTable make_rice_table() {
+  RiceTable t{};
+  for (int krp = 0; krp <= kKpMax; ++krp)
+    for (int q = 0; q <= kUnaryCap; ++q) {
+      const int v = krp + q - 2 * int(q == 0) - int(q == 1);
+      t.next[krp][q] = uint8_t(v < 0 ? 0 : v > kKpMax ? kKpMax : v);
+    }
+  return t;
+}
+inline constexpr RiceTable kRiceNext = make_rice_table();
 inline void adapt_rice(RlgrState& s, int quotient) {
-  const int delta = quotient - 2 * int(quotient == 0) - int(quotient == 1);
-  s.krp = clamp_kp(s.krp + delta);
+  assert(s.krp >= 0 && s.krp <= kKpMax && quotient >= 0 && quotient <= kUnaryCap);
+  s.krp = kRiceNext.next[s.krp][quotient];
 }
 }  // namespace rlgr
 
