@@ -89,7 +89,10 @@ template <class Sink>
 [[gnu::always_inline]] inline bool rlgr_decode_codeword(BitReader& in, size_t count, RlgrState& s, size_t& i,
                                                         Sink& sink) {
   using namespace rlgr;
-  const auto rice = [&](int kr) -> uint32_t {
+  // A Rice code with parameter kr. Without escape the value is below 2^(5 + 10) (quotient < 20, kr <=
+  // 10), so only an escape's 31-bit value needs the range check: in_range = false when it is not
+  // below `limit`.
+  const auto rice = [&](int kr, uint32_t limit, bool& in_range) -> uint32_t {
     const int ones = in.leading_ones();
     if (ones < kUnaryCap) [[likely]] {
       in.skip(ones + 1);
@@ -99,12 +102,16 @@ template <class Sink>
     in.skip(kUnaryCap);
     in.refill();
     adapt_rice(s, kUnaryCap);
-    return in.take(kEscapeBits);
+    const uint32_t escaped = in.take(kEscapeBits);
+    in_range = escaped < limit;
+    return escaped;
   };
+  bool in_range = true;
   const int k = s.kp >> 3;
   if (k == 0) {
-    const uint32_t mapped = rice(s.krp >> 3);
-    if (mapped >= uint32_t(2) * kRlgrMaxMagnitude) [[unlikely]]
+    // |v| < kRlgrMaxMagnitude maps to at most 2 kRlgrMaxMagnitude - 2.
+    const uint32_t mapped = rice(s.krp >> 3, uint32_t(2) * kRlgrMaxMagnitude - 1, in_range);
+    if (!in_range) [[unlikely]]
       return false;
     if (mapped != 0 && !sink(i, (mapped + 1) >> 1, (mapped & 1) != 0)) [[unlikely]]
       return false;
@@ -122,8 +129,8 @@ template <class Sink>
     return false;
   i += run;
   const uint32_t negative = in.take(1);
-  const uint32_t magnitude_minus_1 = rice(s.krp >> 3);
-  if (magnitude_minus_1 >= uint32_t(kRlgrMaxMagnitude)) [[unlikely]]
+  const uint32_t magnitude_minus_1 = rice(s.krp >> 3, uint32_t(kRlgrMaxMagnitude) - 1, in_range);
+  if (!in_range) [[unlikely]]
     return false;
   if (!sink(i, magnitude_minus_1 + 1, negative != 0)) [[unlikely]]
     return false;

@@ -15,6 +15,7 @@
 // Internal headers, for the SIMD == scalar checks of the inverse transform.
 #include "../../libcodec/src/lapped_kernels.h"
 #include "../../libcodec/src/lapped_transform.h"
+#include "../../libcodec/src/rlgr.h"
 
 namespace {
 
@@ -570,3 +571,44 @@ TEST_CASE("vector shrink (division-free) equals the scalar integer division", "[
   CHECK(check(INT32_MIN, INT32_MIN + 4096, 1) == 0);
 }
 #endif
+
+TEST_CASE("RLGR escapes: the largest magnitudes round trip in both modes, larger ones are rejected", "[codec]") {
+  using namespace codec::detail;
+  const int32_t big = kRlgrMaxMagnitude - 1;
+  const std::vector<int32_t> values = {big, -big, 0, 0, 0, 0, 5, -big, 0, big, 1, 0};
+  for (const RlgrState start : {RlgrState{0, 8}, RlgrState{8, 8}, RlgrState{40, 80}}) {
+    std::vector<uint8_t> buf(1024);
+    BitWriter w(buf.data(), buf.size());
+    RlgrState s = start;
+    rlgr_encode(w, values.data(), values.size(), s);
+    const size_t n = w.finish();
+    REQUIRE_FALSE(w.overflow());
+    BitReader r(buf.data(), n);
+    std::vector<int32_t> out(values.size());
+    s = start;
+    INFO("start kp " << start.kp << " krp " << start.krp);
+    CHECK(rlgr_decode(r, out.data(), out.size(), s));
+    CHECK_FALSE(r.overrun());
+    CHECK(out == values);
+  }
+  // Forged escapes one beyond the range: Golomb-Rice mode's mapped value 2^31 - 1 (|v| = 2^30) and
+  // run mode's magnitude - 1 = 2^30 - 1; one below each decodes.
+  const auto forged = [](bool run_mode, uint32_t escaped, int32_t* decoded) {
+    std::vector<uint8_t> buf(64);
+    BitWriter w(buf.data(), buf.size());
+    if (run_mode) w.put(0b100, 3);  // k = 1: a run ended by a value, run length 0, positive
+    w.put_ones(rlgr::kUnaryCap);
+    w.put(escaped, rlgr::kEscapeBits);
+    const size_t n = w.finish();
+    BitReader r(buf.data(), n);
+    RlgrState s = run_mode ? RlgrState{8, 8} : RlgrState{0, 8};
+    return rlgr_decode(r, decoded, 1, s);
+  };
+  int32_t v = 0;
+  CHECK_FALSE(forged(false, 0x7FFFFFFFu, &v));
+  CHECK(forged(false, 0x7FFFFFFEu, &v));
+  CHECK(v == big);
+  CHECK_FALSE(forged(true, uint32_t(kRlgrMaxMagnitude) - 1, &v));
+  CHECK(forged(true, uint32_t(kRlgrMaxMagnitude) - 2, &v));
+  CHECK(v == big);
+}
