@@ -310,11 +310,14 @@ int run(int argc, char** argv) {
     const int first_level = source.level_count() - (levels > 0 ? levels : source.level_count());
     const double s_ref = triangle_size_px(width, height, fov, 255);
     const auto t0 = Clock::now();
-    const ClipmapSizeChoice choice = clipmap_size_for_screen_error(estimate_screen_space_error(source, first_level, s_ref),
-                                                                   s_ref, width, height, fov, *max_screen_error);
+    const ClipmapSizeChoice choice =
+        clipmap_size_for_screen_error(estimate_screen_space_error(source, first_level, s_ref), s_ref, width,
+                                      height, fov, *max_screen_error);
     n = choice.n;
     if (!common.quiet)
-      std::fprintf(stderr, "clipmap-view: --max-screen-error %g px: n = %d, estimated p99.9 %.3f px on the worst level (%.2f s)%s\n",
+      std::fprintf(stderr,
+                   "clipmap-view: --max-screen-error %g px: n = %d, estimated p99.9 %.3f px on the worst "
+                   "level (%.2f s)%s\n",
                    *max_screen_error, n, choice.p999_px, since(t0),
                    choice.met ? "" : "; n = 1023 is the largest, so the tolerance is not met");
   }

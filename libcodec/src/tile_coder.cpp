@@ -421,10 +421,10 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
   return spatial;
 }
 
-TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const TileParams& params, TileWork& work,
-                       const TileWindow& window) {
-  assert(0 <= window.x0 && window.x0 < window.x1 && window.x1 <= w && 0 <= window.y0 && window.y0 < window.y1 &&
-         window.y1 <= h);
+TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const TileParams& params,
+                       TileWork& work, const TileWindow& window) {
+  assert(0 <= window.x0 && window.x0 < window.x1 && window.x1 <= w && 0 <= window.y0 &&
+         window.y0 < window.y1 && window.y1 <= h);
   const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
   if (size < 1) return TileResult::Corrupt;
   const int pw = padded_side(w), ph = padded_side(h);
@@ -458,7 +458,8 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
     }
     if (shift == 0) std::memcpy(to, from, size_t(n) * sizeof(int32_t));
     // Wrapping add: garbage from a corrupt stream must not be undefined behaviour.
-    else for (int x = 0; x < n; ++x) to[x] = int32_t(uint32_t(from[x]) + uint32_t(half)) >> shift;
+    else
+      for (int x = 0; x < n; ++x) to[x] = int32_t(uint32_t(from[x]) + uint32_t(half)) >> shift;
     if (corrected) {
       const int32_t* c = corrections + size_t(y) * w + window.x0;
       for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(to[x]) + c[x]);

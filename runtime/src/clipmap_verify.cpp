@@ -83,15 +83,15 @@ namespace {
 
 // A window of the finest level with its true heights (and validity, when the truth has voids).
 struct TruthWindow {
-  Rect rect;                        // on the finest level
-  const float* z;                   // rect.width * rect.height, row stride rect.width
-  const uint8_t* valid;             // same layout, or null: all valid
+  Rect rect;             // on the finest level
+  const float* z;        // rect.width * rect.height, row stride rect.width
+  const uint8_t* valid;  // same layout, or null: all valid
 };
 
 // Appends |PL(T^_l) - truth| at every valid sample of `w` to err and their squares to sum2, PL being
 // the renderer's triangulation of level l of `rendered` (shift = finest - l).
-void accumulate_level_error(HeightSource& rendered, int l, int shift, const TruthWindow& w, std::vector<float>& level,
-                            std::vector<float>& err, double& sum2) {
+void accumulate_level_error(HeightSource& rendered, int l, int shift, const TruthWindow& w,
+                            std::vector<float>& level, std::vector<float>& err, double& sum2) {
   const int64_t cx0 = w.rect.x0 >> shift, cy0 = w.rect.y0 >> shift;
   const int64_t cw = ((w.rect.x0 + w.rect.width - 1) >> shift) - cx0 + 2;
   const int64_t ch = ((w.rect.y0 + w.rect.height - 1) >> shift) - cy0 + 2;
@@ -117,8 +117,9 @@ void accumulate_level_error(HeightSource& rendered, int l, int shift, const Trut
 }
 
 // Table 2 statistics of levels first_level..finest of `rendered` over the truth windows.
-std::vector<LevelScreenError> level_screen_errors(HeightSource& rendered, const std::vector<TruthWindow>& windows,
-                                                  int first_level, double s_px) {
+std::vector<LevelScreenError> level_screen_errors(HeightSource& rendered,
+                                                  const std::vector<TruthWindow>& windows, int first_level,
+                                                  double s_px) {
   const int finest = rendered.level_count() - 1;
   size_t samples = 0;
   for (const TruthWindow& w : windows) samples += size_t(w.rect.width * w.rect.height);
@@ -179,8 +180,8 @@ std::vector<LevelScreenError> estimate_screen_space_error(HeightSource& source, 
     const int64_t k = std::max<int64_t>(1, int64_t(std::sqrt(double(max_samples) / double(side_x * side_y))));
     for (int64_t j = 0; j < k; ++j)
       for (int64_t i = 0; i < k; ++i)
-        rects.push_back(Rect{(fs.width - side_x) * (2 * i + 1) / (2 * k), (fs.height - side_y) * (2 * j + 1) / (2 * k),
-                             side_x, side_y});
+        rects.push_back(Rect{(fs.width - side_x) * (2 * i + 1) / (2 * k),
+                             (fs.height - side_y) * (2 * j + 1) / (2 * k), side_x, side_y});
   }
   std::vector<std::vector<float>> truth(rects.size());
   std::vector<TruthWindow> windows;
@@ -193,7 +194,8 @@ std::vector<LevelScreenError> estimate_screen_space_error(HeightSource& source, 
 }
 
 ClipmapSizeChoice clipmap_size_for_screen_error(const std::vector<LevelScreenError>& errors, double s_px,
-                                                int width, int height, double fov_y_deg, double tolerance_px) {
+                                                int width, int height, double fov_y_deg,
+                                                double tolerance_px) {
   double worst = 0;  // p99.9 pixels per pixel of triangle size, the worst level
   for (const LevelScreenError& e : errors) worst = std::max(worst, e.p999_px / s_px);
   ClipmapSizeChoice c;

@@ -531,7 +531,8 @@ TEST_CASE("vector inverse transforms equal the scalar reference on random and ex
         for (int trial = 0; trial < 3; ++trial) {
           const int w = size[0], h = size[1];
           const std::vector<int32_t> input = coefficient_tile(kind, w, h, lossy, rng);
-          std::vector<int32_t> reference = input, vector = input, wide = input, wider = input, dispatched = input;
+          std::vector<int32_t> reference = input, vector = input, wide = input, wider = input,
+                               dispatched = input;
           inverse_lapped_scalar(reference.data(), w, h, lossy);
           inverse_lapped(dispatched.data(), w, h, lossy);
           INFO("size " << w << "x" << h << " lossy " << lossy << " kind " << kind);
@@ -541,7 +542,8 @@ TEST_CASE("vector inverse transforms equal the scalar reference on random and ex
             CHECK(first_difference(vector, reference) == -1);
           }
           if (avx2 && inverse_lapped_avx2(wide.data(), w, h, lossy)) CHECK(first_difference(wide, reference) == -1);
-          if (avx512 && inverse_lapped_avx512(wider.data(), w, h, lossy)) CHECK(first_difference(wider, reference) == -1);
+          if (avx512 && inverse_lapped_avx512(wider.data(), w, h, lossy))
+            CHECK(first_difference(wider, reference) == -1);
         }
 #if defined(__x86_64__) && defined(CODEC_VECTOR_TRANSFORM)
   CHECK(vector_ran);
@@ -572,7 +574,8 @@ TEST_CASE("vector shrink (division-free) equals the scalar integer division", "[
 }
 #endif
 
-TEST_CASE("RLGR escapes: the largest magnitudes round trip in both modes, larger ones are rejected", "[codec]") {
+TEST_CASE("RLGR escapes: the largest magnitudes round trip in both modes, larger ones are rejected",
+          "[codec]") {
   using namespace codec::detail;
   const int32_t big = kRlgrMaxMagnitude - 1;
   const std::vector<int32_t> values = {big, -big, 0, 0, 0, 0, 5, -big, 0, big, 1, 0};

@@ -96,7 +96,8 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
     std::ofstream main(project + "/main.cpp");
     main << "#include <codec/codec.h>\n#include <pyramid/synth.h>\n#include <runtime/clipmap.h>\n"
             "int main() {\n"
-            "  const terrain::Heightmap map = terrain::synthesize_terrain({.seed = 1, .width = 33, .height = 17});\n"
+            "  const terrain::Heightmap map = terrain::synthesize_terrain({.seed = 1, .width = 33, .height = "
+            "17});\n"
             "  return map.width() == 33 && codec::encode_bound(33, 17, codec::EncodeOptions{}) > 0 &&\n"
             "         terrain::runtime::triangle_size_px(640, 480, 60, 255) > 0 ? 0 : 1;\n}\n";
   }
@@ -121,10 +122,12 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
 #else
   const std::string cxx_flags;
 #endif
-  const std::string pc_path = "PKG_CONFIG_PATH=" + iotest::shell_quote(moved + "/" + TERRAIN_INSTALL_LIBDIR + "/pkgconfig");
+  const std::string pc_path =
+      "PKG_CONFIG_PATH=" + iotest::shell_quote(moved + "/" + TERRAIN_INSTALL_LIBDIR + "/pkgconfig");
   const std::string pc_exe = iotest::shell_quote(project + "/consumer_pc");
-  const std::string compile = "c++ -std=c++20" + cxx_flags + " " + iotest::shell_quote(project + "/main.cpp") + " -o " +
-                              pc_exe + " $(" + pc_path + " pkg-config --cflags --libs terrain-runtime)" + to_log;
+  const std::string compile = "c++ -std=c++20" + cxx_flags + " " +
+                              iotest::shell_quote(project + "/main.cpp") + " -o " + pc_exe + " $(" + pc_path +
+                              " pkg-config --cflags --libs terrain-runtime)" + to_log;
   const bool pc_built = std::system(compile.c_str()) == 0;
   const auto pc_log = iotest::read_file(dir.file("consumer.log"));
   INFO(std::string(pc_log.begin(), pc_log.end()).substr(0, 4000));

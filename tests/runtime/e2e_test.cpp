@@ -242,7 +242,8 @@ TEST_CASE("e2e: pyramid-build fails cleanly on a truncated input and leaves no o
     CHECK(e.path().filename().string().find("out.pyr") == std::string::npos);
 }
 
-TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the original confirms it", "[e2e]") {
+TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the original confirms it",
+          "[e2e]") {
   // pyramid-build --rms 1, then clipmap-view with a 1-pixel tolerance: it must choose a size 2^k - 1,
   // record it in stats.json, and the screen-space analysis against the original input must find
   // every rendered level's 99.9th percentile within the tolerance. Usage errors come first.
@@ -255,8 +256,9 @@ TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the o
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--max-screen-error", "0"}}).status == 1);
   // Mesa keeps allocations until exit; the tool's leak check is not what this test is about.
   ::setenv("ASAN_OPTIONS", "detect_leaks=0", 1);
-  const auto r = iotest::run_tool(dir, {"clipmap-view", {pyr, "--original", in, "--max-screen-error", "1", "--fov",
-                                                          "73.74", "--frames", "1", "--png-every", "0", "--out", out}});
+  const auto r = iotest::run_tool(dir, {"clipmap-view",
+                                        {pyr, "--original", in, "--max-screen-error", "1", "--fov", "73.74",
+                                         "--frames", "1", "--png-every", "0", "--out", out}});
   REQUIRE(r.status == 0);
   const auto pos = r.err.find("--max-screen-error 1 px: n = ");
   REQUIRE(pos != std::string::npos);
