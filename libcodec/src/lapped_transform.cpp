@@ -48,19 +48,26 @@ void inverse_impl(int32_t* tile, int width, int height) {
   }
 }
 
-#if defined(CODEC_VECTOR_TRANSFORM) && defined(__x86_64__)
+}  // namespace
+
 bool cpu_has_avx2() {
+#if defined(__x86_64__)
   static const bool has = __builtin_cpu_supports("avx2");
   return has;
+#else
+  return false;
+#endif
 }
+
 bool cpu_has_avx512() {
+#if defined(__x86_64__)
   static const bool has = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
                           __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
   return has;
-}
+#else
+  return false;
 #endif
-
-}  // namespace
+}
 
 void forward_lapped(int32_t* tile, int width, int height, bool lossy) {
   if (lossy) forward_impl<LossyPre4, true>(tile, width, height);

@@ -21,11 +21,14 @@ void forward_lapped(int32_t* tile, int width, int height, bool lossy);
 void inverse_lapped(int32_t* tile, int width, int height, bool lossy);
 
 // The implementations behind inverse_lapped, for tests: the scalar reference, 4-lane vectors
-// (SSE2 on x86-64) and 8-lane AVX2 (call only where the CPU has it). The last two return false
-// when the compiler does not provide them.
+// (SSE2 on x86-64), 8-lane AVX2 and 16-lane AVX-512 (call only where the CPU has them). The last
+// three return false when the compiler does not provide them.
 void inverse_lapped_scalar(int32_t* tile, int width, int height, bool lossy);
 bool inverse_lapped_vector(int32_t* tile, int width, int height, bool lossy);
 bool inverse_lapped_avx2(int32_t* tile, int width, int height, bool lossy);
 bool inverse_lapped_avx512(int32_t* tile, int width, int height, bool lossy);
+// Whether the CPU runs inverse_lapped_avx2 / inverse_lapped_avx512 (the ISA subsets they are built for).
+bool cpu_has_avx2();
+bool cpu_has_avx512();
 
 }  // namespace codec::detail

@@ -385,11 +385,11 @@ size_t encode_spatial(const int32_t* src, ptrdiff_t stride, int w, int h, const 
 
 }  // namespace
 
-void TileWork::reserve(int pw, int ph, int w, int h, size_t payload_bound) {
+void TileWork::reserve(int pw, int ph, size_t reconstruction_samples, size_t payload_bound) {
   const size_t padded = size_t(pw) * ph;
   if (coefficients.size() < padded) coefficients.resize(padded);
-  if (sequence.size() < padded) sequence.resize(padded);
-  if (reconstruction.size() < size_t(w) * h) reconstruction.resize(size_t(w) * h);
+  if (sequence.size() < padded) sequence.resize(padded);  // also the decoder's correction layer (w x h)
+  if (reconstruction.size() < reconstruction_samples) reconstruction.resize(reconstruction_samples);
   if (alternative.size() < payload_bound) alternative.resize(payload_bound);
 }
 
@@ -401,7 +401,8 @@ size_t tile_payload_bound(int width, int height) {
 
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const TileParams& params,
                    TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
-  work.reserve(padded_side(w), padded_side(h), w, h, params.bound_max_error ? tile_payload_bound(w, h) : 0);
+  work.reserve(padded_side(w), padded_side(h), size_t(w) * h,
+               params.bound_max_error ? tile_payload_bound(w, h) : 0);
   if (!params.bound_max_error)
     return encode_transform(src, src_stride, w, h, params, work, out, capacity, want_reconstruction);
   // Max-error mode: try spatial quantisation first (into the side buffer), then the transform with
@@ -428,7 +429,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
   if (size < 1) return TileResult::Corrupt;
   const int pw = padded_side(w), ph = padded_side(h);
-  work.reserve(pw, ph, w, h, 0);
+  work.reserve(pw, ph, 0, 0);
   const uint8_t mode = head ? payload[0] : uint8_t(TileMode::Transform);
   const bool spatial = mode == uint8_t(TileMode::SpatialQuantized);
   if (mode != uint8_t(TileMode::Transform) && !spatial) return TileResult::Corrupt;

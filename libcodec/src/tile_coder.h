@@ -41,7 +41,9 @@ struct TileWork {
   std::vector<int32_t> sequence;      // one band's values in coding order
   std::vector<int32_t> reconstruction;  // width x height
   std::vector<uint8_t> alternative;     // second candidate payload in max-error mode
-  void reserve(int padded_width, int padded_height, int width, int height, size_t payload_bound);
+  // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
+  // window and needs none.
+  void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
 };
 
 inline int padded_side(int side) { return (side + 15) & ~15; }

@@ -517,13 +517,7 @@ TEST_CASE("vector inverse transforms equal the scalar reference on random and ex
   using namespace codec::detail;
   std::mt19937 rng(1234);
   bool vector_ran = false;
-#if defined(__x86_64__)
-  const bool avx2 = __builtin_cpu_supports("avx2");
-  const bool avx512 = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-                      __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
-#else
-  const bool avx2 = false, avx512 = false;
-#endif
+  const bool avx2 = cpu_has_avx2(), avx512 = cpu_has_avx512();
   const int sizes[][2] = {{16, 16}, {32, 32}, {48, 16}, {16, 80}, {64, 64}, {96, 48}, {272, 32}};
   for (const auto& size : sizes)
     for (const bool lossy : {false, true})

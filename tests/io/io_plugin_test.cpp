@@ -6,33 +6,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <optional>
 
 #include "io_test_util.h"
 
-namespace {
-
-// Sets an environment variable for the tools this test runs, restoring it afterwards so that
-// later test cases in the same process (which may load the plugin themselves) are unaffected.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) {
-    if (const char* old = std::getenv(name)) old_ = old;
-    setenv(name, value.c_str(), 1);
-  }
-  ~ScopedEnv() {
-    if (old_) setenv(name_, old_->c_str(), 1);
-    else unsetenv(name_);
-  }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-
- private:
-  const char* name_;
-  std::optional<std::string> old_;
-};
-
-}  // namespace
 
 TEST_CASE("the image plugin is loaded only for images, and a missing one is a clear error", "[io][plugin]") {
   iotest::TempDir dir;
@@ -44,7 +20,7 @@ TEST_CASE("the image plugin is loaded only for images, and a missing one is a cl
   REQUIRE(made[1].status == 0);
 
   const std::string missing = dir.file("no-such-plugin.so");
-  ScopedEnv env("TERRAIN_IMAGE_PLUGIN", missing);
+  iotest::ScopedEnv env("TERRAIN_IMAGE_PLUGIN", missing);
   auto r = iotest::run_tools(dir, {{"terrain-info", {raw, "-q"}},
                                    {"terrain-info", {png, "-q"}},
                                    {"terrain-synth", {"-o", dir.file("out.png"), "--width", "5", "--height", "5", "-q"}}});

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -108,6 +109,26 @@ inline std::vector<ToolResult> run_tools(const TempDir& dir, const std::vector<I
   for (auto& t : threads) t.join();
   return results;
 }
+
+// Sets an environment variable for the tools a test runs, restoring it afterwards so that later
+// test cases in the same process are unaffected.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : name_(name) {
+    if (const char* old = std::getenv(name)) old_ = old;
+    setenv(name, value.c_str(), 1);
+  }
+  ~ScopedEnv() {
+    if (old_) setenv(name_, old_->c_str(), 1);
+    else unsetenv(name_);
+  }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+  std::optional<std::string> old_;
+};
 
 // Big-endian int16 tile bytes from a heightmap (voids written as -32768).
 inline std::vector<uint8_t> hgt_bytes(const terrain::Heightmap& map) {
