@@ -224,8 +224,9 @@ int run(int argc, char** argv) {
   p.option("--max-screen-error", "PX",
            "choose n instead of --n: the smallest 2^k-1 (15..1023) whose 99.9th-percentile screen-space\n"
            "geometric error (L&H 2004 Table 2, at this --width/--height/--fov) is at most PX pixels on\n"
-           "the worst rendered level, estimated from the pyramid's own finest level (so leaving out its\n"
-           "compression error; --original reports the true figures). Rugged 90 m DEMs need n = 511 for 1 px",
+           "the worst rendered level, from the pyramid's own finest level plus that level's compression\n"
+           "error as the file records it (a bound; files of format 1.0 lack the record and get an estimate\n"
+           "without it; --original reports the true figures). Rugged 90 m DEMs need n = 511 for 1 px",
            [&](const std::string& v) {
              max_screen_error = cli::parse_double("--max-screen-error", v);
              if (!(*max_screen_error > 0 && *max_screen_error <= 1000))
@@ -310,16 +311,33 @@ int run(int argc, char** argv) {
     const int first_level = source.level_count() - (levels > 0 ? levels : source.level_count());
     const double s_ref = triangle_size_px(width, height, fov, 255);
     const auto t0 = Clock::now();
+    std::vector<LevelScreenError> errors = estimate_screen_space_error(source, first_level, s_ref);
+    // The estimate takes the file's finest level for the truth; the finest level's own error against
+    // the input, which version 1.1 files record, turns it into a bound.
+    const std::optional<LevelError>& finest_error = info.levels.back().error;
+    const double metres_per_unit = std::abs(info.vertical_scale);
+    if (finest_error)
+      add_finest_error_bound(errors, finest_error->rms * metres_per_unit,
+                             finest_error->max_abs * metres_per_unit, s_ref);
     const ClipmapSizeChoice choice =
-        clipmap_size_for_screen_error(estimate_screen_space_error(source, first_level, s_ref), s_ref, width,
-                                      height, fov, *max_screen_error);
+        clipmap_size_for_screen_error(errors, s_ref, width, height, fov, *max_screen_error);
     n = choice.n;
-    if (!common.quiet)
-      std::fprintf(stderr,
-                   "clipmap-view: --max-screen-error %g px: n = %d, estimated p99.9 %.3f px on the worst "
-                   "level (%.2f s)%s\n",
-                   *max_screen_error, n, choice.p999_px, since(t0),
-                   choice.met ? "" : "; n = 1023 is the largest, so the tolerance is not met");
+    if (!common.quiet) {
+      std::fprintf(
+          stderr,
+          "clipmap-view: --max-screen-error %g px: n = %d, p99.9 %s %.3f px on the worst level (%.2f s)%s\n",
+          *max_screen_error, n, finest_error ? "bound" : "estimate", choice.p999_px, since(t0),
+          choice.met ? "" : "; n = 1023 is the largest, so the tolerance is not met");
+      if (finest_error)
+        std::fprintf(stderr,
+                     "clipmap-view: the bound includes the finest level's compression error (max %.3f m)\n",
+                     finest_error->max_abs * metres_per_unit);
+      else
+        std::fprintf(stderr,
+                     "clipmap-view: warning: %s (format 1.0) does not record its compression error; the "
+                     "estimate leaves it out\n",
+                     pyramid.c_str());
+    }
   }
   ClipmapOptions copt;
   copt.n = n;

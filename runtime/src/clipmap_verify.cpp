@@ -2,6 +2,7 @@
 // lossless pyramid (the reference flight's height source) and the screen-space geometric error of
 // the rendered levels (L&H 2004 §9, Table 2).
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <stdexcept>
 
@@ -191,6 +192,19 @@ std::vector<LevelScreenError> estimate_screen_space_error(HeightSource& source, 
     windows.push_back(TruthWindow{rects[w], truth[w].data(), nullptr});
   }
   return level_screen_errors(source, windows, first_level, s_px);
+}
+
+void add_finest_error_bound(std::vector<LevelScreenError>& errors, double finest_rms_m, double finest_max_m,
+                            double s_px) {
+  assert(finest_rms_m >= 0 && finest_max_m >= 0 && s_px > 0);
+  for (LevelScreenError& e : errors) {
+    const double px_per_m = s_px / e.spacing_m;
+    e.rms_m += finest_rms_m;
+    e.max_m += finest_max_m;
+    e.rms_px += finest_rms_m * px_per_m;
+    e.p999_px += finest_max_m * px_per_m;
+    e.max_px += finest_max_m * px_per_m;
+  }
 }
 
 ClipmapSizeChoice clipmap_size_for_screen_error(const std::vector<LevelScreenError>& errors, double s_px,

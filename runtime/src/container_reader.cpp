@@ -3,6 +3,7 @@
 // size, non-overlap, the level dimension chain), so that after open() no accessor can read out
 // of bounds whatever the file contained.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <stdexcept>
@@ -129,8 +130,12 @@ Container Container::open(const std::string& path) {
   const uint32_t filter_size = get_u32(idx + info::kFilterSize);
   parse.require(newer ? (info_size >= info::kSizeV1 && info_size % 8 == 0) : info_size == info::kSizeV1,
                 "index info size " + std::to_string(info_size) + " is invalid");
-  parse.require(newer ? (record_size >= level::kSizeV1 && record_size % 8 == 0) : record_size == level::kSizeV1,
-                "level record size " + std::to_string(record_size) + " is invalid");
+  // Version 1.0 records end at the residual statistics; 1.1 appends the reconstruction error.
+  const uint32_t known_record_size = minor >= 1 ? level::kSizeV1_1 : level::kSizeV1;
+  const uint32_t known_level_flags = level::kFlagHasCrc | (minor >= 1 ? level::kFlagHasError : 0);
+  parse.require(
+      newer ? (record_size >= known_record_size && record_size % 8 == 0) : record_size == known_record_size,
+      "level record size " + std::to_string(record_size) + " is invalid");
   parse.require(level_count >= 1 && level_count <= kMaxLevels, "level count " + std::to_string(level_count) +
                                                                    " is outside 1.." + std::to_string(kMaxLevels));
   parse.require(filter_size <= kMaxFilterSize, "filter size " + std::to_string(filter_size) + " is too large");
@@ -184,7 +189,7 @@ Container Container::open(const std::string& path) {
     li.blob_size = get_u64(r + level::kBlobSize);
     li.blob_crc = get_u32(r + level::kBlobCrc);
     const uint32_t flags = get_u32(r + level::kFlags);
-    parse.require(newer || (flags & ~level::kFlagHasCrc) == 0, name + " has unknown flags");
+    parse.require(newer || (flags & ~known_level_flags) == 0, name + " has unknown flags");
     li.has_blob_crc = (flags & level::kFlagHasCrc) != 0;
     parse.require(li.has_blob_crc || li.blob_crc == 0, name + " has a checksum but its flag is not set");
     li.stats.mean = get_f64(r + level::kMean);
@@ -192,6 +197,18 @@ Container Container::open(const std::string& path) {
     li.stats.rms = get_f64(r + level::kRms);
     li.stats.min = get_f64(r + level::kMin);
     li.stats.max = get_f64(r + level::kMax);
+    if (minor >= 1) {
+      const double error_rms = get_f64(r + level::kErrorRms), error_max = get_f64(r + level::kErrorMax);
+      if (flags & level::kFlagHasError) {
+        parse.require(
+            std::isfinite(error_rms) && std::isfinite(error_max) && error_rms >= 0 && error_max >= 0,
+            name + " error figures are invalid (rms " + std::to_string(error_rms) + ", max " +
+                std::to_string(error_max) + ")");
+        li.error = LevelError{error_rms, error_max};
+      } else {
+        parse.require(error_rms == 0 && error_max == 0, name + " has error figures but its flag is not set");
+      }
+    }
     parse.require_region(li.blob_offset, li.blob_size, sb_size, name + " blob");
     regions.push_back({li.blob_offset, li.blob_size, name + " blob"});
   }

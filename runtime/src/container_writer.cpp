@@ -184,12 +184,12 @@ void ContainerWriter::finish() {
   pad_to_alignment();
 
   const size_t filter_count = info.filter.size();
-  const size_t index_size = info::kSizeV1 + level_count * level::kSizeV1 + filter_count * 8;
+  const size_t index_size = info::kSizeV1 + level_count * level::kSizeV1_1 + filter_count * 8;
   std::vector<uint8_t> index(index_size, 0);
   uint8_t* p = index.data();
   put_u32(p + info::kInfoSize, info::kSizeV1);
   put_u32(p + info::kLevelCount, uint32_t(level_count));
-  put_u32(p + info::kLevelRecordSize, level::kSizeV1);
+  put_u32(p + info::kLevelRecordSize, level::kSizeV1_1);
   put_u32(p + info::kFilterSize, info.filter_size);
   put_u64(p + info::kWidth, info.width);
   put_u64(p + info::kHeight, info.height);
@@ -219,21 +219,26 @@ void ContainerWriter::finish() {
   put_u64(p + info::kMetadataOffset, metadata_offset);
   put_u64(p + info::kMetadataSize, metadata_json_.size());
   for (size_t l = 0; l < level_count; ++l) {
-    uint8_t* r = p + info::kSizeV1 + l * level::kSizeV1;
+    uint8_t* r = p + info::kSizeV1 + l * level::kSizeV1_1;
     const LevelInfo& li = info.levels[l];
     put_u64(r + level::kWidth, li.width);
     put_u64(r + level::kHeight, li.height);
     put_u64(r + level::kBlobOffset, records_[l].offset);
     put_u64(r + level::kBlobSize, records_[l].size);
     put_u32(r + level::kBlobCrc, records_[l].crc);
-    put_u32(r + level::kFlags, records_[l].has_crc ? level::kFlagHasCrc : 0);
+    put_u32(r + level::kFlags,
+            (records_[l].has_crc ? level::kFlagHasCrc : 0) | (li.error ? level::kFlagHasError : 0));
     put_f64(r + level::kMean, li.stats.mean);
     put_f64(r + level::kVariance, li.stats.variance);
     put_f64(r + level::kRms, li.stats.rms);
     put_f64(r + level::kMin, li.stats.min);
     put_f64(r + level::kMax, li.stats.max);
+    if (li.error) {
+      put_f64(r + level::kErrorRms, li.error->rms);
+      put_f64(r + level::kErrorMax, li.error->max_abs);
+    }
   }
-  uint8_t* f = p + info::kSizeV1 + level_count * level::kSizeV1;
+  uint8_t* f = p + info::kSizeV1 + level_count * level::kSizeV1_1;
   for (size_t i = 0; i < filter_count; ++i) put_f64(f + 8 * i, info.filter[i]);
   const uint64_t index_offset = position_;
   write_bytes(index.data(), index.size());

@@ -102,6 +102,7 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info, co
     li.stats.variance = s.residual_rms * s.residual_rms;
     li.stats.min = -double(s.residual_max_abs);
     li.stats.max = double(s.residual_max_abs);
+    li.error = LevelError{s.error_rms, double(s.error_max_abs)};
     info.levels.push_back(li);
   }
   const DownsampleFilter& f = result.header.filter;

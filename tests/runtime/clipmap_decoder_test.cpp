@@ -111,10 +111,18 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   CHECK(exact[2].max_px == 0.0);
   CHECK(exact[0].rms_px > 0.0);  // a coarse level misses the finest detail
 
-  RegionDecoderSource lossy(std::make_shared<const RegionDecoder>(PyramidFile::open(dir.file("lossy.pyr"))), 30.0);
+  auto lossy_file = PyramidFile::open(dir.file("lossy.pyr"));
+  RegionDecoderSource lossy(std::make_shared<const RegionDecoder>(lossy_file), 30.0);
   const auto e = screen_space_error(lossy, original, 0, s_px);
   REQUIRE(e.size() == 3);
   CHECK(e[2].rms_m > 0.0);
+  {  // the file records the finest level's error as the builder measured it: the same figures
+    const LevelInfo& finest_info = lossy_file->info().levels.back();
+    REQUIRE(finest_info.error.has_value());
+    const double metres_per_unit = std::abs(lossy_file->info().vertical_scale);
+    CHECK(finest_info.error->max_abs * metres_per_unit == Approx(e[2].max_m));
+    CHECK(finest_info.error->rms * metres_per_unit == Approx(e[2].rms_m).epsilon(1e-4));
+  }
   {  // at the finest level PL(T^_m) is T^_m itself: the error is the plain sample difference
     const GridSize s = original.level_size(finest);
     std::vector<float> decoded(size_t(s.width * s.height));
@@ -175,6 +183,32 @@ TEST_CASE("clipmap: the screen-space error estimate from the pyramid alone, and 
     }
   }
   CHECK(clipmap_size_for_screen_error(whole, s_px, 640, 480, 60, 1000.0).n == 15);
+
+  // A lossy pyramid: its finest level is not the original any more, and the estimate plus the
+  // finest level's recorded error must bound the true figures on every level.
+  BuildFileOptions bo = build_options(3);
+  bo.target = ErrorTarget::Step;
+  bo.target_metres = 16.0;
+  build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossy.pyr"), bo);
+  auto lossy_file = PyramidFile::open(dir.file("lossy.pyr"));
+  RegionDecoderSource lossy(std::make_shared<const RegionDecoder>(lossy_file), 30.0);
+  const auto lossy_truth = screen_space_error(lossy, original, 0, s_px);
+  auto bound = estimate_screen_space_error(lossy, 0, s_px);
+  const LevelError finest_error = lossy_file->info().levels.back().error.value();
+  const double metres_per_unit = std::abs(lossy_file->info().vertical_scale);
+  REQUIRE(finest_error.max_abs > 0.0);
+  CHECK(bound[2].max_px == 0.0);  // alone, the estimate sees no error at the finest level
+  CHECK(lossy_truth[2].p999_px > 0.0);
+  add_finest_error_bound(bound, finest_error.rms * metres_per_unit, finest_error.max_abs * metres_per_unit,
+                         s_px);
+  for (size_t l = 0; l < 3; ++l) {
+    INFO("level " << l << ": bound " << bound[l].p999_px << " px, true " << lossy_truth[l].p999_px << " px");
+    CHECK(bound[l].rms_px >= lossy_truth[l].rms_px);
+    CHECK(bound[l].p999_px >= lossy_truth[l].p999_px);
+    CHECK(bound[l].max_px >= lossy_truth[l].max_px);
+    CHECK(bound[l].max_m >= lossy_truth[l].max_m);
+  }
+  CHECK(bound[2].max_m == Approx(lossy_truth[2].max_m));  // at the finest level the bound is exact
   const ClipmapSizeChoice unreachable = clipmap_size_for_screen_error(whole, s_px, 640, 480, 60, 1e-9);
   CHECK(!unreachable.met);
   CHECK(unreachable.n == 1023);

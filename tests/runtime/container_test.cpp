@@ -103,6 +103,7 @@ Sample random_sample(std::mt19937_64& rng, uint64_t width, uint64_t height, size
     info.levels[l].height = h;
     info.levels[l].stats = {double(rng() % 100) - 50, double(rng() % 1000) / 7, double(rng() % 100) / 3,
                             -double(rng() % 500), double(rng() % 500)};
+    if (rng() % 3) info.levels[l].error = LevelError{double(rng() % 1000) / 9, double(rng() % 100)};
     w = (w + 1) / 2;
     h = (h + 1) / 2;
   }
@@ -195,6 +196,11 @@ void check_matches(const Container& c, const Sample& s, bool checksums) {
     CHECK(a.levels[l].stats.rms == e.levels[l].stats.rms);
     CHECK(a.levels[l].stats.min == e.levels[l].stats.min);
     CHECK(a.levels[l].stats.max == e.levels[l].stats.max);
+    REQUIRE(a.levels[l].error.has_value() == e.levels[l].error.has_value());
+    if (e.levels[l].error) {
+      CHECK(a.levels[l].error->rms == e.levels[l].error->rms);
+      CHECK(a.levels[l].error->max_abs == e.levels[l].error->max_abs);
+    }
     CHECK(a.levels[l].has_blob_crc == checksums);
     CHECK(c.level_checksum_ok(uint32_t(l)));
   }
@@ -261,6 +267,7 @@ Sample small_sample() {
   s.mask.assign(13 * 6, 1);
   s.mask[3] = s.mask[40] = s.mask[41] = 0;
   s.json = R"({"tool":"test","version":"0.1"})";
+  s.info.levels[2].error = LevelError{0.75, 3.0};
   return s;
 }
 
@@ -272,6 +279,14 @@ FormatErrorCode open_error_code(const std::string& path) {
   }
   FAIL("open succeeded on " << path);
   return FormatErrorCode::Corrupt;
+}
+
+// Writes edited bytes with their checksums made to match again (so only the edit can be noticed),
+// then opens them.
+FormatErrorCode resealed_open_error(const std::string& path, std::vector<uint8_t> bytes) {
+  reseal(bytes);
+  write_bytes(path, bytes);
+  return open_error_code(path);
 }
 
 }  // namespace
@@ -308,7 +323,7 @@ TEST_CASE("container without metadata, mask or filter", "[runtime][container]") 
   ContainerInfo info;
   info.width = 1;
   info.height = 1;
-  info.levels = {LevelInfo{1, 1, {}}};
+  info.levels = {LevelInfo{1, 1, {}, {}}};
   {
     ContainerWriter w(path);
     w.set_info(info);
@@ -507,7 +522,8 @@ TEST_CASE("container version rules", "[runtime][container]") {
         FAIL("version 2 accepted");
       } catch (const FormatError& e) {
         CHECK(e.code() == FormatErrorCode::UnsupportedVersion);
-        CHECK_THAT(e.what(), Catch::Contains(path) && Catch::Contains("version 2.0"));
+        CHECK_THAT(e.what(),
+                   Catch::Contains(path) && Catch::Contains("version 2." + std::to_string(kFormatMinor)));
       }
     }
   }
@@ -520,6 +536,82 @@ TEST_CASE("container version rules", "[runtime][container]") {
     CHECK(c.minor_version() == kFormatMinor + 1);
     CHECK(c.level(2).size == 37);
   }
+}
+
+TEST_CASE("container version 1.0 files (no level error figures) are still read", "[runtime][container]") {
+  // Rewrites a 1.1 file as the 1.0 writer did: 80-byte level records without the error figures
+  // (their flag cleared), minor version 0, sizes and checksums updated. The index is the file's last
+  // region, so it can shrink in place.
+  TempDir dir;
+  const std::string path = dir.file("v10.pyr");
+  std::mt19937_64 rng(5);
+  Sample s = small_sample();
+  for (LevelInfo& li : s.info.levels) li.error = LevelError{1.5, 4.0};
+  write_sample(path, s, rng);
+  const std::vector<uint8_t> v11 = read_bytes(path);
+  constexpr size_t kInfoSize = 264, kRecordSizeField = 8, kRecordV10 = 80, kRecordV11 = 96, kFlags = 36;
+  const size_t index_offset = size_t(get_le(v11, kSbIndexOffset, 8));
+  REQUIRE(get_le(v11, kSbMinor, 2) == 1);
+  REQUIRE(get_le(v11, index_offset + kRecordSizeField, 4) == kRecordV11);
+  const size_t levels = s.info.levels.size();
+  std::vector<uint8_t> v10(v11.begin(), v11.begin() + long(index_offset + kInfoSize));
+  for (size_t l = 0; l < levels; ++l) {
+    const auto record = v11.begin() + long(index_offset + kInfoSize + l * kRecordV11);
+    v10.insert(v10.end(), record, record + long(kRecordV10));
+    CHECK(get_le(v10, v10.size() - kRecordV10 + kFlags, 4) == 3);  // checksum and error figures
+    put_le(v10, v10.size() - kRecordV10 + kFlags, 1, 4);
+  }
+  v10.insert(v10.end(), v11.begin() + long(index_offset + kInfoSize + levels * kRecordV11), v11.end());
+  put_le(v10, index_offset + kRecordSizeField, kRecordV10, 4);
+  put_le(v10, kSbMinor, 0, 2);
+  put_le(v10, kSbIndexSize, v10.size() - index_offset, 8);
+  put_le(v10, kSbFileSize, v10.size(), 8);
+  reseal(v10);
+  write_bytes(path, v10);
+  const Container c = Container::open(path);
+  CHECK(c.minor_version() == 0);
+  for (LevelInfo& li : s.info.levels) li.error.reset();
+  check_matches(c, s, true);
+
+  SECTION("1.0 records cannot claim error figures") {
+    put_le(v10, index_offset + kInfoSize + kFlags, 3, 4);
+    CHECK(resealed_open_error(path, v10) == FormatErrorCode::Corrupt);
+  }
+}
+
+TEST_CASE("container level error figures are validated", "[runtime][container]") {
+  TempDir dir;
+  const std::string path = dir.file("err.pyr");
+  std::mt19937_64 rng(6);
+  Sample s = small_sample();
+  s.info.levels[0].error = LevelError{0.5, 2.0};
+  s.info.levels[1].error.reset();
+  write_sample(path, s, rng);
+  const std::vector<uint8_t> good = read_bytes(path);
+  const size_t records = size_t(get_le(good, kSbIndexOffset, 8)) + 264;
+  constexpr size_t kRecord = 96, kFlags = 36, kErrorRms = 80, kErrorMax = 88;
+  const auto damaged = [&](size_t at, uint64_t value, int bytes) {
+    std::vector<uint8_t> b = good;
+    put_le(b, at, value, bytes);
+    return resealed_open_error(path, b);
+  };
+  CHECK(damaged(records + kErrorMax, std::bit_cast<uint64_t>(std::nan("")), 8) == FormatErrorCode::Corrupt);
+  CHECK(damaged(records + kErrorRms, std::bit_cast<uint64_t>(-1.0), 8) == FormatErrorCode::Corrupt);
+  CHECK(damaged(records + kRecord + kErrorRms, std::bit_cast<uint64_t>(1.0), 8) == FormatErrorCode::Corrupt);
+  CHECK(damaged(records + kRecord + kFlags, 1 | 2 | 4, 4) == FormatErrorCode::Corrupt);  // unknown flag
+  {  // the flag set on zero figures is a valid record: no error at all
+    std::vector<uint8_t> b = good;
+    put_le(b, records + kRecord + kFlags, 1 | 2, 4);
+    reseal(b);
+    write_bytes(path, b);
+    const Container c = Container::open(path);
+    REQUIRE(c.info().levels[1].error.has_value());
+    CHECK(c.info().levels[1].error->max_abs == 0.0);
+    CHECK(c.info().levels[0].error->max_abs == 2.0);
+  }
+  ContainerInfo bad = s.info;
+  bad.levels[2].error = LevelError{std::nan(""), 1};
+  CHECK_THROWS_AS(validate_info(bad), std::invalid_argument);
 }
 
 TEST_CASE("container checksum mismatches are reported", "[runtime][container]") {
@@ -683,8 +775,8 @@ TEST_CASE("container: crafted huge offsets are rejected without overflow", "[run
   write_sample(path, small_sample(), rng);
   const std::vector<uint8_t> good = read_bytes(path);
   const uint64_t index = get_le(good, kSbIndexOffset, 8);
-  // Level records start 264 bytes into the index (80 bytes each, blob offset at +16, size at +24).
-  const size_t record2 = size_t(index) + 264 + 2 * 80;
+  // Level records start 264 bytes into the index (96 bytes each, blob offset at +16, size at +24).
+  const size_t record2 = size_t(index) + 264 + 2 * 96;
   const uint64_t cases[][2] = {{~uint64_t(0) - 7, 16},
                                {8, ~uint64_t(0) - 7},
                                {uint64_t(1) << 32, 37},
@@ -718,7 +810,7 @@ TEST_CASE("container with a blob larger than 4 GiB", "[.][large][runtime][contai
   ContainerInfo info;
   info.width = 2;
   info.height = 2;
-  info.levels = {LevelInfo{1, 1, {}}, LevelInfo{2, 2, {}}};
+  info.levels = {LevelInfo{1, 1, {}, {}}, LevelInfo{2, 2, {}, {}}};
   const size_t chunk = size_t(1) << 26;
   std::vector<uint8_t> data(chunk);
   for (size_t i = 0; i < chunk; ++i) data[i] = uint8_t(i * 31 + 7);
@@ -757,7 +849,7 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(get_le(b, kSbFileSize, 8) == b.size());
   const uint64_t index = get_le(b, kSbIndexOffset, 8), index_size = get_le(b, kSbIndexSize, 8);
   CHECK(index % 8 == 0);
-  CHECK(index_size == 264 + 3 * 80 + 8 * 9);
+  CHECK(index_size == 264 + 3 * 96 + 8 * 9);
   CHECK(index + index_size == b.size());
   CHECK(get_le(b, kSbIndexCrc, 4) == crc32c(b.data() + index, size_t(index_size)));
   CHECK(get_le(b, kSbCrc, 4) == crc32c(b.data(), 60));
@@ -771,13 +863,17 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(get_le(b, index + 224, 8) == 5);
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
-  const uint64_t level2 = index + 264 + 2 * 80;
+  CHECK(get_le(b, kSbMinor, 2) == 1);
+  CHECK(get_le(b, index + 8, 4) == 96);  // level record size
+  const uint64_t level2 = index + 264 + 2 * 96;
   CHECK(get_le(b, level2, 8) == 13);
   CHECK(get_le(b, level2 + 24, 8) == 37);
   const uint64_t blob = get_le(b, level2 + 16, 8);
   CHECK(blob % 8 == 0);
   CHECK(get_le(b, level2 + 32, 4) == crc32c(b.data() + blob, 37));
-  CHECK(get_le(b, level2 + 36, 4) == 1);
-  const uint64_t filter = index + 264 + 3 * 80;
+  CHECK(get_le(b, level2 + 36, 4) == 3);                            // flags: checksum, error figures
+  CHECK(std::bit_cast<double>(get_le(b, level2 + 80, 8)) == 0.75);  // error rms
+  CHECK(std::bit_cast<double>(get_le(b, level2 + 88, 8)) == 3.0);   // error max
+  const uint64_t filter = index + 264 + 3 * 96;
   CHECK(std::bit_cast<double>(get_le(b, filter + 8 * 8, 8)) == 0.125);
 }

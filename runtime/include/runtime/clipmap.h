@@ -176,6 +176,13 @@ std::vector<LevelScreenError> screen_space_error(HeightSource& rendered, const G
 // otherwise over a grid of 256x256 windows spread evenly over it, max_samples in all.
 std::vector<LevelScreenError> estimate_screen_space_error(HeightSource& source, int first_level, double s_px,
                                                           int64_t max_samples = int64_t(1) << 22);
+// Makes such an estimate an upper bound of the figures against the data, given how far the finest
+// level is from the data (rms and max |T^_m - T_m| in metres, e.g. the builder's figures the .pyr
+// records): the true error is the estimate's plus that difference, so on the same samples rms grows
+// by at most finest_rms_m (triangle inequality), p99.9 and max by at most finest_max_m; in pixels
+// each times s_px / g_l.
+void add_finest_error_bound(std::vector<LevelScreenError>& errors, double finest_rms_m, double finest_max_m,
+                            double s_px);
 
 // The smallest clipmap size n = 2^k - 1 (15..1023) whose worst level's p99.9 screen-space error is at
 // most tolerance_px, from `errors` computed at triangle size s_px (errors scale with s, s with 1/n;

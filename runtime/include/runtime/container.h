@@ -64,7 +64,7 @@ using codec::crc32c_portable;
 // Format version written by this library. A reader accepts any minor version of its major
 // version (minor versions only append fields) and rejects other majors.
 inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 0;
+inline constexpr uint16_t kFormatMinor = 1;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
@@ -77,10 +77,18 @@ struct LevelStats {
   double mean = 0, variance = 0, rms = 0, min = 0, max = 0;
 };
 
+// How far the stored level is from what it encodes, T_l - T^_l in quantisation units, as the builder
+// measured it over the whole level (valid samples only at the finest level).
+struct LevelError {
+  double rms = 0;
+  double max_abs = 0;
+};
+
 struct LevelInfo {
   uint64_t width = 0;
   uint64_t height = 0;
   LevelStats stats;
+  std::optional<LevelError> error;  // absent in version 1.0 files
   // Filled in by the reader only.
   uint64_t blob_offset = 0;
   uint64_t blob_size = 0;
