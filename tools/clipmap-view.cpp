@@ -406,10 +406,14 @@ int run(int argc, char** argv) {
     std::fflush(stdout);
   }
 
+  // Every GL call runs under a GlLeakCheckPause: Mesa's process-lifetime allocations would otherwise
+  // fail an ASan build at exit.
+  std::optional<GlLeakCheckPause> gl_setup_pause(std::in_place);
   HeadlessGL gl;
   ClipmapRenderer renderer(n, clipmap.level_count(), width, height);
   std::unique_ptr<ClipmapRenderer> ref_renderer;
   if (ref_clipmap) ref_renderer = std::make_unique<ClipmapRenderer>(n, clipmap.level_count(), width, height);
+  gl_setup_pause.reset();
   std::vector<uint8_t> ref_pixels;
   std::vector<double> psnr;
   if (!common.quiet)
@@ -445,17 +449,24 @@ int run(int argc, char** argv) {
     const auto t0 = Clock::now();
     const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
     const double upd = since(t0);
-    renderer.upload(clipmap);
-    const RenderStats rs = renderer.render(clipmap, cam, ropt);
+    RenderStats rs;
+    {
+      const GlLeakCheckPause gl_pause;
+      renderer.upload(clipmap);
+      rs = renderer.render(clipmap, cam, ropt);
+    }
     const double total = since(t0);
     const RegionStats after = decoder->stats();
     double frame_psnr = std::nan("");
     if (ref_clipmap) {
       ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
-      ref_renderer->upload(*ref_clipmap);
-      ref_renderer->render(*ref_clipmap, cam, ropt);
-      ref_renderer->read_rgba(ref_pixels);
-      renderer.read_rgba(pixels);
+      {
+        const GlLeakCheckPause gl_pause;
+        ref_renderer->upload(*ref_clipmap);
+        ref_renderer->render(*ref_clipmap, cam, ropt);
+        ref_renderer->read_rgba(ref_pixels);
+        renderer.read_rgba(pixels);
+      }
       double sq = 0;
       for (size_t i = 0; i < pixels.size(); ++i)
         if (i % 4 != 3) sq += double((int(pixels[i]) - int(ref_pixels[i])) * (int(pixels[i]) - int(ref_pixels[i])));
@@ -464,7 +475,10 @@ int run(int argc, char** argv) {
       psnr.push_back(frame_psnr);
     }
     if (png_every > 0 && f % png_every == 0) {
-      renderer.read_rgba(pixels);
+      {
+        const GlLeakCheckPause gl_pause;
+        renderer.read_rgba(pixels);
+      }
       char name[64];
       std::snprintf(name, sizeof name, "/frame_%05d.png", f);
       write_png_rgba(out_dir + name, width, height, pixels);

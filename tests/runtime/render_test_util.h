@@ -1,5 +1,5 @@
 // Helpers shared by the rendering tests of the runtime test program: the one headless GL context
-// of the whole program, a LeakSanitizer pause around Mesa, and the crack check of the watertight
+// of the whole program, the LeakSanitizer pause around Mesa, and the crack check of the watertight
 // tests (flat terrain colour on a black background: any background pixel in a frame that lies
 // wholly on the terrain is a crack).
 #pragma once
@@ -10,9 +10,6 @@
 
 #include "runtime/renderer.h"
 
-#if defined(__SANITIZE_ADDRESS__)
-#include <sanitizer/lsan_interface.h>
-#endif
 
 namespace rendertest {
 
@@ -23,23 +20,9 @@ inline terrain::runtime::HeadlessGL& gl() {
   return context;
 }
 
-// LeakSanitizer is paused inside the rendering tests: Mesa (libgio at driver load, llvmpipe's JIT
-// on first draws) keeps a few allocations for the life of the process, which would fail the ASan
-// run at exit. The clipmap code they exercise is leak-checked by the [clipmap] tests.
-struct LeakCheckPause {
-  LeakCheckPause() {
-#if defined(__SANITIZE_ADDRESS__)
-    __lsan_disable();
-#endif
-  }
-  ~LeakCheckPause() {
-#if defined(__SANITIZE_ADDRESS__)
-    __lsan_enable();
-#endif
-  }
-  LeakCheckPause(const LeakCheckPause&) = delete;
-  LeakCheckPause& operator=(const LeakCheckPause&) = delete;
-};
+// LeakSanitizer is paused inside the rendering tests (Mesa's process-lifetime allocations, see
+// GlLeakCheckPause). The clipmap code they exercise is leak-checked by the [clipmap] tests.
+using LeakCheckPause = terrain::runtime::GlLeakCheckPause;
 
 // Render options of the crack check: every terrain pixel white, the background black.
 inline terrain::runtime::RenderOptions crack_check_options() {

@@ -25,6 +25,10 @@
 
 #include "runtime/clipmap.h"
 
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/lsan_interface.h>
+#endif
+
 namespace terrain::runtime {
 
 struct Camera {
@@ -56,6 +60,26 @@ struct RenderStats {
   double seconds_upload = 0;          // texture uploads of the last upload()
   double seconds_render = 0;          // draw + glFinish
   int64_t samples_uploaded = 0;
+};
+
+// Pauses LeakSanitizer on the calling thread while it lives (nothing in builds without ASan). Mesa
+// keeps a few allocations for the life of the process (libgio at driver load, llvmpipe's JIT on the
+// first draws) that LeakSanitizer reports at exit; an ASan build wraps its GL calls (context, renderer
+// construction, upload, render, read-back) in one of these so its exit status speaks of its own leaks.
+class GlLeakCheckPause {
+ public:
+  GlLeakCheckPause() {
+#if defined(__SANITIZE_ADDRESS__)
+    __lsan_disable();
+#endif
+  }
+  ~GlLeakCheckPause() {
+#if defined(__SANITIZE_ADDRESS__)
+    __lsan_enable();
+#endif
+  }
+  GlLeakCheckPause(const GlLeakCheckPause&) = delete;
+  GlLeakCheckPause& operator=(const GlLeakCheckPause&) = delete;
 };
 
 // An EGL display + OpenGL 4.5 core context, current on the calling thread. Throws
