@@ -124,7 +124,7 @@ int format_exit(const FormatError& e) {
 int run_bench(const std::shared_ptr<const PyramidFile>& file, double spacing, ClipmapOptions copt, int reps, bool quiet) {
   copt.budget = int64_t(1) << 40;
   copt.deactivate_by_height = false;
-  const int levels = copt.levels > 0 ? copt.levels : file->level_count();
+  const int levels = clipmap_level_count(copt, file->level_count());
   const GridSize fs = file->level_size(file->level_count() - 1);
   enum Part { kUpsample, kResidual, kFillOther, kZc, kNormals, kBounds, kTotal, kParts };
   std::vector<std::array<std::vector<double>, kParts>> t(static_cast<size_t>(levels));
@@ -305,10 +305,13 @@ int run(int argc, char** argv) {
   HeightSource& heights = synth ? static_cast<HeightSource&>(*synth) : source;
   if (levels > heights.level_count())
     throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the source's " + std::to_string(heights.level_count()));
+  ClipmapOptions copt;
+  copt.levels = levels;
+  copt.budget = budget;
   if (max_screen_error) {
     if (n_given) throw cli::UsageError("give --n or --max-screen-error, not both");
     if (synth) throw cli::UsageError("--max-screen-error cannot be combined with --synth-levels");
-    const int first_level = source.level_count() - (levels > 0 ? levels : source.level_count());
+    const int first_level = source.level_count() - clipmap_level_count(copt, source.level_count());
     const double s_ref = triangle_size_px(width, height, fov, 255);
     const auto t0 = Clock::now();
     std::vector<LevelScreenError> errors = estimate_screen_space_error(source, first_level, s_ref);
@@ -339,10 +342,7 @@ int run(int argc, char** argv) {
                      pyramid.c_str());
     }
   }
-  ClipmapOptions copt;
   copt.n = n;
-  copt.levels = levels;
-  copt.budget = budget;
   if (bench > 0) return run_bench(file, spacing, copt, bench, common.quiet);
   Clipmap clipmap(heights, copt);
   const int finest_level = source.level_count() - 1;

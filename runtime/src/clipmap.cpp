@@ -98,7 +98,7 @@ Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(
     throw std::invalid_argument("clipmap size n must be 2^k - 1 in 15..1023, got " + std::to_string(n_));
   const int source_levels = source.level_count();
   if (source_levels < 1) throw std::invalid_argument("clipmap: the height source has no levels");
-  const int levels = options.levels == 0 ? source_levels : options.levels;
+  const int levels = clipmap_level_count(options, source_levels);
   if (levels < 1 || levels > source_levels || levels > kMaxLevels)
     throw std::invalid_argument("clipmap: level count must be 1.." + std::to_string(source_levels) + " (the source's), got " +
                                 std::to_string(options.levels));

@@ -213,6 +213,12 @@ struct ClipmapOptions {
   bool deactivate_by_height = true;
   double height_factor = 0.4;     // level l off when viewer height above terrain > factor * n * spacing(l)
 };
+// How many levels a clipmap with these options has over a source of source_levels levels (the
+// `levels = 0: all` rule, for callers that size things before constructing one); the Clipmap
+// constructor checks the count.
+inline int clipmap_level_count(const ClipmapOptions& options, int source_levels) {
+  return options.levels == 0 ? source_levels : options.levels;
+}
 
 struct ClipmapUpdateStats {
   // seconds_fill: the height source in all, including what it could not split (a recursive region
