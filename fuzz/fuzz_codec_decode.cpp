@@ -20,8 +20,9 @@ void put_u32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
 }
 
-// Rewrites header, tile and index CRCs in place (stream layout of formats 2 and 3, docs/codec.md: 56-byte header
-// with its CRC at 52, payloads back to back, then per tile a varint size and a CRC, then the index CRC).
+// Rewrites header, tile and index CRCs in place (stream layout of formats 2 and 3, docs/codec.md: 56-byte
+// header with its CRC at 52, payloads back to back, then per tile a varint size and a CRC, then the index
+// CRC).
 void fix_checksums(std::vector<uint8_t>& s) {
   constexpr size_t kHeaderCrcAt = 52;
   if (s.size() < kHeaderCrcAt + 4) return;
@@ -55,7 +56,8 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
   const auto& h = decoder.header();
   if (h.width * h.height > (int64_t(1) << 20)) return;  // keep memory per input small
   std::vector<int32_t> full(size_t(h.width * h.height));
-  if (decoder.decode_region({0, 0, h.width, h.height}, full.data(), h.width, scratch) != codec::Status::Ok) return;
+  if (decoder.decode_region({0, 0, h.width, h.height}, full.data(), h.width, scratch) != codec::Status::Ok)
+    return;
   const codec::Rect r{h.width / 3, h.height / 2, h.width - h.width / 3, h.height - h.height / 2};
   std::vector<int32_t> part(size_t(r.width * r.height));
   if (decoder.decode_region(r, part.data(), r.width, scratch) != codec::Status::Ok) std::abort();
@@ -76,7 +78,9 @@ void round_trip(const uint8_t* data, size_t size, codec::Scratch& scratch) {
   }
   std::vector<uint8_t> stream(codec::encode_bound(w, h, o));
   size_t written = 0;
-  if (codec::encode(img.data(), w, w, h, o, stream.data(), stream.size(), &written, scratch) != codec::Status::Ok) std::abort();
+  if (codec::encode(img.data(), w, w, h, o, stream.data(), stream.size(), &written, scratch) !=
+      codec::Status::Ok)
+    std::abort();
   std::vector<int32_t> out(img.size());
   if (codec::decode(stream.data(), written, out.data(), w, scratch) != codec::Status::Ok) std::abort();
   if (out != img) std::abort();

@@ -22,7 +22,8 @@ namespace fuzz_io {
 inline const std::string& scratch_dir() {
   static const std::string* dir = [] {
     const char* tmp = std::getenv("TMPDIR");
-    auto* d = new std::string(std::string(tmp && *tmp ? tmp : "/tmp") + "/terrain-fuzz-" + std::to_string(getpid()));
+    auto* d = new std::string(std::string(tmp && *tmp ? tmp : "/tmp") + "/terrain-fuzz-" +
+                              std::to_string(getpid()));
     std::filesystem::create_directories(*d);
     std::atexit([] {
       std::error_code ec;
@@ -49,7 +50,8 @@ inline void remove_file(const std::string& name) {
 
 // Reads the grid both whole and streamed in small bands; both must agree on what they accept.
 // Grids over max_samples are only probed (keeps memory per input small).
-inline void read_both_ways(const std::string& path, const terrain::ReadOptions& options, int64_t max_samples = 1 << 20) {
+inline void read_both_ways(const std::string& path, const terrain::ReadOptions& options,
+                           int64_t max_samples = 1 << 20) {
   terrain::GridInfo info;
   try {
     info = terrain::probe(path, options);

@@ -19,12 +19,16 @@
 
 namespace {
 
-uint32_t get_u32(const uint8_t* p) { return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24; }
+uint32_t get_u32(const uint8_t* p) {
+  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
 uint64_t get_u64(const uint8_t* p) { return uint64_t(get_u32(p)) | uint64_t(get_u32(p + 4)) << 32; }
 void put_u32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
 }
-bool in_file(uint64_t offset, uint64_t size, size_t file_size) { return offset <= file_size && size <= file_size - offset; }
+bool in_file(uint64_t offset, uint64_t size, size_t file_size) {
+  return offset <= file_size && size <= file_size - offset;
+}
 
 void fix_checksums(std::vector<uint8_t>& f) {
   using terrain::runtime::crc32c;
@@ -34,9 +38,11 @@ void fix_checksums(std::vector<uint8_t>& f) {
     uint8_t* info = f.data() + index_offset;
     const uint32_t info_size = get_u32(info), levels = get_u32(info + 4), record_size = get_u32(info + 8);
     const uint64_t mask_offset = get_u64(info + 216), mask_size = get_u64(info + 224);
-    if (in_file(mask_offset, mask_size, f.size())) put_u32(info + 240, crc32c(f.data() + mask_offset, mask_size));
+    if (in_file(mask_offset, mask_size, f.size()))
+      put_u32(info + 240, crc32c(f.data() + mask_offset, mask_size));
     const uint64_t meta_offset = get_u64(info + 248), meta_size = get_u64(info + 256);
-    if (in_file(meta_offset, meta_size, f.size())) put_u32(info + 244, crc32c(f.data() + meta_offset, meta_size));
+    if (in_file(meta_offset, meta_size, f.size()))
+      put_u32(info + 244, crc32c(f.data() + meta_offset, meta_size));
     for (uint64_t l = 0; l < std::min<uint32_t>(levels, 64); ++l) {
       const uint64_t r = uint64_t(info_size) + l * record_size;
       if (record_size < 40 || r + 40 > index_size) break;

@@ -1,7 +1,6 @@
 // Locating ../shared/data for tests. In CI (CI=true) missing data is a failure, elsewhere a skip.
 #pragma once
 #include <catch2/catch.hpp>
-
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -19,7 +18,8 @@ inline bool in_ci() {
   return ci && std::string(ci) == "true";
 }
 
-// Returns the path of a shared data file; FAILs in CI when it is missing, otherwise returns "" (callers SKIP).
+// Returns the path of a shared data file; FAILs in CI when it is missing, otherwise returns "" (callers
+// SKIP).
 inline std::string require(const std::string& name) {
   auto p = shared_dir() / name;
   if (std::filesystem::exists(p)) return p.string();

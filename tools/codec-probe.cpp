@@ -98,7 +98,8 @@ int main(int argc, char** argv) {
     bool integral = true;
     for (double v : map.values) integral = integral && v == std::floor(v);
     std::vector<int32_t> src(map.values.size());
-    for (size_t i = 0; i < src.size(); ++i) src[i] = int32_t(std::lround(integral ? map.values[i] : map.values[i] * 10));
+    for (size_t i = 0; i < src.size(); ++i)
+      src[i] = int32_t(std::lround(integral ? map.values[i] : map.values[i] * 10));
     const int64_t w = map.width(), h = map.height();
     const double n = double(src.size());
     std::vector<int32_t> out(src.size());
@@ -120,7 +121,8 @@ int main(int argc, char** argv) {
       double enc = 1e30, dec = 1e30;
       for (int r = 0; r < repeat; ++r) {
         const auto t0 = std::chrono::steady_clock::now();
-        const codec::Status s = codec::encode(src.data(), w, w, h, o, stream.data(), stream.size(), &written, scratch);
+        const codec::Status s =
+            codec::encode(src.data(), w, w, h, o, stream.data(), stream.size(), &written, scratch);
         enc = std::min(enc, seconds_since(t0));
         if (s != codec::Status::Ok) {
           std::fprintf(stderr, "codec-probe: %s: encode failed: %s\n", path.c_str(), codec::status_name(s));

@@ -30,16 +30,19 @@ int run(int argc, char** argv) {
   int64_t width = 0, height = 0;
   cli::CommonFlags common;
   terrain::ReadOptions read_options;
-  cli::ArgParser parser("mirror-tile", "TILE -o OUT.raw --out-width W --out-height H [options]",
-                        "Mirror-tiles TILE (reflected at every tile edge, so the result is seamless) into a\n"
-                        "W x H little-endian int16 raw grid OUT.raw with an OUT.raw.json sidecar. Rows are\n"
-                        "streamed to disk; memory is the tile plus one output row. Voids stay voids (-32768).");
+  cli::ArgParser parser(
+      "mirror-tile", "TILE -o OUT.raw --out-width W --out-height H [options]",
+      "Mirror-tiles TILE (reflected at every tile edge, so the result is seamless) into a\n"
+      "W x H little-endian int16 raw grid OUT.raw with an OUT.raw.json sidecar. Rows are\n"
+      "streamed to disk; memory is the tile plus one output row. Voids stay voids (-32768).");
   parser.positional("TILE", "heightmap tile to repeat (any format terrain-info reads)", &input);
-  parser.option("-o,--output", "OUT", "raw grid to write (required)", [&](const std::string& v) { output = v; });
+  parser.option("-o,--output", "OUT", "raw grid to write (required)",
+                [&](const std::string& v) { output = v; });
   parser.option("--out-width", "W", "output width in samples",
                 [&](const std::string& v) { width = cli::parse_int("--out-width", v, 1, int64_t(1) << 31); });
-  parser.option("--out-height", "H", "output height in samples",
-                [&](const std::string& v) { height = cli::parse_int("--out-height", v, 1, int64_t(1) << 31); });
+  parser.option("--out-height", "H", "output height in samples", [&](const std::string& v) {
+    height = cli::parse_int("--out-height", v, 1, int64_t(1) << 31);
+  });
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
   if (auto status = parser.parse(argc, argv)) return *status;
@@ -74,28 +77,34 @@ int run(int argc, char** argv) {
       for (int64_t x = 0; x < width; ++x) row[size_t(x)] = src[reflect(x, tw)];  // little-endian host
       write_all(f, row.data(), row.size() * sizeof(int16_t), output);
     }
-    if (std::fclose(f) != 0) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ": cannot close");
+    if (std::fclose(f) != 0)
+      throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ": cannot close");
   } catch (...) {
     std::remove(temp.c_str());
     throw;
   }
   std::FILE* js = std::fopen((output + ".json").c_str(), "wb");
   if (!js) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ".json: cannot create");
-  std::fprintf(js,
-               "{\n  \"width\": %lld,\n  \"height\": %lld,\n  \"type\": \"int16\",\n  \"byte_order\": \"little\",\n"
-               "  \"spacing_x\": %.17g,\n  \"spacing_y\": %.17g,\n  \"horizontal_units\": \"%s\",\n"
-               "  \"vertical_scale\": %.17g,\n  \"vertical_offset\": %.17g,\n  \"nodata\": %s\n}\n",
-               (long long)width, (long long)height, tile.info.spacing_x, tile.info.spacing_y,
-               tile.info.horizontal_units.c_str(), tile.info.vertical_scale, tile.info.vertical_offset,
-               has_voids ? "-32768" : "null");
-  if (std::fclose(js) != 0) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ".json: cannot write");
+  std::fprintf(
+      js,
+      "{\n  \"width\": %lld,\n  \"height\": %lld,\n  \"type\": \"int16\",\n  \"byte_order\": \"little\",\n"
+      "  \"spacing_x\": %.17g,\n  \"spacing_y\": %.17g,\n  \"horizontal_units\": \"%s\",\n"
+      "  \"vertical_scale\": %.17g,\n  \"vertical_offset\": %.17g,\n  \"nodata\": %s\n}\n",
+      (long long)width, (long long)height, tile.info.spacing_x, tile.info.spacing_y,
+      tile.info.horizontal_units.c_str(), tile.info.vertical_scale, tile.info.vertical_offset,
+      has_voids ? "-32768" : "null");
+  if (std::fclose(js) != 0)
+    throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ".json: cannot write");
   std::filesystem::rename(temp, output);
   if (!common.quiet)
     std::cerr << "mirror-tile: wrote " << output << " (" << width << "x" << height << " int16, "
-              << double(width) * double(height) * 2 / (1 << 20) << " MiB) from " << tw << "x" << th << " tile\n";
+              << double(width) * double(height) * 2 / (1 << 20) << " MiB) from " << tw << "x" << th
+              << " tile\n";
   return 0;
 }
 
 }  // namespace
 
-int main(int argc, char** argv) { return cli::run_tool("mirror-tile", [&] { return run(argc, argv); }); }
+int main(int argc, char** argv) {
+  return cli::run_tool("mirror-tile", [&] { return run(argc, argv); });
+}

@@ -1,7 +1,6 @@
 // pyramid-bench: times the streamed pyramid build (filter fit, D cascade, U prediction, closed-loop
 // residuals with the uniform quantiser; no entropy coding) on a heightmap file.
 #include <sys/resource.h>
-
 #include <unistd.h>
 
 #include <chrono>
@@ -30,12 +29,14 @@ int run(int argc, char** argv) {
   o.temp_dir = "/tmp";
   o.level_ordered_output = false;  // the counting sink takes bands in any order: no temp files
   int64_t step = 4, band_rows = 64;
-  cli::ArgParser parser("pyramid-bench", "INPUT [--step S] [--levels N] [--threads T] [--temp-dir DIR] [options]",
-                        "Builds the residual pyramid of INPUT streamed (one pass over the input, no level spilled\n"
-                        "to disk), with the uniform quantiser as residual coder and a sink that only counts bytes,\n"
-                        "and reports throughput (finest samples per second of wall time), times, peak RSS, rows\n"
-                        "held per level and level statistics. Nothing is written.");
-  parser.positional("INPUT", "heightmap to read (any format terrain-info reads; raw needs its .json)", &input);
+  cli::ArgParser parser(
+      "pyramid-bench", "INPUT [--step S] [--levels N] [--threads T] [--temp-dir DIR] [options]",
+      "Builds the residual pyramid of INPUT streamed (one pass over the input, no level spilled\n"
+      "to disk), with the uniform quantiser as residual coder and a sink that only counts bytes,\n"
+      "and reports throughput (finest samples per second of wall time), times, peak RSS, rows\n"
+      "held per level and level statistics. Nothing is written.");
+  parser.positional("INPUT", "heightmap to read (any format terrain-info reads; raw needs its .json)",
+                    &input);
   parser.option("--step", "S", "quantiser step in level units (default 4)",
                 [&](const std::string& v) { step = cli::parse_int("--step", v, 1, 1 << 20); });
   parser.option("--levels", "N", "number of levels (default: coarsest about 128 samples)",
@@ -78,7 +79,9 @@ int run(int argc, char** argv) {
     for (auto& l : r.levels) {
       j.begin_object();
       j.field("width", l.size.width).field("height", l.size.height).field("residual_rms", l.residual_rms);
-      j.field("residual_max", l.residual_max_abs).field("error_rms", l.error_rms).field("error_max", l.error_max_abs);
+      j.field("residual_max", l.residual_max_abs)
+          .field("error_rms", l.error_rms)
+          .field("error_max", l.error_max_abs);
       j.field("bytes", int64_t(l.bytes));
       j.end_object();
     }
@@ -98,8 +101,9 @@ int run(int argc, char** argv) {
       const auto& s = r.levels[l];
       char line[160];
       std::snprintf(line, sizeof line, "  %-5zu  %6lldx%-6lld  %12.3f  %6lld  %9.3f  %4lld  %8.2f\n", l,
-                    (long long)s.size.width, (long long)s.size.height, s.residual_rms, (long long)s.residual_max_abs,
-                    s.error_rms, (long long)s.error_max_abs, double(s.bytes) / (1 << 20));
+                    (long long)s.size.width, (long long)s.size.height, s.residual_rms,
+                    (long long)s.residual_max_abs, s.error_rms, (long long)s.error_max_abs,
+                    double(s.bytes) / (1 << 20));
       std::cout << line;
     }
   }
@@ -108,4 +112,6 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) { return cli::run_tool("pyramid-bench", [&] { return run(argc, argv); }); }
+int main(int argc, char** argv) {
+  return cli::run_tool("pyramid-bench", [&] { return run(argc, argv); });
+}

@@ -32,20 +32,26 @@ int run(int argc, char** argv) {
       "per-terrain optimal 11x11 downsampling filter, and codes the closed-loop residuals of every level\n"
       "with one absolute quantisation step (libcodec). Memory stays bounded for any input height.\n"
       "Error targets, in metres at the finest level: --rms M (the step is calibrated on a window of the\n"
-      "input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; integer input).\n"
+      "input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; integer "
+      "input).\n"
       "The output is written to OUT.pyr.tmp.<pid> and renamed when complete.");
   parser.positional("INPUT", "heightmap to read", &input);
-  parser.option("-o,--output", "OUT", "pyramid file to write (required)", [&](const std::string& v) { output = v; });
-  parser.option("--rms", "M", "target rms error in metres", [&](const std::string& v) { set_target(ErrorTarget::Rms, "--rms", v); });
+  parser.option("-o,--output", "OUT", "pyramid file to write (required)",
+                [&](const std::string& v) { output = v; });
+  parser.option("--rms", "M", "target rms error in metres",
+                [&](const std::string& v) { set_target(ErrorTarget::Rms, "--rms", v); });
   parser.option("--max-error", "M", "guaranteed max |error| in metres",
                 [&](const std::string& v) { set_target(ErrorTarget::MaxError, "--max-error", v); });
-  parser.option("--step", "S", "quantiser step in metres", [&](const std::string& v) { set_target(ErrorTarget::Step, "--step", v); });
+  parser.option("--step", "S", "quantiser step in metres",
+                [&](const std::string& v) { set_target(ErrorTarget::Step, "--step", v); });
   bool lossless = false;
   parser.flag("--lossless", "exact reconstruction (integer input, or float at --quantum)", &lossless);
-  parser.option("--quantum", "Q", "level unit in metres for float input (default 0.01)", [&](const std::string& v) {
-    o.quantum_metres = cli::parse_double("--quantum", v);
-    if (!(o.quantum_metres > 0) || !std::isfinite(o.quantum_metres)) throw cli::UsageError("--quantum must be positive");
-  });
+  parser.option("--quantum", "Q", "level unit in metres for float input (default 0.01)",
+                [&](const std::string& v) {
+                  o.quantum_metres = cli::parse_double("--quantum", v);
+                  if (!(o.quantum_metres > 0) || !std::isfinite(o.quantum_metres))
+                    throw cli::UsageError("--quantum must be positive");
+                });
   parser.option("--levels", "N", "number of levels (default: until the coarsest is about 128 samples)",
                 [&](const std::string& v) { o.levels = int(cli::parse_int("--levels", v, 1, 40)); });
   parser.option("--tile", "T", "codec tile side, multiple of 16 in [16, 1024] (default 32)",
@@ -65,9 +71,13 @@ int run(int argc, char** argv) {
   if (targets > 1) throw cli::UsageError("give at most one of --rms, --max-error, --step, --lossless");
 
   std::ostringstream opts;
-  opts << "{\"target\":\"" << (o.target == ErrorTarget::Rms ? "rms" : o.target == ErrorTarget::MaxError ? "max-error"
-                                : o.target == ErrorTarget::Step ? "step" : "lossless")
-       << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size << "}";
+  opts << "{\"target\":\""
+       << (o.target == ErrorTarget::Rms        ? "rms"
+           : o.target == ErrorTarget::MaxError ? "max-error"
+           : o.target == ErrorTarget::Step     ? "step"
+                                               : "lossless")
+       << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
+       << "}";
 
   std::unique_ptr<cli::Progress> bar;
   std::string phase;
@@ -95,7 +105,9 @@ int run(int argc, char** argv) {
     if (common.verbose)
       for (const auto& line : r.calibration_log) std::cerr << "pyramid-build: calibration: " << line << "\n";
     for (const auto& line : r.build.log) std::cerr << "pyramid-build: " << line << "\n";
-    std::fprintf(stderr, "pyramid-build: %s: %zu levels, step %.4g m, %llu bytes = %.4f bits/sample, finest rms %.4g m, max %.4g m, %.1f Msamples/s\n",
+    std::fprintf(stderr,
+                 "pyramid-build: %s: %zu levels, step %.4g m, %llu bytes = %.4f bits/sample, finest rms %.4g "
+                 "m, max %.4g m, %.1f Msamples/s\n",
                  output.c_str(), lv.size(), r.step_units * mpu, (unsigned long long)r.file_bytes, bits,
                  lv.back().error_rms * mpu, double(lv.back().error_max_abs) * mpu,
                  double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
@@ -104,7 +116,9 @@ int run(int argc, char** argv) {
     std::ofstream file;
     if (json_path != "-") {
       file.open(json_path);
-      if (!file) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
+      if (!file)
+        throw terrain::IoError(terrain::IoErrorCode::WriteFailed,
+                               json_path + ": cannot write the JSON report");
     }
     std::ostream& os = json_path == "-" ? std::cout : file;
     cli::JsonWriter j(os);
@@ -112,8 +126,10 @@ int run(int argc, char** argv) {
     j.field("input", input).field("output", output).field("bytes", int64_t(r.file_bytes));
     j.field("finest_samples", r.finest_samples).field("bits_per_sample", bits);
     j.field("metres_per_unit", mpu).field("step_metres", r.step_units * mpu);
-    j.field("max_error_bound_metres", o.target == ErrorTarget::MaxError ? double(r.max_error_units) * mpu : -1.0);
-    j.field("filter", r.build.filter_report.summary()).field("filter_fallback", r.build.filter_report.fallback);
+    j.field("max_error_bound_metres",
+            o.target == ErrorTarget::MaxError ? double(r.max_error_units) * mpu : -1.0);
+    j.field("filter", r.build.filter_report.summary())
+        .field("filter_fallback", r.build.filter_report.fallback);
     j.field("seconds_calibrate", r.seconds_calibrate).field("seconds_build", r.seconds_build);
     j.field("build_msamples_per_s", double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
     j.field("voids", r.build.void_count);

@@ -16,15 +16,15 @@
 
 #include <algorithm>
 #include <chrono>
-#include <ctime>
-#include <map>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -100,7 +100,8 @@ double parse_number(const std::string& option, const std::string& v, double lo, 
   char* end = nullptr;
   const double x = std::strtod(v.c_str(), &end);
   if (end == v.c_str() || *end || !(x >= lo && x <= hi))
-    throw UsageError{option + " must be a number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" + v + "'"};
+    throw UsageError{option + " must be a number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                     "], got '" + v + "'"};
   return x;
 }
 
@@ -201,7 +202,9 @@ peers::Image16 to_image16(const terrain::Heightmap& map, std::string* note) {
     first = false;
   }
   int k = 0;
-  while (std::round(hi / (quantum * std::ldexp(1.0, k))) - std::round(lo / (quantum * std::ldexp(1.0, k))) > 65535) ++k;
+  while (std::round(hi / (quantum * std::ldexp(1.0, k))) - std::round(lo / (quantum * std::ldexp(1.0, k))) >
+         65535)
+    ++k;
   img.unit_m = quantum * std::ldexp(1.0, k);
   const double lo_u = std::round(lo / img.unit_m), hi_u = std::round(hi / img.unit_m);
   const double offset = (lo_u >= -32768 && hi_u <= 32767) ? 0.0 : std::floor((lo_u + hi_u) / 2);
@@ -232,12 +235,12 @@ std::optional<double> known_vertical_scale(const std::string& path) {
 
 struct Row {
   std::string file, codec, setting;
-  std::string target_kind;     // pyramid rows: "lossless", "rms", "max"; peers: ""
+  std::string target_kind;  // pyramid rows: "lossless", "rms", "max"; peers: ""
   double target_m = 0;
   double unit_m = 1;
   int64_t width = 0, height = 0;
   peers::Result result;
-  double bound = -1;           // declared max error in sample units (peers) or metres / unit_m (pyramid)
+  double bound = -1;  // declared max error in sample units (peers) or metres / unit_m (pyramid)
   // Pyramid rows only: cold region decodes (fresh cache per window) and the build's thread count.
   double region_seconds = 0, region_cpu_seconds = 0;
   int64_t region_samples = 0;
@@ -262,14 +265,15 @@ void write_csv_row(std::ostream& os, const Row& r) {
   const double n = double(r.width * r.height);
   const peers::Result& x = r.result;
   char buf[800];
-  std::snprintf(buf, sizeof buf,
-                "%zu,%.5f,%.5f,%.4f,%.4f,%.3f,%.6f,%.6f,%.6f,%.6f,%.2f,%.2f,%.2f,%.2f,%.2f,%.2f,%d,%d,%d,%.4g", x.bytes,
-                x.bits_per_sample, x.error.rms * r.unit_m, x.error.max_abs * r.unit_m, x.error.p999_abs * r.unit_m,
-                x.error.psnr_db, x.encode_seconds, x.decode_seconds,
-                x.encode_cpu_seconds, x.decode_cpu_seconds, msps(n, x.encode_seconds), msps(n, x.decode_seconds),
-                msps(n, x.encode_cpu_seconds), msps(n, x.decode_cpu_seconds),
-                msps(double(r.region_samples), r.region_seconds), msps(double(r.region_samples), r.region_cpu_seconds),
-                x.encode_reps, x.decode_reps, r.threads, r.bound < 0 ? -1.0 : r.bound * r.unit_m);
+  std::snprintf(
+      buf, sizeof buf,
+      "%zu,%.5f,%.5f,%.4f,%.4f,%.3f,%.6f,%.6f,%.6f,%.6f,%.2f,%.2f,%.2f,%.2f,%.2f,%.2f,%d,%d,%d,%.4g", x.bytes,
+      x.bits_per_sample, x.error.rms * r.unit_m, x.error.max_abs * r.unit_m, x.error.p999_abs * r.unit_m,
+      x.error.psnr_db, x.encode_seconds, x.decode_seconds, x.encode_cpu_seconds, x.decode_cpu_seconds,
+      msps(n, x.encode_seconds), msps(n, x.decode_seconds), msps(n, x.encode_cpu_seconds),
+      msps(n, x.decode_cpu_seconds), msps(double(r.region_samples), r.region_seconds),
+      msps(double(r.region_samples), r.region_cpu_seconds), x.encode_reps, x.decode_reps, r.threads,
+      r.bound < 0 ? -1.0 : r.bound * r.unit_m);
   os << r.file << ',' << r.codec << ",\"" << r.setting << "\"," << r.target_kind << ',' << r.target_m << ','
      << r.unit_m << ',' << r.width << ',' << r.height << ',' << buf << ",\"" << r.error << "\"\n";
 }
@@ -295,10 +299,10 @@ void write_json(std::ostream& os, const std::vector<Row>& rows) {
        << ", \"setting\": " << json_string(r.setting) << ", \"unit_m\": " << r.unit_m
        << ", \"width\": " << r.width << ", \"height\": " << r.height << ", \"bytes\": " << x.bytes
        << ", \"bits_per_sample\": " << x.bits_per_sample << ", \"rms_m\": " << x.error.rms * r.unit_m
-       << ", \"max_abs_m\": " << x.error.max_abs * r.unit_m << ", \"p999_abs_m\": " << x.error.p999_abs * r.unit_m
-       << ", \"psnr_db\": " << psnr << ", \"encode_s\": " << x.encode_seconds
-       << ", \"decode_s\": " << x.decode_seconds << ", \"encode_cpu_s\": " << x.encode_cpu_seconds
-       << ", \"decode_cpu_s\": " << x.decode_cpu_seconds
+       << ", \"max_abs_m\": " << x.error.max_abs * r.unit_m
+       << ", \"p999_abs_m\": " << x.error.p999_abs * r.unit_m << ", \"psnr_db\": " << psnr
+       << ", \"encode_s\": " << x.encode_seconds << ", \"decode_s\": " << x.decode_seconds
+       << ", \"encode_cpu_s\": " << x.encode_cpu_seconds << ", \"decode_cpu_s\": " << x.decode_cpu_seconds
        << ", \"region_cpu_msamples_s\": " << msps(double(r.region_samples), r.region_cpu_seconds)
        << ", \"encode_cpu_msamples_s\": " << msps(n, x.encode_cpu_seconds)
        << ", \"error\": " << json_string(r.error) << "}" << (i + 1 < rows.size() ? ",\n" : "\n");
@@ -342,7 +346,8 @@ Curve curve_of(const std::vector<Row>& rows, const std::string& file, const std:
   // ("step=3" and "maxerr=2" of libcodec are two sweeps; "9/7 1.50bps" is openjpeg's 9/7 sweep).
   std::vector<std::string> family_names;
   const auto family_of = [&](const Row& r) {
-    const std::string key = !r.target_kind.empty() ? r.target_kind : r.setting.substr(0, r.setting.find_first_of("= "));
+    const std::string key =
+        !r.target_kind.empty() ? r.target_kind : r.setting.substr(0, r.setting.find_first_of("= "));
     auto it = std::find(family_names.begin(), family_names.end(), key);
     if (it == family_names.end()) it = family_names.insert(family_names.end(), key);
     return int(it - family_names.begin());
@@ -360,9 +365,11 @@ Curve curve_of(const std::vector<Row>& rows, const std::string& file, const std:
     }
     if (x.encode_cpu_seconds > 0) c.encode_msps.push_back(msps(n, x.encode_cpu_seconds));
     if (x.decode_cpu_seconds > 0) c.decode_msps.push_back(msps(n, x.decode_cpu_seconds));
-    if (r.region_cpu_seconds > 0) c.region_msps.push_back(msps(double(r.region_samples), r.region_cpu_seconds));
+    if (r.region_cpu_seconds > 0)
+      c.region_msps.push_back(msps(double(r.region_samples), r.region_cpu_seconds));
     if (codec == kPyramid && x.encode_seconds > 0) c.build_msps.push_back(msps(n, x.encode_seconds));
-    if (codec == kPyramid && x.encode_cpu_seconds > 0) c.build_cpu_msps.push_back(msps(n, x.encode_cpu_seconds));
+    if (codec == kPyramid && x.encode_cpu_seconds > 0)
+      c.build_cpu_msps.push_back(msps(n, x.encode_cpu_seconds));
   }
   return c;
 }
@@ -380,7 +387,8 @@ const double kMaxTargets[] = {1, 2, 5};
 // Markdown summary: one row per (file, codec) with interpolated rates and the speed range.
 void write_summary(std::ostream& os, const std::vector<Row>& rows, const std::vector<std::string>& file_order,
                    const std::vector<std::string>& codec_order) {
-  os << "| DEM | codec | lossless | @rms 0.5 m | @rms 1 m | @rms 2 m | @rms 4 m | @max 1 m | @max 2 m | @max 5 m "
+  os << "| DEM | codec | lossless | @rms 0.5 m | @rms 1 m | @rms 2 m | @rms 4 m | @max 1 m | @max 2 m | @max "
+        "5 m "
         "| encode Ms/s (CPU) | decode Ms/s (CPU) |\n";
   os << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const std::string& file : file_order) {
@@ -403,12 +411,14 @@ bool is_external_peer(const std::string& codec) { return codec != kPyramid && !i
 
 // Issue 4's goals for libcodec alone: bits against JPEG XR at equal rms, for each tile size run, and
 // encode/decode speed at the step-sweep point nearest 2 bits/sample.
-void write_codec_goals(std::ostream& os, const std::vector<Row>& rows, const std::vector<std::string>& file_order,
+void write_codec_goals(std::ostream& os, const std::vector<Row>& rows,
+                       const std::vector<std::string>& file_order,
                        const std::vector<std::string>& codec_order) {
   std::vector<std::string> ours;
   for (const std::string& c : codec_order)
     if (is_ours(c)) ours.push_back(c);
-  if (ours.empty() || std::find(codec_order.begin(), codec_order.end(), "jpegxr") == codec_order.end()) return;
+  if (ours.empty() || std::find(codec_order.begin(), codec_order.end(), "jpegxr") == codec_order.end())
+    return;
   os << "## libcodec against JPEG XR (issue 4)\n\n"
      << "Goals: at equal rms, fewer bits than JPEG XR (jxrlib) on every tile; decode ≥ 300 and encode ≥ 60 "
         "Msamples/s per core at about 2 bits/sample. Cell: libcodec bits/sample ÷ JPEG XR bits/sample at "
@@ -473,14 +483,16 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
                   const std::vector<std::string>& codec_order, const Options& opt,
                   const std::vector<std::string>& peer_configs) {
   os << "# Benchmarks: run time against error\n\n"
-     << "This file is generated by `scripts/bench` (program `tools/terrain-bench.cpp`); do not edit it by hand.\n\n";
+     << "This file is generated by `scripts/bench` (program `tools/terrain-bench.cpp`); do not edit it by "
+        "hand.\n\n";
   if (!opt.provenance.empty()) os << opt.provenance << "\n\n";
   os << "Reproduce:\n\n```\n" << (opt.command.empty() ? "scripts/bench" : opt.command) << "\n```\n\n";
   os << "## Method\n\n"
      << "* **pyramid** = this project end to end: `build_pyramid_file` (what `pyramid-build` runs: streamed "
         "read, optimal D filter, closed-loop residuals, libcodec, container) at each `--rms` / `--max-error` "
         "target and `--lossless`, "
-     << (opt.threads ? std::to_string(opt.threads) + " build thread(s)" : std::string("all cores for the build"))
+     << (opt.threads ? std::to_string(opt.threads) + " build thread(s)"
+                     : std::string("all cores for the build"))
      << "; then `RegionDecoder` reconstructs the finest level (one thread). "
         "**bits/sample = whole pyramid file bytes × 8 / finest-level samples** (all levels, container, "
         "band tables, mask and metadata included). Errors are measured on the finest level against the "
@@ -489,14 +501,16 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
         "file I/O), best of N repetitions. `libcodec` is our residual coder alone on the single finest "
         "level (no pyramid); it is not counted as a peer.\n"
      << "* Bits/sample at a target error is interpolated on the lower envelope of (error, bits/sample) "
-        "points of each of a codec's sweeps (one per mode: libcodec's step and max-error sweeps, the pyramid's "
+        "points of each of a codec's sweeps (one per mode: libcodec's step and max-error sweeps, the "
+        "pyramid's "
         "rms and max-error targets), linear in log(bits) against log(error), and the cheapest sweep counts; "
         "a target below a sweep's smallest non-zero error takes the codec's lossless rate when it has one "
         "(lossless meets every target); '—' = no sweep reaches that error. The rms columns use the measured "
         "rms of every sweep, the max-error columns the measured max |error|.\n"
      << "* Speeds are million finest samples per second of process CPU time (the machine is shared); "
         "build speed is the whole `build_pyramid_file` call, file read to file renamed (rms targets include "
-        "the step calibration), as wall clock and per CPU-second of all build threads. Region decode = 256×256 windows of the "
+        "the step calibration), as wall clock and per CPU-second of all build threads. Region decode = "
+        "256×256 windows of the "
         "finest level at scattered positions, each with an empty cache (cold).\n\n";
 
   // Table 1: pyramid vs best peer.
@@ -528,13 +542,16 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
       ratios[column].push_back(mine / best);
       return cell(mine) + " (" + fmt("%.2f", mine / best) + " " + best_name + ")";
     };
-    os << "| " << file << " | " << entry("lossless", ours.lossless, [](const Curve& c) { return c.lossless; });
+    os << "| " << file << " | "
+       << entry("lossless", ours.lossless, [](const Curve& c) { return c.lossless; });
     for (double t : kRmsTargets)
-      os << " | " << entry("rms" + fmt("%g", t), peers::bits_at_error(ours.by_rms, t),
-                           [t](const Curve& c) { return peers::bits_at_error(c.by_rms, t); });
+      os << " | " << entry("rms" + fmt("%g", t), peers::bits_at_error(ours.by_rms, t), [t](const Curve& c) {
+        return peers::bits_at_error(c.by_rms, t);
+      });
     for (double t : kMaxTargets)
-      os << " | " << entry("max" + fmt("%g", t), peers::bits_at_error(ours.by_max, t),
-                           [t](const Curve& c) { return peers::bits_at_error(c.by_max, t); });
+      os << " | " << entry("max" + fmt("%g", t), peers::bits_at_error(ours.by_max, t), [t](const Curve& c) {
+        return peers::bits_at_error(c.by_max, t);
+      });
     os << " |\n";
   }
   os << "| **geometric mean of the ratios** | " << cell(geomean(ratios["lossless"]));
@@ -569,11 +586,13 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
     const double dr = ratio(dec, oj);
     g[4].push_back(dr);
     os << " | " << (dec < 0 ? "—" : fmt("%.1f", dec)) << " | " << (reg < 0 ? "—" : fmt("%.1f", reg)) << " | "
-       << (oj < 0 ? "—" : fmt("%.1f", oj)) << " | " << (dr < 0 ? "—" : fmt("%.2f", dr) + (dr >= 2 ? " ✓" : " ✗"))
-       << " | " << speed_range(ours.build_msps) << " | " << speed_range(ours.build_cpu_msps) << " |\n";
+       << (oj < 0 ? "—" : fmt("%.1f", oj)) << " | "
+       << (dr < 0 ? "—" : fmt("%.2f", dr) + (dr >= 2 ? " ✓" : " ✗")) << " | " << speed_range(ours.build_msps)
+       << " | " << speed_range(ours.build_cpu_msps) << " |\n";
   }
   os << "| **geometric mean** | " << cell(geomean(g[0])) << " | " << cell(geomean(g[1])) << " | "
-     << cell(geomean(g[2])) << " | " << cell(geomean(g[3])) << " | | | | " << cell(geomean(g[4])) << " | | |\n\n";
+     << cell(geomean(g[2])) << " | " << cell(geomean(g[3])) << " | | | | " << cell(geomean(g[4]))
+     << " | | |\n\n";
 
   write_codec_goals(os, rows, file_order, codec_order);
 
@@ -582,7 +601,8 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
   write_summary(os, rows, file_order, codec_order);
   os << "\n## Plots\n\n"
      << "![bits/sample against rms](" << opt.plot_dir << "/rms.png)\n\n![bits/sample against max error]("
-     << opt.plot_dir << "/max.png)\n\n![decode speed against bits/sample](" << opt.plot_dir << "/speed.png)\n\n"
+     << opt.plot_dir << "/max.png)\n\n![decode speed against bits/sample](" << opt.plot_dir
+     << "/speed.png)\n\n"
      << "Data: [" << opt.plot_dir << "/bench.csv](" << opt.plot_dir << "/bench.csv).\n\n";
   os << "## Codec configurations\n\n";
   for (const std::string& c : peer_configs) os << "* " << c << "\n";
@@ -633,13 +653,17 @@ int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
       std::string verdict = "ok";
       try {
         const peers::Result r = peers::measure(*peer, img, s, 0, 1);
-        if (r.bytes == 0) verdict = "FAIL: empty stream";
-        else if (s.max_error_bound >= 0 && r.error.max_abs > s.max_error_bound) verdict = "FAIL: max error above bound";
-        else if (s.max_error_bound < 0 && !(r.error.rms <= 0.25 * range)) verdict = "FAIL: rms above a quarter of the range";
+        if (r.bytes == 0)
+          verdict = "FAIL: empty stream";
+        else if (s.max_error_bound >= 0 && r.error.max_abs > s.max_error_bound)
+          verdict = "FAIL: max error above bound";
+        else if (s.max_error_bound < 0 && !(r.error.rms <= 0.25 * range))
+          verdict = "FAIL: rms above a quarter of the range";
         if (s.max_error_bound == 0 && r.error.max_abs == 0) has_lossless = true;
         std::printf("%-9s %-20s bytes %6zu  max|err| %7.1f  rms %7.2f  bound %5s  %s\n", peer->name().c_str(),
                     s.label.c_str(), r.bytes, r.error.max_abs, r.error.rms,
-                    s.max_error_bound < 0 ? "none" : std::to_string(int(s.max_error_bound)).c_str(), verdict.c_str());
+                    s.max_error_bound < 0 ? "none" : std::to_string(int(s.max_error_bound)).c_str(),
+                    verdict.c_str());
       } catch (const std::exception& e) {
         verdict = std::string("FAIL: ") + e.what();
         std::printf("%-9s %-20s %s\n", peer->name().c_str(), s.label.c_str(), verdict.c_str());
@@ -647,11 +671,13 @@ int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
       if (verdict != "ok") ++failures;
     }
     if (peer->lossless_capable() && !has_lossless) {
-      std::printf("%-9s FAIL: claims lossless capability but no setting round-tripped exactly\n", peer->name().c_str());
+      std::printf("%-9s FAIL: claims lossless capability but no setting round-tripped exactly\n",
+                  peer->name().c_str());
       ++failures;
     }
   }
-  std::printf("self-test: %s (%d failure%s)\n", failures ? "FAILED" : "passed", failures, failures == 1 ? "" : "s");
+  std::printf("self-test: %s (%d failure%s)\n", failures ? "FAILED" : "passed", failures,
+              failures == 1 ? "" : "s");
   return failures ? kExitInternal : kExitOk;
 }
 
@@ -666,10 +692,10 @@ struct PyramidTarget {
 std::vector<PyramidTarget> pyramid_sweep(bool quick) {
   using terrain::runtime::ErrorTarget;
   std::vector<PyramidTarget> t{{ErrorTarget::Lossless, 0}};
-  const std::vector<double> rms = quick ? std::vector<double>{0.5, 1, 2, 4}
-                                        : std::vector<double>{0.25, 0.5, 1, 1.4, 2, 2.8, 4, 8};
-  const std::vector<double> max = quick ? std::vector<double>{1, 2, 5}
-                                        : std::vector<double>{0.5, 1, 2, 3, 5, 8, 16};
+  const std::vector<double> rms =
+      quick ? std::vector<double>{0.5, 1, 2, 4} : std::vector<double>{0.25, 0.5, 1, 1.4, 2, 2.8, 4, 8};
+  const std::vector<double> max =
+      quick ? std::vector<double>{1, 2, 5} : std::vector<double>{0.5, 1, 2, 3, 5, 8, 16};
   for (double m : rms) t.push_back({ErrorTarget::Rms, m});
   for (double m : max) t.push_back({ErrorTarget::MaxError, m});
   return t;
@@ -702,7 +728,8 @@ RegionTiming time_cold_windows(terrain::runtime::RegionDecoder& decoder, int lev
     t.cpu_seconds += peers::process_cpu_seconds() - c0;
     t.samples += side_x * side_y;
     for (int64_t y = 0; whole && y < side_y; ++y)
-      if (std::memcmp(&window[size_t(y * side_x)], &whole[size_t((y0 + y) * size.width + x0)], size_t(side_x) * 4) != 0)
+      if (std::memcmp(&window[size_t(y * side_x)], &whole[size_t((y0 + y) * size.width + x0)],
+                      size_t(side_x) * 4) != 0)
         t.mismatch = true;
   }
   return t;
@@ -710,9 +737,9 @@ RegionTiming time_cold_windows(terrain::runtime::RegionDecoder& decoder, int lev
 
 // Builds one pyramid file at `target`, decodes its finest level whole (timed, best of N, cold cache
 // each time) and in cold 256x256 windows, and measures the error against `reference` (metres).
-Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_options, const std::string& file,
-                    const terrain::Heightmap& map, const std::vector<double>& reference,
-                    const PyramidTarget& target, const Options& opt) {
+Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_options,
+                    const std::string& file, const terrain::Heightmap& map,
+                    const std::vector<double>& reference, const PyramidTarget& target, const Options& opt) {
   using namespace terrain::runtime;
   Row row;
   row.file = file;
@@ -721,11 +748,18 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   row.height = map.height();
   row.unit_m = 1;  // pyramid rows are measured in metres directly
   row.target_m = target.metres;
-  row.target_kind = target.target == ErrorTarget::Lossless ? "lossless" : target.target == ErrorTarget::Rms ? "rms" : "max";
-  row.setting = target.target == ErrorTarget::Lossless ? "lossless" : row.target_kind + "=" + fmt("%g", target.metres) + " m";
-  row.bound = target.target == ErrorTarget::Lossless ? 0 : target.target == ErrorTarget::MaxError ? target.metres : -1;
+  row.target_kind = target.target == ErrorTarget::Lossless ? "lossless"
+                    : target.target == ErrorTarget::Rms    ? "rms"
+                                                           : "max";
+  row.setting = target.target == ErrorTarget::Lossless
+                    ? "lossless"
+                    : row.target_kind + "=" + fmt("%g", target.metres) + " m";
+  row.bound = target.target == ErrorTarget::Lossless   ? 0
+              : target.target == ErrorTarget::MaxError ? target.metres
+                                                       : -1;
   row.threads = opt.threads ? opt.threads : int(std::max(1L, sysconf(_SC_NPROCESSORS_ONLN)));
-  const std::string output = opt.work_dir + "/terrain-bench-" + std::to_string(getpid()) + "-" + file + ".pyr";
+  const std::string output =
+      opt.work_dir + "/terrain-bench-" + std::to_string(getpid()) + "-" + file + ".pyr";
   struct Remove {
     std::string p;
     ~Remove() {
@@ -752,7 +786,8 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
     row.error = std::string("n/a: ") + e.what();  // a target the input cannot honour (e.g. below its quantum)
     return row;
   }
-  row.setting += " (step " + fmt("%g", built.step_units) + " u, " + std::to_string(built.build.levels.size()) + " levels)";
+  row.setting += " (step " + fmt("%g", built.step_units) + " u, " +
+                 std::to_string(built.build.levels.size()) + " levels)";
   x.bytes = size_t(std::filesystem::file_size(output));
   const double n = double(map.width() * map.height());
   x.bits_per_sample = 8.0 * double(x.bytes) / n;
@@ -771,12 +806,14 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   std::vector<double> decoded(units.size());
   const double scale = decoder.metres_per_unit(), offset = decoder.metres_offset();
   for (size_t i = 0; i < units.size(); ++i) decoded[i] = double(units[i]) * scale + offset;
-  x.error = peers::error_stats(reference.data(), decoded.data(), map.valid.empty() ? nullptr : map.valid.data(),
-                               units.size());
+  x.error = peers::error_stats(reference.data(), decoded.data(),
+                               map.valid.empty() ? nullptr : map.valid.data(), units.size());
   if (row.bound >= 0 && x.error.max_abs > row.bound * (1 + 1e-9))
-    row.error = "max error " + fmt("%g", x.error.max_abs) + " m exceeds the requested bound " + fmt("%g", row.bound) + " m";
+    row.error = "max error " + fmt("%g", x.error.max_abs) + " m exceeds the requested bound " +
+                fmt("%g", row.bound) + " m";
 
-  const RegionTiming t = time_cold_windows(decoder, finest, {map.width(), map.height()}, opt.quick ? 8 : 16, units.data());
+  const RegionTiming t =
+      time_cold_windows(decoder, finest, {map.width(), map.height()}, opt.quick ? 8 : 16, units.data());
   row.region_seconds = t.seconds;
   row.region_cpu_seconds = t.cpu_seconds;
   row.region_samples = t.samples;
@@ -825,10 +862,12 @@ int main(int argc, char** argv) {
       terrain::runtime::RegionDecoder decoder(file);
       const int finest = file->level_count() - 1;
       const RegionTiming t = time_cold_windows(decoder, finest, file->level_size(finest), 64, nullptr);
-      std::printf("%s: %d levels, finest %lldx%lld; 64 cold 256x256 windows: %.1f Msamples/s wall, %.1f Msamples/s CPU\n",
-                  opt.region_speed.c_str(), file->level_count(), (long long)file->level_size(finest).width,
-                  (long long)file->level_size(finest).height, msps(double(t.samples), t.seconds),
-                  msps(double(t.samples), t.cpu_seconds));
+      std::printf(
+          "%s: %d levels, finest %lldx%lld; 64 cold 256x256 windows: %.1f Msamples/s wall, %.1f Msamples/s "
+          "CPU\n",
+          opt.region_speed.c_str(), file->level_count(), (long long)file->level_size(finest).width,
+          (long long)file->level_size(finest).height, msps(double(t.samples), t.seconds),
+          msps(double(t.samples), t.cpu_seconds));
       return kExitOk;
     } catch (const terrain::runtime::FormatError& e) {
       std::fprintf(stderr, "terrain-bench: %s\n", e.what());
@@ -864,8 +903,8 @@ int main(int argc, char** argv) {
   auto add_row = [&](Row&& row) {
     if (!row.error.empty() && row.error.rfind("n/a:", 0) != 0) {
       codec_failed = true;
-      std::fprintf(stderr, "terrain-bench: %s %s %s: %s\n", row.file.c_str(), row.codec.c_str(), row.setting.c_str(),
-                   row.error.c_str());
+      std::fprintf(stderr, "terrain-bench: %s %s %s: %s\n", row.file.c_str(), row.codec.c_str(),
+                   row.setting.c_str(), row.error.c_str());
     }
     if (csv.is_open()) {
       write_csv_row(csv, row);
@@ -900,20 +939,36 @@ int main(int argc, char** argv) {
         try {
           add_row(measure_pyramid(path, read_options, file, map, reference, t, opt));
         } catch (const std::exception& e) {
-          Row row{file, kPyramid, "target " + fmt("%g", t.metres), "", t.metres, 1, map.width(), map.height(), {}, -1,
-                  0, 0, 0, 1, e.what()};
+          Row row{file,
+                  kPyramid,
+                  "target " + fmt("%g", t.metres),
+                  "",
+                  t.metres,
+                  1,
+                  map.width(),
+                  map.height(),
+                  {},
+                  -1,
+                  0,
+                  0,
+                  0,
+                  1,
+                  e.what()};
           add_row(std::move(row));
         }
         std::fprintf(stderr, "  pyramid %-40s %s\n", rows.back().setting.c_str(),
-                     rows.back().error.empty() ? (fmt("%.3f bits/sample", rows.back().result.bits_per_sample) +
-                                                  fmt(", rms %.3f m", rows.back().result.error.rms) +
-                                                  fmt(", max %.3f m", rows.back().result.error.max_abs)).c_str()
-                                               : rows.back().error.c_str());
+                     rows.back().error.empty()
+                         ? (fmt("%.3f bits/sample", rows.back().result.bits_per_sample) +
+                            fmt(", rms %.3f m", rows.back().result.error.rms) +
+                            fmt(", max %.3f m", rows.back().result.error.max_abs))
+                               .c_str()
+                         : rows.back().error.c_str());
       }
     }
     for (auto& peer : peer_list) {
       for (const peers::Setting& s : peer->sweep(opt.quick, img.unit_m)) {
-        Row row{file, peer->name(), s.label, "", 0, img.unit_m, img.width, img.height, {}, s.max_error_bound, 0, 0, 0, 1, {}};
+        Row row{file, peer->name(),      s.label, "", 0, img.unit_m, img.width, img.height,
+                {},   s.max_error_bound, 0,       0,  0, 1,          {}};
         try {
           row.result = peers::measure(*peer, img, s, opt.min_time, 50);
           row.result.decoded.clear();
@@ -943,8 +998,10 @@ int main(int argc, char** argv) {
       return kExitWriteFailed;
     }
   }
-  if (opt.json) write_json(std::cout, rows);
-  else write_summary(std::cout, rows, file_order, codec_order);
+  if (opt.json)
+    write_json(std::cout, rows);
+  else
+    write_summary(std::cout, rows, file_order, codec_order);
   std::cout.flush();
   return codec_failed ? kExitInternal : kExitOk;
 }

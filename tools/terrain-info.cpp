@@ -17,12 +17,13 @@ int run(int argc, char** argv) {
   std::string path;
   cli::CommonFlags common;
   terrain::ReadOptions options;
-  cli::ArgParser parser("terrain-info", "FILE [read options] [--json]",
-                        "Describes a heightmap: detected format, dimensions, sample type, min/max in metres over\n"
-                        "valid samples, nodata count, spacing and units, georeference. Reads the file as a stream\n"
-                        "of row bands, so memory stays O(width). Formats: SRTM .hgt/.hgt.gz, ESRI .bil/.flt + .hdr,\n"
-                        "raw grids (.raw/.bin/.r16/.r32 with a <file>.json sidecar or --type/--width/--height),\n"
-                        "16-bit PNG/TIFF, float TIFF/EXR, Mapbox Terrain-RGB PNG. See docs/io.md.");
+  cli::ArgParser parser(
+      "terrain-info", "FILE [read options] [--json]",
+      "Describes a heightmap: detected format, dimensions, sample type, min/max in metres over\n"
+      "valid samples, nodata count, spacing and units, georeference. Reads the file as a stream\n"
+      "of row bands, so memory stays O(width). Formats: SRTM .hgt/.hgt.gz, ESRI .bil/.flt + .hdr,\n"
+      "raw grids (.raw/.bin/.r16/.r32 with a <file>.json sidecar or --type/--width/--height),\n"
+      "16-bit PNG/TIFF, float TIFF/EXR, Mapbox Terrain-RGB PNG. See docs/io.md.");
   parser.positional("FILE", "the heightmap to describe", &path);
   cli::add_read_options(parser, options);
   parser.add_common(common);
@@ -53,8 +54,10 @@ int run(int argc, char** argv) {
     progress.update(reader->rows_read());
   }
   progress.finish();
-  double min_m = std::min(lo * g.vertical_scale + g.vertical_offset, hi * g.vertical_scale + g.vertical_offset);
-  double max_m = std::max(lo * g.vertical_scale + g.vertical_offset, hi * g.vertical_scale + g.vertical_offset);
+  double min_m =
+      std::min(lo * g.vertical_scale + g.vertical_offset, hi * g.vertical_scale + g.vertical_offset);
+  double max_m =
+      std::max(lo * g.vertical_scale + g.vertical_offset, hi * g.vertical_scale + g.vertical_offset);
   double mean_m = valid_count ? (sum / double(valid_count)) * g.vertical_scale + g.vertical_offset : 0.0;
 
   if (common.json) {
@@ -62,28 +65,43 @@ int run(int argc, char** argv) {
     j.begin_object();
     j.field("file", path).field("format", terrain::file_format_name(g.format));
     j.field("width", g.width).field("height", g.height);
-    j.field("sample_type", terrain::sample_type_name(g.sample_type)).field("integer_valued", g.integer_valued());
+    j.field("sample_type", terrain::sample_type_name(g.sample_type))
+        .field("integer_valued", g.integer_valued());
     j.field("vertical_scale", g.vertical_scale).field("vertical_offset", g.vertical_offset);
     j.key("nodata_value");
-    if (g.nodata) j.value(*g.nodata);
-    else j.null();
+    if (g.nodata)
+      j.value(*g.nodata);
+    else
+      j.null();
     j.key("min_m");
-    if (valid_count) j.value(min_m);
-    else j.null();
+    if (valid_count)
+      j.value(min_m);
+    else
+      j.null();
     j.key("max_m");
-    if (valid_count) j.value(max_m);
-    else j.null();
+    if (valid_count)
+      j.value(max_m);
+    else
+      j.null();
     j.key("mean_m");
-    if (valid_count) j.value(mean_m);
-    else j.null();
+    if (valid_count)
+      j.value(mean_m);
+    else
+      j.null();
     j.field("valid_count", valid_count).field("nodata_count", nodata_count);
-    j.field("spacing_x", g.spacing_x).field("spacing_y", g.spacing_y).field("horizontal_units", g.horizontal_units);
+    j.field("spacing_x", g.spacing_x)
+        .field("spacing_y", g.spacing_y)
+        .field("horizontal_units", g.horizontal_units);
     j.key("origin_x");
-    if (g.origin_x) j.value(*g.origin_x);
-    else j.null();
+    if (g.origin_x)
+      j.value(*g.origin_x);
+    else
+      j.null();
     j.key("origin_y");
-    if (g.origin_y) j.value(*g.origin_y);
-    else j.null();
+    if (g.origin_y)
+      j.value(*g.origin_y);
+    else
+      j.null();
     j.end_object();
     j.finish();
     return cli::kExitOk;
@@ -101,8 +119,8 @@ int run(int argc, char** argv) {
   else
     std::printf("min / max:    - (no valid samples)\n");
   if (g.nodata)
-    std::printf("nodata:       %" PRId64 " of %" PRId64 " samples (value %s)\n", nodata_count, g.width * g.height,
-                shortest(*g.nodata).c_str());
+    std::printf("nodata:       %" PRId64 " of %" PRId64 " samples (value %s)\n", nodata_count,
+                g.width * g.height, shortest(*g.nodata).c_str());
   else
     std::printf("nodata:       none defined\n");
   std::printf("spacing:      %s x %s %s\n", shortest(g.spacing_x).c_str(), shortest(g.spacing_y).c_str(),

@@ -42,14 +42,16 @@ ErrorStats error_stats(std::vector<double>& abs_err, double range) {
 
 // Linear ramp black -> blue -> magenta -> orange -> yellow, for e in [0, 1].
 void heat_colour(double e, uint8_t* rgb) {
-  static const double stops[5][3] = {{0, 0, 0}, {20, 40, 160}, {170, 40, 150}, {250, 130, 30}, {255, 250, 150}};
+  static const double stops[5][3] = {
+      {0, 0, 0}, {20, 40, 160}, {170, 40, 150}, {250, 130, 30}, {255, 250, 150}};
   e = std::clamp(e, 0.0, 1.0) * 4;
   const int i = std::min(3, int(e));
   const double f = e - i;
   for (int c = 0; c < 3; ++c) rgb[c] = uint8_t(stops[i][c] + f * (stops[i + 1][c] - stops[i][c]) + 0.5);
 }
 
-void write_heatmap(const std::string& path, const std::vector<float>& abs_err, int64_t w, int64_t h, double scale_max) {
+void write_heatmap(const std::string& path, const std::vector<float>& abs_err, int64_t w, int64_t h,
+                   double scale_max) {
   // Max-pool to at most 2048 pixels on the longer side so isolated large errors stay visible.
   const int64_t f = std::max<int64_t>(1, (std::max(w, h) + 2047) / 2048);
   const int64_t ow = (w + f - 1) / f, oh = (h + f - 1) / f;
@@ -64,8 +66,10 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
           if (!std::isnan(e)) m = std::max(m, e), any = true;
         }
       uint8_t* p = &rgb[size_t((oy * ow + ox) * 3)];
-      if (!any) p[0] = p[1] = p[2] = 128;  // void
-      else heat_colour(scale_max > 0 ? m / scale_max : 0, p);
+      if (!any)
+        p[0] = p[1] = p[2] = 128;  // void
+      else
+        heat_colour(scale_max > 0 ? m / scale_max : 0, p);
     }
   const std::string tmp = path + ".tmp.png";
   try {
@@ -80,16 +84,18 @@ int run(int argc, char** argv) {
   std::string input, pyr_path, json_path, heatmap;
   cli::CommonFlags common;
   ReadOptions read_options;
-  cli::ArgParser parser("terrain-report", "INPUT PYRAMID.pyr [--json FILE] [--heatmap FILE.png] [read options]",
-                        "Compares a pyramid file with the input it was built from. Per level and overall: rms,\n"
-                        "max |error|, 99.9th percentile of |error| (metres) and PSNR = 20 log10((zmax-zmin)/rms) dB,\n"
-                        "where level l of the source is the builder's own filtered level (same D filter, same void\n"
-                        "fill) and zmin/zmax are the finest source level's. Also bits per finest sample,\n"
-                        "compression factor against the source samples, build time (from the file) and decode time.\n"
-                        "Holds the input in memory (8 bytes per sample).");
+  cli::ArgParser parser(
+      "terrain-report", "INPUT PYRAMID.pyr [--json FILE] [--heatmap FILE.png] [read options]",
+      "Compares a pyramid file with the input it was built from. Per level and overall: rms,\n"
+      "max |error|, 99.9th percentile of |error| (metres) and PSNR = 20 log10((zmax-zmin)/rms) dB,\n"
+      "where level l of the source is the builder's own filtered level (same D filter, same void\n"
+      "fill) and zmin/zmax are the finest source level's. Also bits per finest sample,\n"
+      "compression factor against the source samples, build time (from the file) and decode time.\n"
+      "Holds the input in memory (8 bytes per sample).");
   parser.positional("INPUT", "the heightmap the pyramid was built from", &input);
   parser.positional("PYRAMID", "the .pyr file", &pyr_path);
-  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)", [&](const std::string& v) { json_path = v; });
+  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)",
+                [&](const std::string& v) { json_path = v; });
   parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)",
                 [&](const std::string& v) { heatmap = v; });
   cli::add_read_options(parser, read_options);
@@ -100,9 +106,10 @@ int run(int argc, char** argv) {
   const ContainerInfo& info = file->info();
   const Heightmap map = read_heightmap(input, read_options);
   if (uint64_t(map.width()) != info.width || uint64_t(map.height()) != info.height)
-    throw IoError(IoErrorCode::DimensionMismatch, input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
-                                                      " does not match the pyramid's " + std::to_string(info.width) + "x" +
-                                                      std::to_string(info.height));
+    throw IoError(IoErrorCode::DimensionMismatch,
+                  input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
+                      " does not match the pyramid's " + std::to_string(info.width) + "x" +
+                      std::to_string(info.height));
   // The reference below is built without the builder's centring offset, so its units map to metres
   // with the input's own offset.
   const double mpu = info.vertical_scale, off = map.info.vertical_offset;
@@ -140,7 +147,8 @@ int run(int argc, char** argv) {
     std::vector<float> dec(size_t(s.width * s.height));
     const auto t0 = std::chrono::steady_clock::now();
     decoder.decode_metres(l, terrain::Rect{0, 0, s.width, s.height}, dec.data(), s.width);
-    if (l == levels - 1) decode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (l == levels - 1)
+      decode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::vector<int32_t>& ref = source.recon[size_t(l)];
     std::vector<double> err;
     err.reserve(dec.size());
@@ -165,25 +173,28 @@ int run(int argc, char** argv) {
   const uint64_t bytes = std::filesystem::file_size(pyr_path);
   const int64_t samples = map.width() * map.height();
   const double bits = 8.0 * double(bytes) / double(samples);
-  const int source_bits = map.info.sample_type == SampleType::Int16 || map.info.sample_type == SampleType::UInt16 ? 16
-                          : map.info.sample_type == SampleType::TerrainRGB                                     ? 24
-                                                                                                               : 32;
+  const int source_bits =
+      map.info.sample_type == SampleType::Int16 || map.info.sample_type == SampleType::UInt16 ? 16
+      : map.info.sample_type == SampleType::TerrainRGB                                        ? 24
+                                                                                              : 32;
 
   if (!heatmap.empty()) write_heatmap(heatmap, finest_err, map.width(), map.height(), finest.max);
 
   if (!common.quiet) {
-    std::printf("%s vs %s: %dx%d, %d levels, %s\n", pyr_path.c_str(), input.c_str(), int(map.width()), int(map.height()),
-                levels, voids_mismatch ? "VOIDS NOT RESTORED" : "voids restored");
+    std::printf("%s vs %s: %dx%d, %d levels, %s\n", pyr_path.c_str(), input.c_str(), int(map.width()),
+                int(map.height()), levels, voids_mismatch ? "VOIDS NOT RESTORED" : "voids restored");
     std::printf("%-6s %11s %10s %10s %10s %8s\n", "level", "size", "rms m", "max m", "p99.9 m", "PSNR dB");
     for (int l = 0; l < levels; ++l) {
       const GridSize s = file->level_size(l);
       const ErrorStats& e = per_level[size_t(l)];
-      std::printf("%-6d %5lldx%-5lld %10.4f %10.4f %10.4f %8.2f\n", l, (long long)s.width, (long long)s.height, e.rms, e.max,
-                  e.p999, e.psnr);
+      std::printf("%-6d %5lldx%-5lld %10.4f %10.4f %10.4f %8.2f\n", l, (long long)s.width,
+                  (long long)s.height, e.rms, e.max, e.p999, e.psnr);
     }
-    std::printf("%-6s %11s %10.4f %10.4f %10.4f %8.2f\n", "all", "", overall.rms, overall.max, overall.p999, overall.psnr);
-    std::printf("size %llu bytes, %.4f bits per finest sample, compression factor %.2f (vs %d-bit source samples)\n",
-                (unsigned long long)bytes, bits, double(source_bits) / bits, source_bits);
+    std::printf("%-6s %11s %10.4f %10.4f %10.4f %8.2f\n", "all", "", overall.rms, overall.max, overall.p999,
+                overall.psnr);
+    std::printf(
+        "size %llu bytes, %.4f bits per finest sample, compression factor %.2f (vs %d-bit source samples)\n",
+        (unsigned long long)bytes, bits, double(source_bits) / bits, source_bits);
     std::printf("finest-level decode %.3f s (%.1f Msamples/s, one thread, cold cache)\n", decode_seconds,
                 samples / 1e6 / std::max(1e-9, decode_seconds));
   }
@@ -196,11 +207,20 @@ int run(int argc, char** argv) {
     std::ostream& os = json_path == "-" ? std::cout : f;
     cli::JsonWriter j(os);
     auto put = [&](const ErrorStats& e) {
-      j.field("samples", e.count).field("rms_m", e.rms).field("max_m", e.max).field("p999_m", e.p999).field("psnr_db", e.psnr);
+      j.field("samples", e.count)
+          .field("rms_m", e.rms)
+          .field("max_m", e.max)
+          .field("p999_m", e.p999)
+          .field("psnr_db", e.psnr);
     };
     j.begin_object();
-    j.field("input", input).field("pyramid", pyr_path).field("width", map.width()).field("height", map.height());
-    j.field("bytes", int64_t(bytes)).field("bits_per_sample", bits).field("compression_factor", double(source_bits) / bits);
+    j.field("input", input)
+        .field("pyramid", pyr_path)
+        .field("width", map.width())
+        .field("height", map.height());
+    j.field("bytes", int64_t(bytes))
+        .field("bits_per_sample", bits)
+        .field("compression_factor", double(source_bits) / bits);
     j.field("zmin_m", zmin).field("zmax_m", zmax).field("voids_restored", voids_mismatch == 0);
     j.field("decode_seconds", decode_seconds);
     j.field("decode_msamples_per_s", samples / 1e6 / std::max(1e-9, decode_seconds));
@@ -210,7 +230,9 @@ int run(int argc, char** argv) {
     j.key("levels").begin_array();
     for (int l = 0; l < levels; ++l) {
       j.begin_object();
-      j.field("level", l).field("width", file->level_size(l).width).field("height", file->level_size(l).height);
+      j.field("level", l)
+          .field("width", file->level_size(l).width)
+          .field("height", file->level_size(l).height);
       put(per_level[size_t(l)]);
       j.end_object();
     }

@@ -14,8 +14,8 @@ namespace {
 // The terrain at 2^-K of the size (coarse_extent K times, spacing 2^K times), amplified by K
 // synthesised levels of Gaussian detail (runtime/synthesis.h, docs/synthesis.md) and cropped to
 // the requested size. Whole metres, sea (<= 0) kept flat, unless float output keeps the fractions.
-terrain::Heightmap amplified_terrain(const terrain::SynthOptions& synth, int levels, double std0_m, double hurst,
-                                     bool whole_metres) {
+terrain::Heightmap amplified_terrain(const terrain::SynthOptions& synth, int levels, double std0_m,
+                                     double hurst, bool whole_metres) {
   terrain::SynthOptions base_options = synth;
   for (int k = 0; k < levels; ++k)
     base_options.width = terrain::coarse_extent(base_options.width),
@@ -51,10 +51,11 @@ int run(int argc, char** argv) {
   bool big_endian = false;
   cli::CommonFlags common;
   terrain::SynthOptions synth;
-  cli::ArgParser parser("terrain-synth", "-o OUT --width W --height H [--seed S]",
-                        "Generates deterministic fractal terrain (integer metres, 0 = sea, up to ~3000 m; the same\n"
-                        "seed and size give the same bytes on every machine) and writes it by OUT's extension:\n"
-                        ".raw (+ OUT.json sidecar, int16), .png (16-bit grey), .tif/.tiff (16-bit), .exr (float32).");
+  cli::ArgParser parser(
+      "terrain-synth", "-o OUT --width W --height H [--seed S]",
+      "Generates deterministic fractal terrain (integer metres, 0 = sea, up to ~3000 m; the same\n"
+      "seed and size give the same bytes on every machine) and writes it by OUT's extension:\n"
+      ".raw (+ OUT.json sidecar, int16), .png (16-bit grey), .tif/.tiff (16-bit), .exr (float32).");
   bool have_width = false, have_height = false;
   parser.option("-o,--output", "OUT", "output file", [&](const std::string& v) { out = v; });
   parser.option("--width", "W", "samples per row (1..65536)", [&](const std::string& v) {
@@ -75,14 +76,17 @@ int run(int argc, char** argv) {
                 });
   int detail_levels = 0;
   double detail_std = -1, hurst = 0.8;
-  parser.option("--detail-levels", "K",
-                "generate at 2^-K of the size and add K levels of synthesised fractal detail (U + Gaussian\n"
-                "noise, the clipmap's synthesis; docs/synthesis.md)",
-                [&](const std::string& v) { detail_levels = int(cli::parse_int("--detail-levels", v, 1, 8)); });
-  parser.option("--detail-std", "M", "noise std of the first added level, metres (default 0.02 x its spacing)",
+  parser.option(
+      "--detail-levels", "K",
+      "generate at 2^-K of the size and add K levels of synthesised fractal detail (U + Gaussian\n"
+      "noise, the clipmap's synthesis; docs/synthesis.md)",
+      [&](const std::string& v) { detail_levels = int(cli::parse_int("--detail-levels", v, 1, 8)); });
+  parser.option("--detail-std", "M",
+                "noise std of the first added level, metres (default 0.02 x its spacing)",
                 [&](const std::string& v) {
                   detail_std = cli::parse_double("--detail-std", v);
-                  if (!(detail_std >= 0 && detail_std < 1e4)) throw cli::UsageError("--detail-std must be in [0, 10000)");
+                  if (!(detail_std >= 0 && detail_std < 1e4))
+                    throw cli::UsageError("--detail-std must be in [0, 10000)");
                 });
   parser.option("--hurst", "H", "std falls by 2^-H per finer level (default 0.8)", [&](const std::string& v) {
     hurst = cli::parse_double("--hurst", v);
@@ -104,21 +108,32 @@ int run(int argc, char** argv) {
     return lower.size() >= e.size() && lower.compare(lower.size() - e.size(), e.size(), e) == 0;
   };
   enum class Kind { Raw, Image16, Exr } kind;
-  if (ends(".raw")) kind = Kind::Raw;
-  else if (ends(".png") || ends(".tif") || ends(".tiff")) kind = Kind::Image16;
-  else if (ends(".exr")) kind = Kind::Exr;
-  else throw cli::UsageError("unknown output extension in " + out + " (use .raw, .png, .tif, .tiff or .exr)");
+  if (ends(".raw"))
+    kind = Kind::Raw;
+  else if (ends(".png") || ends(".tif") || ends(".tiff"))
+    kind = Kind::Image16;
+  else if (ends(".exr"))
+    kind = Kind::Exr;
+  else
+    throw cli::UsageError("unknown output extension in " + out + " (use .raw, .png, .tif, .tiff or .exr)");
 
   if (detail_std < 0) detail_std = 0.02 * std::ldexp(synth.spacing_m, detail_levels - 1);
   terrain::Heightmap map = detail_levels > 0
                                ? amplified_terrain(synth, detail_levels, detail_std, hurst, kind != Kind::Exr)
                                : terrain::synthesize_terrain(synth);
   switch (kind) {
-    case Kind::Raw: terrain::write_raw(out, map, big_endian); break;
-    case Kind::Image16: terrain::write_image16(out, map); break;
-    case Kind::Exr: terrain::write_exr(out, map); break;
+    case Kind::Raw:
+      terrain::write_raw(out, map, big_endian);
+      break;
+    case Kind::Image16:
+      terrain::write_image16(out, map);
+      break;
+    case Kind::Exr:
+      terrain::write_exr(out, map);
+      break;
   }
-  if (common.verbose) std::cerr << "terrain-synth: wrote " << out << " (" << synth.width << "x" << synth.height << ")\n";
+  if (common.verbose)
+    std::cerr << "terrain-synth: wrote " << out << " (" << synth.width << "x" << synth.height << ")\n";
   return cli::kExitOk;
 }
 

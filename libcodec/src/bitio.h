@@ -59,8 +59,10 @@ class BitWriter {
     n_ -= 32;
   }
   void emit(uint8_t byte) {
-    if (pos_ < cap_) buf_[pos_++] = byte;
-    else overflow_ = true;
+    if (pos_ < cap_)
+      buf_[pos_++] = byte;
+    else
+      overflow_ = true;
   }
 
   uint8_t* buf_;
@@ -80,8 +82,10 @@ class BitReader {
     if (count_ > 56 || refill_fast()) return;
     while (count_ <= 56) {
       uint64_t byte = 0;
-      if (p_ < end_) byte = *p_++;
-      else ++zero_bytes_;
+      if (p_ < end_)
+        byte = *p_++;
+      else
+        ++zero_bytes_;
       cache_ |= byte << (56 - count_);
       count_ += 8;
     }

@@ -9,6 +9,8 @@
 namespace codec::detail {
 
 // CRC32C of data[0 .. size); chain calls by passing the previous result as `crc`.
-inline uint32_t crc32c(const uint8_t* data, size_t size, uint32_t crc = 0) { return codec::crc32c(data, size, crc); }
+inline uint32_t crc32c(const uint8_t* data, size_t size, uint32_t crc = 0) {
+  return codec::crc32c(data, size, crc);
+}
 
 }  // namespace codec::detail

@@ -43,6 +43,7 @@ typedef int32_t V16 __attribute__((vector_size(64)));
 typedef uint32_t U16 __attribute__((vector_size(64)));
 typedef double D16 __attribute__((vector_size(128)));
 #endif
+// clang-format off: one line per lane type reads as the table it is.
 template <class T> struct UnsignedOf { using type = uint32_t; };
 template <class T> struct DoublesOf {};
 #ifdef CODEC_VECTOR_TRANSFORM
@@ -54,6 +55,7 @@ template <> struct UnsignedOf<V16> { using type = U16; };
 template <> struct DoublesOf<V16> { using type = D16; };
 #endif
 template <class T> using Unsigned = typename UnsignedOf<T>::type;
+// clang-format on
 
 // Additions wrap instead of overflowing: valid streams never come near 2^31 (see the header), and
 // wrapping keeps garbage coefficients from a corrupt stream free of undefined behaviour.
@@ -176,12 +178,24 @@ template <class T> CODEC_INLINE void lossy_post4(T& a, T& b, T& c, T& d) {
 }
 
 // The 4-point steps as types, so that one kernel template serves every lane type.
-struct Fwd4 { template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { fwd4(a, b, c, d); } };
-struct Inv4 { template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { inv4(a, b, c, d); } };
-struct Pre4 { template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { overlap4<1>(a, b, c, d); } };
-struct Post4 { template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { overlap4<-1>(a, b, c, d); } };
-struct LossyPre4 { template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { lossy_pre4(a, b, c, d); } };
-struct LossyPost4 { template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { lossy_post4(a, b, c, d); } };
+struct Fwd4 {
+  template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { fwd4(a, b, c, d); }
+};
+struct Inv4 {
+  template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { inv4(a, b, c, d); }
+};
+struct Pre4 {
+  template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { overlap4<1>(a, b, c, d); }
+};
+struct Post4 {
+  template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { overlap4<-1>(a, b, c, d); }
+};
+struct LossyPre4 {
+  template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { lossy_pre4(a, b, c, d); }
+};
+struct LossyPost4 {
+  template <class T> CODEC_INLINE static void apply(T& a, T& b, T& c, T& d) { lossy_post4(a, b, c, d); }
+};
 
 // Op on the four samples p[0], p[step], p[2 step], p[3 step].
 template <class Op> CODEC_INLINE void op_at(int32_t* p, ptrdiff_t step) {
@@ -201,7 +215,8 @@ template <class Op> CODEC_INLINE void down_rows(int32_t* top, ptrdiff_t stride, 
 
 // The inverse's stage 2 on the grid of block DCs (1/16 of the samples): scalar everywhere.
 template <class Post, bool Two> void inverse_stage2(int32_t* tile, int width, int height) {
-  for (int y = 0; y < height; y += 16) down_rows<Inv4>(tile + ptrdiff_t(y) * width, ptrdiff_t(4) * width, width / 4, 4);
+  for (int y = 0; y < height; y += 16)
+    down_rows<Inv4>(tile + ptrdiff_t(y) * width, ptrdiff_t(4) * width, width / 4, 4);
   for (int y = 0; y < height; y += 4)
     for (int x = 0; x < width; x += 16) op_at<Inv4>(tile + ptrdiff_t(y) * width + x, 4);
   if (Two) {
@@ -295,8 +310,10 @@ template <class V, class Post, bool Two> void inverse_lanes(int32_t* tile, int w
 
 // inverse_lanes with the post-filter of a lossy or a lossless tile.
 template <class V> void inverse_lanes(int32_t* tile, int width, int height, bool lossy) {
-  if (lossy) inverse_lanes<V, LossyPost4, true>(tile, width, height);
-  else inverse_lanes<V, Post4, false>(tile, width, height);
+  if (lossy)
+    inverse_lanes<V, LossyPost4, true>(tile, width, height);
+  else
+    inverse_lanes<V, Post4, false>(tile, width, height);
 }
 #endif
 

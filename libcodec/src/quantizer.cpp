@@ -1,7 +1,8 @@
 // Band norms are measured rather than derived by hand: the norm of a band is the root energy of the
 // tile the integer inverse transform produces from one large coefficient, divided by its amplitude.
 // The impulse sits in an interior macroblock of a 64x64 tile so that the overlap filters act on all
-// sides. The norms are those of the lossy transform (the only one quantised with steps above 1). Integer lifting is linear up to rounding, which a 2^14 amplitude makes negligible.
+// sides. The norms are those of the lossy transform (the only one quantised with steps above 1). Integer
+// lifting is linear up to rounding, which a 2^14 amplitude makes negligible.
 #include "quantizer.h"
 
 #include <array>

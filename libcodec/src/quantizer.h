@@ -50,7 +50,8 @@ inline int32_t quantize(int32_t c, double inverse_step) {
 // large enough to matter is clamped to a value every caller rejects (> kMaxCoefficient).
 inline int64_t dequantize(int64_t q, uint32_t step_q8) {
   const int64_t m = q < 0 ? -q : q;
-  const int64_t product = std::min(std::min<int64_t>(m, int64_t(1) << 30) * int64_t(step_q8), int64_t(1) << 40);
+  const int64_t product =
+      std::min(std::min<int64_t>(m, int64_t(1) << 30) * int64_t(step_q8), int64_t(1) << 40);
   const int64_t magnitude = ((product * 16 + step_q8 + 2048) >> 12) & -int64_t(m != 0);  // branch-free
   return q < 0 ? -magnitude : magnitude;
 }

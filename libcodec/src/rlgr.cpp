@@ -52,8 +52,7 @@ namespace {
 
 // The encoder loop, with the value of each position supplied by `level(i, k)`, called once per
 // position in coding order; k is the run-length parameter there (0: Golomb-Rice mode).
-template <class Level>
-void encode_levels(BitWriter& out, size_t count, RlgrState& s, Level&& level) {
+template <class Level> void encode_levels(BitWriter& out, size_t count, RlgrState& s, Level&& level) {
   size_t i = 0;
   while (i < count) {
     const int k = s.kp >> 3;
@@ -94,7 +93,8 @@ void rlgr_encode_quantizing(BitWriter& out, int32_t* values, size_t count, size_
   double offset[kMaxRunK + 1];
   offset[0] = dead_zone.rice_offset;
   for (int k = 1; k <= kMaxRunK; ++k)
-    offset[k] = std::max(dead_zone.min_run_offset, dead_zone.run_offset - dead_zone.run_offset_per_k * (k - 1));
+    offset[k] =
+        std::max(dead_zone.min_run_offset, dead_zone.run_offset - dead_zone.run_offset_per_k * (k - 1));
   // Magnitudes below zero_below[k] quantise to 0 in the current group: most values take this
   // integer test only. encode_levels visits the positions in increasing order, so the group advances
   // without a division.

@@ -33,9 +33,9 @@ void rlgr_encode(BitWriter& out, const int32_t* values, size_t count, RlgrState&
 // run-length mode (k > 0) a non-zero value costs a run code, a sign and a Rice code and ends the run,
 // so small values are worth zeroing; the longer the runs (larger k), the more so.
 struct DeadZone {
-  double rice_offset;        // Golomb-Rice mode
-  double run_offset;         // run mode, k = 1
-  double run_offset_per_k;   // decrease per unit of k above 1
+  double rice_offset;       // Golomb-Rice mode
+  double run_offset;        // run mode, k = 1
+  double run_offset_per_k;  // decrease per unit of k above 1
   double min_run_offset;
 };
 // Quantises and codes in one pass (encoder only; the decoder is rlgr_decode): values[i], a

@@ -50,9 +50,15 @@ constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
 
-void put_u16(uint8_t* p, uint16_t v) { for (int i = 0; i < 2; ++i) p[i] = uint8_t(v >> (8 * i)); }
-void put_u32(uint8_t* p, uint32_t v) { for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i)); }
-void put_u64(uint8_t* p, uint64_t v) { for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i)); }
+void put_u16(uint8_t* p, uint16_t v) {
+  for (int i = 0; i < 2; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+void put_u32(uint8_t* p, uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+void put_u64(uint8_t* p, uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
+}
 uint16_t get_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
 uint32_t get_u32(const uint8_t* p) {
   uint32_t v = 0;
@@ -117,14 +123,22 @@ bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
 
 const char* status_name(Status status) {
   switch (status) {
-    case Status::Ok: return "ok";
-    case Status::BufferTooSmall: return "output buffer too small";
-    case Status::Truncated: return "truncated stream";
-    case Status::Corrupt: return "corrupt stream";
-    case Status::ChecksumMismatch: return "checksum mismatch";
-    case Status::UnsupportedVersion: return "unsupported stream version";
-    case Status::InvalidArgument: return "invalid argument";
-    case Status::ValueOutOfRange: return "sample value out of range";
+    case Status::Ok:
+      return "ok";
+    case Status::BufferTooSmall:
+      return "output buffer too small";
+    case Status::Truncated:
+      return "truncated stream";
+    case Status::Corrupt:
+      return "corrupt stream";
+    case Status::ChecksumMismatch:
+      return "checksum mismatch";
+    case Status::UnsupportedVersion:
+      return "unsupported stream version";
+    case Status::InvalidArgument:
+      return "invalid argument";
+    case Status::ValueOutOfRange:
+      return "sample value out of range";
   }
   return "unknown status";
 }
@@ -269,8 +283,8 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
   const uint32_t fraction_bits = get_u32(data + 40);
   if (step_q8 <= detail::kStepOne ? fraction_bits != 0
-                                   : fraction_bits != uint32_t(detail::kFineFractionBits) &&
-                                         fraction_bits != uint32_t(detail::kWideFractionBits))
+                                  : fraction_bits != uint32_t(detail::kFineFractionBits) &&
+                                        fraction_bits != uint32_t(detail::kWideFractionBits))
     return Status::Corrupt;
   const uint64_t index_offset = get_u64(data + 44);
   if (index_offset < kHeaderSize || index_offset > SIZE_MAX / 2) return Status::Corrupt;
@@ -300,7 +314,8 @@ Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& heade
       p += 4;
       entry.offset = offset;
       entry.size = tile_size;
-      const size_t bound = detail::tile_payload_bound(tile_extent(header.width, t, tx), tile_extent(header.height, t, ty));
+      const size_t bound =
+          detail::tile_payload_bound(tile_extent(header.width, t, tx), tile_extent(header.height, t, ty));
       if (entry.size < 1 || entry.size > bound) return Status::Corrupt;
       offset += entry.size;
       if (offset > header.index_offset) return Status::Corrupt;
@@ -357,8 +372,12 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
       const int tw = tile_extent(header_.width, t, tx), th = tile_extent(header_.height, t, ty);
       const int64_t x0 = std::max(rect.x, tx * t), x1 = std::min(rect.x + rect.width, tx * t + tw);
       const int64_t y0 = std::max(rect.y, ty * t), y1 = std::min(rect.y + rect.height, ty * t + th);
-      const detail::TileWindow window{int(x0 - tx * t), int(y0 - ty * t), int(x1 - tx * t), int(y1 - ty * t),
-                                      dst + (y0 - rect.y) * dst_stride + (x0 - rect.x), dst_stride};
+      const detail::TileWindow window{int(x0 - tx * t),
+                                      int(y0 - ty * t),
+                                      int(x1 - tx * t),
+                                      int(y1 - ty * t),
+                                      dst + (y0 - rect.y) * dst_stride + (x0 - rect.x),
+                                      dst_stride};
       if (detail::decode_tile(payload, entry.size, tw, th, params, work, window) != detail::TileResult::Ok)
         return Status::Corrupt;
     }
@@ -369,7 +388,8 @@ Status decode(const uint8_t* data, size_t size, int32_t* dst, ptrdiff_t dst_stri
   Decoder decoder;
   const Status s = decoder.open(data, size);
   if (s != Status::Ok) return s;
-  return decoder.decode_region({0, 0, decoder.header().width, decoder.header().height}, dst, dst_stride, scratch);
+  return decoder.decode_region({0, 0, decoder.header().width, decoder.header().height}, dst, dst_stride,
+                               scratch);
 }
 
 Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst, ptrdiff_t dst_stride,

@@ -82,8 +82,7 @@ inline int64_t dc_prediction(const int32_t* tile, int pw, int mx, int my) {
 // go through these two, so the three cannot disagree.
 //
 // LP: the stage-2 coefficient at `pos` of every macroblock, macroblocks in raster order.
-template <class Visit>
-inline void for_lp_macroblocks(int pw, int ph, Position pos, Visit&& visit) {
+template <class Visit> inline void for_lp_macroblocks(int pw, int ph, Position pos, Visit&& visit) {
   for (int my = 0; my < ph / 16; ++my)
     for (int mx = 0; mx < pw / 16; ++mx) visit(size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u);
 }
@@ -92,8 +91,7 @@ inline void for_lp_macroblocks(int pw, int ph, Position pos, Visit&& visit) {
 // each in raster order. Keeping a macroblock's blocks together makes busy and quiet areas longer runs
 // for RLGR's adaptation than block rows across the whole tile (measured: 0.5% fewer bits at equal rms
 // over six SRTM DEMs, every DEM gains; Morton order gave 0.47%).
-template <class Visit>
-inline void for_hp_blocks(int pw, int ph, Position pos, Visit&& visit) {
+template <class Visit> inline void for_hp_blocks(int pw, int ph, Position pos, Visit&& visit) {
   for (int my = 0; my < ph / 16; ++my)
     for (int mx = 0; mx < pw / 16; ++mx) {
       const size_t mb = size_t(16 * my + pos.v) * pw + 16 * mx + pos.u;
@@ -114,8 +112,7 @@ void load_padded(const int32_t* src, ptrdiff_t stride, int w, int h, int pw, int
 // Writes a flag bit and then, through code(writer, state), a band coded from starts[flag], choosing
 // the flag that gives fewer bits: each candidate is coded once into a copy of `out` to count its bits,
 // then the winner is coded for real. Returns the flag.
-template <class Code>
-int code_with_best_start(BitWriter& out, const RlgrState (&starts)[2], Code&& code) {
+template <class Code> int code_with_best_start(BitWriter& out, const RlgrState (&starts)[2], Code&& code) {
   size_t cost[2];
   for (int flag = 0; flag < 2; ++flag) {
     BitWriter trial = out;
@@ -178,21 +175,25 @@ void code_bands(BitWriter& out, int32_t* tile, int pw, int ph, const BandSteps& 
   });
 
   n = 0;
-  for (const Position& pos : kScan) for_lp_macroblocks(pw, ph, pos, [&](size_t offset) { seq[n++] = tile[offset]; });
+  for (const Position& pos : kScan)
+    for_lp_macroblocks(pw, ph, pos, [&](size_t offset) { seq[n++] = tile[offset]; });
   double group_inverse[15];
   for (int s = 0; s < 15; ++s) group_inverse[s] = inverse[lp_band(kScan[s].v * 4 + kScan[s].u)];
   const int lp_flag = code_lp(out, seq, n, size_t(mbx) * mby, group_inverse);
   const bool lp_zero = all_zero(seq, n);
   n = 0;
-  for (const Position& pos : kScan) for_lp_macroblocks(pw, ph, pos, [&](size_t offset) { tile[offset] = seq[n++]; });
+  for (const Position& pos : kScan)
+    for_lp_macroblocks(pw, ph, pos, [&](size_t offset) { tile[offset] = seq[n++]; });
 
   n = 0;
-  for (const Position& pos : kScan) for_hp_blocks(pw, ph, pos, [&](size_t offset) { seq[n++] = tile[offset]; });
+  for (const Position& pos : kScan)
+    for_hp_blocks(pw, ph, pos, [&](size_t offset) { seq[n++] = tile[offset]; });
   for (int s = 0; s < 15; ++s) group_inverse[s] = inverse[hp_band(kScan[s].v * 4 + kScan[s].u)];
   RlgrState hp_state = hp_start(lp_flag, lp_zero);
   rlgr_encode_quantizing(out, seq, n, size_t(bx_count) * by_count, group_inverse, kAcDeadZone, hp_state);
   n = 0;
-  for (const Position& pos : kScan) for_hp_blocks(pw, ph, pos, [&](size_t offset) { tile[offset] = seq[n++]; });
+  for (const Position& pos : kScan)
+    for_hp_blocks(pw, ph, pos, [&](size_t offset) { tile[offset] = seq[n++]; });
 }
 
 void dequantize_tile(int32_t* tile, int pw, int ph, const BandSteps& steps) {
@@ -220,7 +221,9 @@ const uint32_t* band_layout(TileWork& work, int pw, int ph) {
   layout.padded_width = pw;
   layout.padded_height = ph;
   layout.slots.resize(size_t(pw) * ph - size_t(mbx) * mby);
-  const auto slot = [](int band, size_t offset) { return uint32_t(band) << kSlotOffsetBits | uint32_t(offset); };
+  const auto slot = [](int band, size_t offset) {
+    return uint32_t(band) << kSlotOffsetBits | uint32_t(offset);
+  };
   size_t n = 0;
   for (const Position& pos : kScan) {
     const int band = lp_band(pos.v * 4 + pos.u);
@@ -303,7 +306,8 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
 }
 
 void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {
-  for (int y = 0; y < h; ++y) std::memcpy(dst + size_t(y) * w, tile + size_t(y) * pw, size_t(w) * sizeof(int32_t));
+  for (int y = 0; y < h; ++y)
+    std::memcpy(dst + size_t(y) * w, tile + size_t(y) * pw, size_t(w) * sizeof(int32_t));
 }
 
 // The encoder picks fraction_bits so that the scaled samples stay within +-2^22 (quantizer.h).
@@ -371,7 +375,8 @@ size_t encode_spatial(const int32_t* src, ptrdiff_t stride, int w, int h, const 
   const int64_t e = params.max_error, bin = 2 * e + 1;
   int32_t* quantized = work.reconstruction.data();  // reused as input, rewritten below
   for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) quantized[size_t(y) * w + x] = int32_t(floor_div(src[y * stride + x] + e, bin));
+    for (int x = 0; x < w; ++x)
+      quantized[size_t(y) * w + x] = int32_t(floor_div(src[y * stride + x] + e, bin));
   out[0] = uint8_t(TileMode::SpatialQuantized);
   BitWriter bits(out + 1, capacity - 1);
   int32_t* tile = work.coefficients.data();
@@ -407,8 +412,8 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
     return encode_transform(src, src_stride, w, h, params, work, out, capacity, want_reconstruction);
   // Max-error mode: try spatial quantisation first (into the side buffer), then the transform with
   // corrections (into out, leaving its reconstruction in work); keep the smaller.
-  const size_t spatial = encode_spatial(src, src_stride, w, h, params, work, work.alternative.data(),
-                                        work.alternative.size());
+  const size_t spatial =
+      encode_spatial(src, src_stride, w, h, params, work, work.alternative.data(), work.alternative.size());
   assert(spatial > 0);
   const size_t transform = encode_transform(src, src_stride, w, h, params, work, out, capacity, true);
   if (transform > 0 && transform <= spatial) return transform;

@@ -2,8 +2,8 @@
 // the max-error layer. A tile payload is one mode byte followed by one bitstream (docs/codec.md).
 #pragma once
 
-#include <cstddef>
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -12,8 +12,8 @@
 namespace codec::detail {
 
 enum class TileMode : uint8_t {
-  Transform = 0,            // lapped transform at the stream's band steps (+ corrections if bounded)
-  SpatialQuantized = 1,     // max-error mode only: samples quantised with step 2E+1, coded losslessly
+  Transform = 0,         // lapped transform at the stream's band steps (+ corrections if bounded)
+  SpatialQuantized = 1,  // max-error mode only: samples quantised with step 2E+1, coded losslessly
 };
 
 struct TileParams {
@@ -37,8 +37,8 @@ struct TileWork {
   // A stream has at most four padded tile shapes (interior, right edge, bottom edge, corner).
   std::array<BandLayout, 4> layouts;
   size_t next_layout = 0;
-  std::vector<int32_t> coefficients;  // padded tile
-  std::vector<int32_t> sequence;      // one band's values in coding order
+  std::vector<int32_t> coefficients;    // padded tile
+  std::vector<int32_t> sequence;        // one band's values in coding order
   std::vector<int32_t> reconstruction;  // width x height
   std::vector<uint8_t> alternative;     // second candidate payload in max-error mode
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
@@ -53,9 +53,8 @@ size_t tile_payload_bound(int width, int height);
 // Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
 // the payload size, or 0 when it does not fit. With want_reconstruction, work.reconstruction then
 // holds the decoder's output (row stride = width).
-size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height,
-                   const TileParams& params, TileWork& work, uint8_t* out, size_t capacity,
-                   bool want_reconstruction);
+size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height, const TileParams& params,
+                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction);
 
 enum class TileResult { Ok, Corrupt };
 // The part of a decoded tile the caller wants: samples [x0, x1) x [y0, y1) of the tile (inside

@@ -28,7 +28,8 @@ codec::Scratch& thread_scratch() {
 }  // namespace
 
 PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
-    : options_(options), band_rows_(options.band_rows > 0 ? options.band_rows : 4 * int64_t(options.tile_size)) {
+    : options_(options),
+      band_rows_(options.band_rows > 0 ? options.band_rows : 4 * int64_t(options.tile_size)) {
   if (codec::encode_bound(16, 16, to_codec(options_)) == 0)
     throw std::invalid_argument("residual coder: invalid options (step " + std::to_string(options_.step) +
                                 ", tile size " + std::to_string(options_.tile_size) + ")");
@@ -44,9 +45,9 @@ std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w
   if (s != codec::Status::Ok) {
     int64_t largest = 0;
     for (int64_t i = 0; i < w * h; ++i) largest = std::max<int64_t>(largest, std::abs(int64_t(residual[i])));
-    throw std::runtime_error(std::string("residual coder: libcodec encode failed (") + std::to_string(w) + "x" +
-                             std::to_string(h) + " band, largest |residual| " + std::to_string(largest) +
-                             "): " + codec::status_name(s));
+    throw std::runtime_error(std::string("residual coder: libcodec encode failed (") + std::to_string(w) +
+                             "x" + std::to_string(h) + " band, largest |residual| " +
+                             std::to_string(largest) + "): " + codec::status_name(s));
   }
   out.resize(written);
   return out;

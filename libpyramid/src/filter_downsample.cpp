@@ -48,16 +48,17 @@ DownsampleFilter DownsampleFilter::from_orbit_weights(const std::array<double, 2
     for (int dx = -kRadius; dx <= kRadius; ++dx) {
       const int a = std::max(std::abs(dx), std::abs(dy)), b = std::min(std::abs(dx), std::abs(dy));
       for (size_t k = 0; k < orbits.size(); ++k)
-        if (orbits[k].a == a && orbits[k].b == b) f.taps[size_t((dy + kRadius) * kSize + dx + kRadius)] = w[k];
+        if (orbits[k].a == a && orbits[k].b == b)
+          f.taps[size_t((dy + kRadius) * kSize + dx + kRadius)] = w[k];
     }
   return f;
 }
 
 DownsampleFilter DownsampleFilter::default_filter() {
   std::array<double, 21> w{};
-  w[0] = 0.25;     // (0,0)
-  w[1] = 0.125;    // (1,0)
-  w[2] = 0.0625;   // (1,1)
+  w[0] = 0.25;    // (0,0)
+  w[1] = 0.125;   // (1,0)
+  w[2] = 0.0625;  // (1,1)
   return from_orbit_weights(w, Kind::Default);
 }
 
@@ -84,7 +85,8 @@ int32_t round_to_int32(double x) {
   return int32_t(r);
 }
 
-DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows)
+DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads,
+                                   int64_t batch_rows)
     : filter_(filter),
       symmetric_(filter.symmetric8()),
       fine_(fine),
@@ -184,7 +186,9 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
   const double* E = s.even.data();
   const double* O = s.odd.data();
   // Sample at padded position 2i + 5 + d lives in E[i + (5+d)/2] (5+d even) or O[i + (4+d)/2].
-  auto source = [&](int d) -> const double* { return ((5 + d) % 2 == 0) ? E + (5 + d) / 2 : O + (4 + d) / 2; };
+  auto source = [&](int d) -> const double* {
+    return ((5 + d) % 2 == 0) ? E + (5 + d) / 2 : O + (4 + d) / 2;
+  };
   auto split = [&](const double* row) {
     for (int64_t t = 0; t < half_even; ++t) s.even[size_t(t)] = row[2 * t];
     for (int64_t t = 0; t < half_odd; ++t) s.odd[size_t(t)] = row[2 * t + 1];

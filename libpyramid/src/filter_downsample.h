@@ -48,7 +48,7 @@ class DownsampleEngine {
   int threads_;
   int64_t batch_;
   int64_t padded_width_;
-  std::vector<double> rows_;   // capacity_ padded fine rows, ring-free: rows base_.. base_+count_-1
+  std::vector<double> rows_;  // capacity_ padded fine rows, ring-free: rows base_.. base_+count_-1
   int64_t capacity_ = 0, base_ = 0, count_ = 0, pushed_ = 0, next_coarse_ = 0;
   std::vector<Scratch> scratch_;
   std::vector<double> out_;

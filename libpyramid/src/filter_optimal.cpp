@@ -50,7 +50,8 @@ std::vector<Rect> filter_fit_windows(GridSize level, const FilterFitOptions& opt
   std::vector<Rect> out;
   const int64_t side = std::min({options.window, level.width, level.height});
   if (side < 3 * kMargin || options.max_windows <= 0) return out;
-  int64_t nx = std::clamp<int64_t>(level.width / side, 1, 4), ny = std::clamp<int64_t>(level.height / side, 1, 4);
+  int64_t nx = std::clamp<int64_t>(level.width / side, 1, 4),
+          ny = std::clamp<int64_t>(level.height / side, 1, 4);
   while (nx * ny > options.max_windows) (nx >= ny ? nx : ny) -= 1;
   for (int64_t ty = 0; ty < ny; ++ty)
     for (int64_t tx = 0; tx < nx; ++tx) {
@@ -65,13 +66,15 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
                                     const std::vector<std::vector<int32_t>>& window_data,
                                     const FilterFitOptions& options, FilterFitReport* report) {
   if (report) *report = FilterFitReport{};
-  if (windows.size() != window_data.size()) throw std::invalid_argument("fit_optimal_filter: window count mismatch");
+  if (windows.size() != window_data.size())
+    throw std::invalid_argument("fit_optimal_filter: window count mismatch");
   const auto& orbits = symmetric_orbits();
 
   // Count the equations (the report's figure and the minimum for a fit).
   int64_t rows = 0;
   for (const Rect& r : windows)
-    if (r.width > 2 * kMargin && r.height > 2 * kMargin) rows += (r.width - 2 * kMargin) * (r.height - 2 * kMargin);
+    if (r.width > 2 * kMargin && r.height > 2 * kMargin)
+      rows += (r.width - 2 * kMargin) * (r.height - 2 * kMargin);
   if (report) {
     report->windows = int(windows.size());
     report->equations = rows;
@@ -103,7 +106,8 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
     for (int k = 0; k < kOrbits; ++k) {
       std::array<double, kOrbits> unit{};
       unit[size_t(k)] = 1.0;
-      const DownsampleFilter basis = DownsampleFilter::from_orbit_weights(unit, DownsampleFilter::Kind::Custom);
+      const DownsampleFilter basis =
+          DownsampleFilter::from_orbit_weights(unit, DownsampleFilter::Kind::Custom);
       detail::downsample_real(basis, window_data[wi].data(), fine, coarse.data());
       predk[size_t(k)].resize(size_t(r.width * r.height));
       upsample_real(coarse.data(), fine, predk[size_t(k)].data());
@@ -131,7 +135,7 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
     R = fold.matrixQR().topRows(kCols).triangularView<Eigen::Upper>();
   }
   const Eigen::MatrixXd RA = R.topLeftCorner(kUnknowns, kUnknowns);
-  const Eigen::VectorXd z = R.col(kUnknowns).head(kUnknowns);  // Q^T y
+  const Eigen::VectorXd z = R.col(kUnknowns).head(kUnknowns);             // Q^T y
   const double rho2 = R(kUnknowns, kUnknowns) * R(kUnknowns, kUnknowns);  // ||y - A a||^2 at the optimum
 
   // A lone feature (a spike, a single ridge) can make the matrix full rank with only a few hundred
@@ -143,7 +147,8 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
       if (peak > tol) ++active;
     if (report) report->active_equations = active;
     if (active < options.min_active_equations)
-      return fallback(report, "too few informative samples (" + std::to_string(active) + " non-flat equations)");
+      return fallback(report,
+                      "too few informative samples (" + std::to_string(active) + " non-flat equations)");
   }
   // Column scaling makes the rank/condition test about the shape of the data, not its amplitude.
   Eigen::VectorXd norms = RA.colwise().norm();

@@ -99,7 +99,8 @@ void horizontal_row(const In* row, int64_t col0, int64_t n, int64_t fx0, int64_t
 }
 
 inline int32_t saturate_int32(int64_t v) {
-  return int32_t(std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
+  return int32_t(
+      std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
 }
 
 struct IntegerFinish {
@@ -254,9 +255,8 @@ void upsample_region(const CoarseWindow& coarse, GridSize fine_level, const Rect
   const int32_t limit = int32_path_limit(fine, coarse.level);
   if (within(need_data, coarse.stride, need.width, need.height, limit)) {
     scratch.rows32.resize(count);
-    upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(coarse.data, coarse.stride, coarse.rect,
-                                                             coarse.level, fine, out, out_stride,
-                                                             scratch.rows32.data());
+    upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(
+        coarse.data, coarse.stride, coarse.rect, coarse.level, fine, out, out_stride, scratch.rows32.data());
   } else {
     scratch.rows.resize(count);
     upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(

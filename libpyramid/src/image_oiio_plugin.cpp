@@ -40,16 +40,35 @@ std::string or_unknown(std::string reason) { return reason.empty() ? std::string
 
 bool type_for_pixel(int32_t pixel, TypeDesc& type) {
   switch (pixel) {
-    case TERRAIN_PIXEL_UINT8: type = TypeDesc::UINT8; return true;
-    case TERRAIN_PIXEL_INT8: type = TypeDesc::INT8; return true;
-    case TERRAIN_PIXEL_UINT16: type = TypeDesc::UINT16; return true;
-    case TERRAIN_PIXEL_INT16: type = TypeDesc::INT16; return true;
-    case TERRAIN_PIXEL_UINT32: type = TypeDesc::UINT32; return true;
-    case TERRAIN_PIXEL_INT32: type = TypeDesc::INT32; return true;
-    case TERRAIN_PIXEL_HALF: type = TypeDesc::HALF; return true;
-    case TERRAIN_PIXEL_FLOAT: type = TypeDesc::FLOAT; return true;
-    case TERRAIN_PIXEL_DOUBLE: type = TypeDesc::DOUBLE; return true;
-    default: return false;
+    case TERRAIN_PIXEL_UINT8:
+      type = TypeDesc::UINT8;
+      return true;
+    case TERRAIN_PIXEL_INT8:
+      type = TypeDesc::INT8;
+      return true;
+    case TERRAIN_PIXEL_UINT16:
+      type = TypeDesc::UINT16;
+      return true;
+    case TERRAIN_PIXEL_INT16:
+      type = TypeDesc::INT16;
+      return true;
+    case TERRAIN_PIXEL_UINT32:
+      type = TypeDesc::UINT32;
+      return true;
+    case TERRAIN_PIXEL_INT32:
+      type = TypeDesc::INT32;
+      return true;
+    case TERRAIN_PIXEL_HALF:
+      type = TypeDesc::HALF;
+      return true;
+    case TERRAIN_PIXEL_FLOAT:
+      type = TypeDesc::FLOAT;
+      return true;
+    case TERRAIN_PIXEL_DOUBLE:
+      type = TypeDesc::DOUBLE;
+      return true;
+    default:
+      return false;
   }
 }
 
@@ -84,12 +103,15 @@ int32_t guarded(char* message, size_t message_size, int32_t failure_status, Body
 TERRAIN_IMAGE_EXPORT int32_t terrain_image_abi_version(void) { return TERRAIN_IMAGE_PLUGIN_ABI_VERSION; }
 
 TERRAIN_IMAGE_EXPORT int32_t terrain_image_open(const char* path, terrain_image_reader** reader,
-                                                terrain_image_header* header, char* message, size_t message_size) {
+                                                terrain_image_header* header, char* message,
+                                                size_t message_size) {
   return guarded(message, message_size, TERRAIN_IMAGE_OPEN_FAILED, [&]() -> int32_t {
-    if (!path || !reader || !header) return report(TERRAIN_IMAGE_BAD_ARGUMENT, "null argument", message, message_size);
+    if (!path || !reader || !header)
+      return report(TERRAIN_IMAGE_BAD_ARGUMENT, "null argument", message, message_size);
     *reader = nullptr;
     OIIO::ImageSpec config;
-    // Keep RGB exactly as stored: by default OIIO premultiplies by alpha, which would corrupt Terrain-RGB codes.
+    // Keep RGB exactly as stored: by default OIIO premultiplies by alpha, which would corrupt Terrain-RGB
+    // codes.
     config.attribute("oiio:UnassociatedAlpha", 1);
     auto input = OIIO::ImageInput::open(path, &config);
     if (!input) return report(TERRAIN_IMAGE_OPEN_FAILED, or_unknown(OIIO::geterror()), message, message_size);
@@ -106,9 +128,9 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_open(const char* path, terrain_image_
   });
 }
 
-TERRAIN_IMAGE_EXPORT int32_t terrain_image_read_rows(terrain_image_reader* reader, int32_t row_begin, int32_t row_end,
-                                                     int32_t channels, int32_t pixel, void* pixels, char* message,
-                                                     size_t message_size) {
+TERRAIN_IMAGE_EXPORT int32_t terrain_image_read_rows(terrain_image_reader* reader, int32_t row_begin,
+                                                     int32_t row_end, int32_t channels, int32_t pixel,
+                                                     void* pixels, char* message, size_t message_size) {
   return guarded(message, message_size, TERRAIN_IMAGE_READ_FAILED, [&]() -> int32_t {
     TypeDesc type;
     if (!reader || !type_for_pixel(pixel, type))
@@ -123,9 +145,10 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_read_rows(terrain_image_reader* reade
 
 TERRAIN_IMAGE_EXPORT void terrain_image_close(terrain_image_reader* reader) { delete reader; }
 
-TERRAIN_IMAGE_EXPORT int32_t terrain_image_create(const char* path, int32_t width, int32_t height, int32_t channels,
-                                                  int32_t pixel, const char* compression, int32_t flags,
-                                                  terrain_image_writer** writer, char* message, size_t message_size) {
+TERRAIN_IMAGE_EXPORT int32_t terrain_image_create(const char* path, int32_t width, int32_t height,
+                                                  int32_t channels, int32_t pixel, const char* compression,
+                                                  int32_t flags, terrain_image_writer** writer, char* message,
+                                                  size_t message_size) {
   return guarded(message, message_size, TERRAIN_IMAGE_CREATE_FAILED, [&]() -> int32_t {
     TypeDesc type;
     if (!path || !writer || !type_for_pixel(pixel, type))
@@ -137,14 +160,16 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_create(const char* path, int32_t widt
     if (compression) spec.attribute("compression", compression);
     // OIIO stamps the current time when DateTime is absent; a fixed value keeps output byte-reproducible.
     if (flags & TERRAIN_IMAGE_NO_TIMESTAMP) spec.attribute("DateTime", "");
-    if (!output->open(path, spec)) return report(TERRAIN_IMAGE_CREATE_FAILED, output->geterror(), message, message_size);
+    if (!output->open(path, spec))
+      return report(TERRAIN_IMAGE_CREATE_FAILED, output->geterror(), message, message_size);
     *writer = new terrain_image_writer{std::move(output), type};
     return TERRAIN_IMAGE_OK;
   });
 }
 
-TERRAIN_IMAGE_EXPORT int32_t terrain_image_write_rows(terrain_image_writer* writer, int32_t row_begin, int32_t row_end,
-                                                      const void* pixels, char* message, size_t message_size) {
+TERRAIN_IMAGE_EXPORT int32_t terrain_image_write_rows(terrain_image_writer* writer, int32_t row_begin,
+                                                      int32_t row_end, const void* pixels, char* message,
+                                                      size_t message_size) {
   return guarded(message, message_size, TERRAIN_IMAGE_WRITE_FAILED, [&]() -> int32_t {
     if (!writer) return report(TERRAIN_IMAGE_BAD_ARGUMENT, "null writer", message, message_size);
     if (!writer->output->write_scanlines(row_begin, row_end, 0, writer->type, pixels))
@@ -153,7 +178,8 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_write_rows(terrain_image_writer* writ
   });
 }
 
-TERRAIN_IMAGE_EXPORT int32_t terrain_image_finish(terrain_image_writer* writer, char* message, size_t message_size) {
+TERRAIN_IMAGE_EXPORT int32_t terrain_image_finish(terrain_image_writer* writer, char* message,
+                                                  size_t message_size) {
   return guarded(message, message_size, TERRAIN_IMAGE_WRITE_FAILED, [&]() -> int32_t {
     if (!writer) return report(TERRAIN_IMAGE_BAD_ARGUMENT, "null writer", message, message_size);
     if (!writer->output->close())

@@ -43,7 +43,8 @@ std::string plugin_path(bool& from_env, std::string& tried) {
   std::vector<std::string> candidates;
   std::error_code ec;
   const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-  if (!ec) candidates.push_back((exe.parent_path() / TERRAIN_IMAGE_PLUGIN_RELATIVE).lexically_normal().string());
+  if (!ec)
+    candidates.push_back((exe.parent_path() / TERRAIN_IMAGE_PLUGIN_RELATIVE).lexically_normal().string());
   candidates.push_back(TERRAIN_IMAGE_PLUGIN_PATH);
   candidates.push_back(TERRAIN_IMAGE_PLUGIN_INSTALLED);
   for (const std::string& c : candidates) {
@@ -58,11 +59,10 @@ LoadedPlugin load_plugin() {
   bool from_env = false;
   std::string tried;
   const std::string path = plugin_path(from_env, tried);
-  const std::string where =
-      "cannot load the image plugin " + path +
-      (from_env ? " (from $TERRAIN_IMAGE_PLUGIN)"
-                : (tried.empty() ? std::string() : " (none of " + tried + " exists)") +
-                      " (set $TERRAIN_IMAGE_PLUGIN to use another)");
+  const std::string where = "cannot load the image plugin " + path +
+                            (from_env ? " (from $TERRAIN_IMAGE_PLUGIN)"
+                                      : (tried.empty() ? std::string() : " (none of " + tried + " exists)") +
+                                            " (set $TERRAIN_IMAGE_PLUGIN to use another)");
   void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
   if (!handle) {
     const char* why = dlerror();
@@ -81,8 +81,8 @@ LoadedPlugin load_plugin() {
   decltype(&terrain_image_abi_version) abi_version = nullptr;
   find("terrain_image_abi_version", abi_version);
   if (loaded.error.empty() && abi_version() != TERRAIN_IMAGE_PLUGIN_ABI_VERSION)
-    loaded.error = where + ": it has interface version " + std::to_string(abi_version()) + ", this program needs " +
-                   std::to_string(TERRAIN_IMAGE_PLUGIN_ABI_VERSION);
+    loaded.error = where + ": it has interface version " + std::to_string(abi_version()) +
+                   ", this program needs " + std::to_string(TERRAIN_IMAGE_PLUGIN_ABI_VERSION);
   ImagePlugin& f = loaded.functions;
   find("terrain_image_open", f.open);
   find("terrain_image_read_rows", f.read_rows);

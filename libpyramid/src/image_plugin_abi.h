@@ -19,12 +19,12 @@ extern "C" {
 
 enum terrain_image_status {
   TERRAIN_IMAGE_OK = 0,
-  TERRAIN_IMAGE_OPEN_FAILED = 1,   // no reader for the file, or it cannot be opened / decoded
-  TERRAIN_IMAGE_READ_FAILED = 2,   // a row range could not be decoded
-  TERRAIN_IMAGE_NO_WRITER = 3,     // no writer for the file name's extension
-  TERRAIN_IMAGE_CREATE_FAILED = 4, // the writer could not create the file
-  TERRAIN_IMAGE_WRITE_FAILED = 5,  // writing rows or closing the file failed
-  TERRAIN_IMAGE_BAD_ARGUMENT = 6,  // unknown pixel type, or a handle that is null
+  TERRAIN_IMAGE_OPEN_FAILED = 1,    // no reader for the file, or it cannot be opened / decoded
+  TERRAIN_IMAGE_READ_FAILED = 2,    // a row range could not be decoded
+  TERRAIN_IMAGE_NO_WRITER = 3,      // no writer for the file name's extension
+  TERRAIN_IMAGE_CREATE_FAILED = 4,  // the writer could not create the file
+  TERRAIN_IMAGE_WRITE_FAILED = 5,   // writing rows or closing the file failed
+  TERRAIN_IMAGE_BAD_ARGUMENT = 6,   // unknown pixel type, or a handle that is null
 };
 
 // Pixel types as stored or requested. TERRAIN_PIXEL_OTHER: anything else (header only).
@@ -43,8 +43,8 @@ enum terrain_image_pixel {
 
 struct terrain_image_header {
   int32_t width, height, depth, channels;
-  int32_t pixel;          // enum terrain_image_pixel of the stored samples
-  char pixel_name[32];    // OpenImageIO's name of the stored type ("uint8", "half", ...), for messages
+  int32_t pixel;        // enum terrain_image_pixel of the stored samples
+  char pixel_name[32];  // OpenImageIO's name of the stored type ("uint8", "half", ...), for messages
 };
 
 typedef struct terrain_image_reader terrain_image_reader;
@@ -53,12 +53,13 @@ typedef struct terrain_image_writer terrain_image_writer;
 int32_t terrain_image_abi_version(void);
 
 // Opens `path` (RGB kept as stored: alpha is not premultiplied) and fills `header`.
-int32_t terrain_image_open(const char* path, terrain_image_reader** reader, struct terrain_image_header* header,
-                           char* message, size_t message_size);
+int32_t terrain_image_open(const char* path, terrain_image_reader** reader,
+                           struct terrain_image_header* header, char* message, size_t message_size);
 // Decodes rows [row_begin, row_end) (0 = first row), `channels` channels from the first, converted
 // to `pixel`, into `pixels` (row_end - row_begin rows of width * channels samples, packed).
-int32_t terrain_image_read_rows(terrain_image_reader* reader, int32_t row_begin, int32_t row_end, int32_t channels,
-                                int32_t pixel, void* pixels, char* message, size_t message_size);
+int32_t terrain_image_read_rows(terrain_image_reader* reader, int32_t row_begin, int32_t row_end,
+                                int32_t channels, int32_t pixel, void* pixels, char* message,
+                                size_t message_size);
 void terrain_image_close(terrain_image_reader* reader);
 
 // Bit of terrain_image_create's flags: write an empty DateTime (otherwise some writers stamp the
@@ -68,11 +69,11 @@ void terrain_image_close(terrain_image_reader* reader);
 // Creates `path` (the writer is chosen by its extension) for width x height pixels of `channels`
 // samples of type `pixel`; `compression` may be NULL for the writer's default.
 int32_t terrain_image_create(const char* path, int32_t width, int32_t height, int32_t channels, int32_t pixel,
-                             const char* compression, int32_t flags, terrain_image_writer** writer, char* message,
-                             size_t message_size);
+                             const char* compression, int32_t flags, terrain_image_writer** writer,
+                             char* message, size_t message_size);
 // Writes rows [row_begin, row_end), packed like terrain_image_read_rows' output.
-int32_t terrain_image_write_rows(terrain_image_writer* writer, int32_t row_begin, int32_t row_end, const void* pixels,
-                                 char* message, size_t message_size);
+int32_t terrain_image_write_rows(terrain_image_writer* writer, int32_t row_begin, int32_t row_end,
+                                 const void* pixels, char* message, size_t message_size);
 // Completes the file; the writer must still be destroyed.
 int32_t terrain_image_finish(terrain_image_writer* writer, char* message, size_t message_size);
 void terrain_image_destroy(terrain_image_writer* writer);

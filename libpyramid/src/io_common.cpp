@@ -14,11 +14,16 @@ namespace terrain {
 
 const char* sample_type_name(SampleType t) {
   switch (t) {
-    case SampleType::Int16: return "int16";
-    case SampleType::UInt16: return "uint16";
-    case SampleType::Int32: return "int32";
-    case SampleType::Float32: return "float32";
-    case SampleType::TerrainRGB: return "terrain-rgb";
+    case SampleType::Int16:
+      return "int16";
+    case SampleType::UInt16:
+      return "uint16";
+    case SampleType::Int32:
+      return "int32";
+    case SampleType::Float32:
+      return "float32";
+    case SampleType::TerrainRGB:
+      return "terrain-rgb";
   }
   return "unknown";
 }
@@ -34,12 +39,18 @@ std::optional<SampleType> sample_type_from_name(const std::string& name) {
 
 const char* file_format_name(FileFormat f) {
   switch (f) {
-    case FileFormat::Hgt: return "srtm-hgt";
-    case FileFormat::Raw: return "raw";
-    case FileFormat::EsriBil: return "esri-bil";
-    case FileFormat::EsriFlt: return "esri-flt";
-    case FileFormat::Image: return "image";
-    case FileFormat::TerrainRgbImage: return "terrain-rgb-image";
+    case FileFormat::Hgt:
+      return "srtm-hgt";
+    case FileFormat::Raw:
+      return "raw";
+    case FileFormat::EsriBil:
+      return "esri-bil";
+    case FileFormat::EsriFlt:
+      return "esri-flt";
+    case FileFormat::Image:
+      return "image";
+    case FileFormat::TerrainRgbImage:
+      return "terrain-rgb-image";
   }
   return "unknown";
 }
@@ -51,7 +62,8 @@ void fail(IoErrorCode code, const std::string& path, const std::string& problem)
 }
 
 std::string to_lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(c >= 'A' && c <= 'Z' ? c + 32 : c); });
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return char(c >= 'A' && c <= 'Z' ? c + 32 : c); });
   return s;
 }
 
@@ -76,22 +88,29 @@ uint64_t existing_file_size(const std::string& path) {
 
 int stored_bytes(StoredType t) {
   switch (t) {
-    case StoredType::UInt8: return 1;
+    case StoredType::UInt8:
+      return 1;
     case StoredType::Int16:
-    case StoredType::UInt16: return 2;
+    case StoredType::UInt16:
+      return 2;
     case StoredType::Int32:
-    case StoredType::Float32: return 4;
+    case StoredType::Float32:
+      return 4;
   }
   return 1;
 }
 
 StoredType stored_type_for(SampleType t) {
   switch (t) {
-    case SampleType::Int16: return StoredType::Int16;
-    case SampleType::UInt16: return StoredType::UInt16;
+    case SampleType::Int16:
+      return StoredType::Int16;
+    case SampleType::UInt16:
+      return StoredType::UInt16;
     case SampleType::Int32:
-    case SampleType::TerrainRGB: return StoredType::Int32;
-    case SampleType::Float32: return StoredType::Float32;
+    case SampleType::TerrainRGB:
+      return StoredType::Int32;
+    case SampleType::Float32:
+      return StoredType::Float32;
   }
   return StoredType::Int16;
 }

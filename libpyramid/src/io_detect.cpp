@@ -33,29 +33,39 @@ Kind detect_kind(const std::string& path, const ReadOptions& options) {
         std::memcmp(magic, "MM\0*", 4) == 0 || std::memcmp(magic, "\x76\x2f\x31\x01", 4) == 0)
       return Kind::Image;
   }
-  if (options.width || options.height || options.sample_type || io::file_exists(path + ".json")) return Kind::Raw;
+  if (options.width || options.height || options.sample_type || io::file_exists(path + ".json"))
+    return Kind::Raw;
   io::fail(IoErrorCode::UnknownType, path,
-           "unknown format: expected .hgt[.gz], .bil/.flt, .png/.tif/.exr, or a raw grid with a .json sidecar or --type/--width/--height");
+           "unknown format: expected .hgt[.gz], .bil/.flt, .png/.tif/.exr, or a raw grid with a .json "
+           "sidecar or --type/--width/--height");
 }
 
 }  // namespace
 
 GridInfo probe(const std::string& path, const ReadOptions& options) {
   switch (detect_kind(path, options)) {
-    case Kind::Hgt: return io::probe_hgt_layout(path, options).info;
-    case Kind::Esri: return io::probe_esri_layout(path, options).info;
-    case Kind::Image: return io::probe_image(path, options);
-    case Kind::Raw: return io::probe_raw_layout(path, options).info;
+    case Kind::Hgt:
+      return io::probe_hgt_layout(path, options).info;
+    case Kind::Esri:
+      return io::probe_esri_layout(path, options).info;
+    case Kind::Image:
+      return io::probe_image(path, options);
+    case Kind::Raw:
+      return io::probe_raw_layout(path, options).info;
   }
   return {};
 }
 
 std::unique_ptr<BandReader> open_band_reader(const std::string& path, const ReadOptions& options) {
   switch (detect_kind(path, options)) {
-    case Kind::Hgt: return io::open_raw_stream(path, io::probe_hgt_layout(path, options));
-    case Kind::Esri: return io::open_raw_stream(path, io::probe_esri_layout(path, options));
-    case Kind::Image: return io::open_image_reader(path, options);
-    case Kind::Raw: return io::open_raw_stream(path, io::probe_raw_layout(path, options));
+    case Kind::Hgt:
+      return io::open_raw_stream(path, io::probe_hgt_layout(path, options));
+    case Kind::Esri:
+      return io::open_raw_stream(path, io::probe_esri_layout(path, options));
+    case Kind::Image:
+      return io::open_image_reader(path, options);
+    case Kind::Raw:
+      return io::open_raw_stream(path, io::probe_raw_layout(path, options));
   }
   return nullptr;
 }

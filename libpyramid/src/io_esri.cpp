@@ -13,7 +13,8 @@ namespace {
 std::string header_path_for(const std::string& path) {
   auto dot = path.find_last_of('.');
   auto slash = path.find_last_of('/');
-  std::string base = (dot != std::string::npos && (slash == std::string::npos || dot > slash)) ? path.substr(0, dot) : path;
+  std::string base =
+      (dot != std::string::npos && (slash == std::string::npos || dot > slash)) ? path.substr(0, dot) : path;
   for (const char* ext : {".hdr", ".HDR"})
     if (file_exists(base + ext)) return base + ext;
   return base + ".hdr";
@@ -23,7 +24,8 @@ using Header = std::map<std::string, std::string>;  // upper-case keyword -> val
 
 // `where` names the grid and its header in error messages.
 Header read_header(const std::string& hdr, const std::string& where) {
-  if (!file_exists(hdr)) fail(IoErrorCode::MissingField, where, "missing header file " + hdr + " for the ESRI grid");
+  if (!file_exists(hdr))
+    fail(IoErrorCode::MissingField, where, "missing header file " + hdr + " for the ESRI grid");
   std::ifstream in(hdr);
   if (!in) fail(IoErrorCode::NotFound, where, "cannot open the header");
   Header out;
@@ -80,11 +82,13 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
   g.height = header_dimension(h, "NROWS", where);
   g.width = header_dimension(h, "NCOLS", where);
   if (auto nb = header_number(h, "NBANDS", where); nb && *nb != 1)
-    fail(IoErrorCode::UnknownType, where, "only single-band grids are supported (NBANDS " + format_double(*nb) + ")");
+    fail(IoErrorCode::UnknownType, where,
+         "only single-band grids are supported (NBANDS " + format_double(*nb) + ")");
 
   int nbits = is_flt ? 32 : 8;  // the BIL default is 8-bit unsigned
   if (auto nb = header_number(h, "NBITS", where)) {
-    if (!(*nb == 8 || *nb == 16 || *nb == 32)) fail(IoErrorCode::UnknownType, where, "unsupported NBITS " + format_double(*nb));
+    if (!(*nb == 8 || *nb == 16 || *nb == 32))
+      fail(IoErrorCode::UnknownType, where, "unsupported NBITS " + format_double(*nb));
     nbits = int(*nb);
   }
   std::string pixel = h.count("PIXELTYPE") ? to_lower(h["PIXELTYPE"]) : (is_flt ? "float" : "");
@@ -105,7 +109,8 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
       layout.stored = StoredType::Int32;
       g.sample_type = SampleType::Int32;
     } else {
-      fail(IoErrorCode::UnknownType, where, "unsupported NBITS " + std::to_string(nbits) + " for PIXELTYPE " + h["PIXELTYPE"]);
+      fail(IoErrorCode::UnknownType, where,
+           "unsupported NBITS " + std::to_string(nbits) + " for PIXELTYPE " + h["PIXELTYPE"]);
     }
   } else {
     fail(IoErrorCode::UnknownType, where, "unknown PIXELTYPE \"" + h["PIXELTYPE"] + "\"");
@@ -113,9 +118,12 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
 
   if (h.count("BYTEORDER")) {
     std::string bo = to_lower(h["BYTEORDER"]);
-    if (bo == "i" || bo == "lsbfirst") layout.big_endian = false;
-    else if (bo == "m" || bo == "msbfirst") layout.big_endian = true;
-    else fail(IoErrorCode::UnknownType, where, "unknown BYTEORDER \"" + h["BYTEORDER"] + "\"");
+    if (bo == "i" || bo == "lsbfirst")
+      layout.big_endian = false;
+    else if (bo == "m" || bo == "msbfirst")
+      layout.big_endian = true;
+    else
+      fail(IoErrorCode::UnknownType, where, "unknown BYTEORDER \"" + h["BYTEORDER"] + "\"");
   }
   if (auto layout_kw = h.find("LAYOUT"); layout_kw != h.end()) {
     std::string l = to_lower(layout_kw->second);
@@ -123,7 +131,8 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
       fail(IoErrorCode::UnknownType, where, "unknown LAYOUT \"" + layout_kw->second + "\"");
   }
   if (auto skip = header_number(h, "SKIPBYTES", where)) {
-    if (!(*skip >= 0 && *skip <= 4.0e18) || *skip != std::floor(*skip)) fail(IoErrorCode::MissingField, where, "SKIPBYTES must be a non-negative integer");
+    if (!(*skip >= 0 && *skip <= 4.0e18) || *skip != std::floor(*skip))
+      fail(IoErrorCode::MissingField, where, "SKIPBYTES must be a non-negative integer");
     layout.data_offset = uint64_t(*skip);
   }
   if (auto v = header_number(h, "NODATA", where)) g.nodata = *v;
@@ -137,7 +146,8 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
   if (auto ulx = header_number(h, "ULXMAP", where)) g.origin_x = *ulx;  // centre of the upper-left cell
   if (auto uly = header_number(h, "ULYMAP", where)) g.origin_y = *uly;
   if (auto xll = header_number(h, "XLLCORNER", where)) g.origin_x = *xll + 0.5 * g.spacing_x;
-  if (auto yll = header_number(h, "YLLCORNER", where)) g.origin_y = *yll + (double(g.height) - 0.5) * g.spacing_y;
+  if (auto yll = header_number(h, "YLLCORNER", where))
+    g.origin_y = *yll + (double(g.height) - 0.5) * g.spacing_y;
   if (auto xc = header_number(h, "XLLCENTER", where)) g.origin_x = *xc;
   if (auto yc = header_number(h, "YLLCENTER", where)) g.origin_y = *yc + double(g.height - 1) * g.spacing_y;
 

@@ -39,7 +39,8 @@ uint64_t gzip_uncompressed_size(const std::string& path, uint64_t file_size) {
   bool ok = std::fread(magic, 1, 2, f) == 2 && fseeko(f, -4, SEEK_END) == 0 && std::fread(tail, 1, 4, f) == 4;
   std::fclose(f);
   if (!ok) fail(IoErrorCode::NotFound, path, "read error");
-  if (magic[0] != 0x1f || magic[1] != 0x8b) fail(IoErrorCode::CorruptData, path, "not a gzip stream (bad magic)");
+  if (magic[0] != 0x1f || magic[1] != 0x8b)
+    fail(IoErrorCode::CorruptData, path, "not a gzip stream (bad magic)");
   return uint64_t(tail[0]) | uint64_t(tail[1]) << 8 | uint64_t(tail[2]) << 16 | uint64_t(tail[3]) << 24;
 }
 
@@ -75,15 +76,18 @@ RawLayout probe_hgt_layout(const std::string& path, const ReadOptions& options) 
     g.spacing_x = g.spacing_y = size == kSrtm3Bytes ? 3.0 : 1.0;
   } else {
     // Blame the nearer of the two standard tile sizes: short of it is truncation, past it oversize.
-    uint64_t nearest = (size < kSrtm3Bytes || size - kSrtm3Bytes < kSrtm1Bytes - size) ? kSrtm3Bytes : kSrtm1Bytes;
+    uint64_t nearest =
+        (size < kSrtm3Bytes || size - kSrtm3Bytes < kSrtm1Bytes - size) ? kSrtm3Bytes : kSrtm1Bytes;
     const char* tile = nearest == kSrtm3Bytes ? "1201x1201 (SRTM3)" : "3601x3601 (SRTM1)";
     if (size < nearest)
       fail(IoErrorCode::Truncated, path,
-           std::string("truncated: ") + what + std::to_string(size) + " bytes, " + std::to_string(nearest - size) +
-               " short of a " + tile + " tile (" + std::to_string(nearest) + " bytes)");
+           std::string("truncated: ") + what + std::to_string(size) + " bytes, " +
+               std::to_string(nearest - size) + " short of a " + tile + " tile (" + std::to_string(nearest) +
+               " bytes)");
     fail(IoErrorCode::Oversized, path,
-         std::string("oversized: ") + what + std::to_string(size) + " bytes, " + std::to_string(size - nearest) +
-             " more than a " + tile + " tile (" + std::to_string(nearest) + " bytes)");
+         std::string("oversized: ") + what + std::to_string(size) + " bytes, " +
+             std::to_string(size - nearest) + " more than a " + tile + " tile (" + std::to_string(nearest) +
+             " bytes)");
   }
   int lat = 0, lon = 0;
   if (parse_tile_name(std::filesystem::path(path).filename().string(), lat, lon)) {

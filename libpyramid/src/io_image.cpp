@@ -18,9 +18,10 @@ using Message = std::array<char, kImageMessageSize>;
 // How an opened image maps onto a grid: which channels to read, as what, and what they mean.
 struct ImagePlan {
   GridInfo info;
-  int32_t read_pixel = TERRAIN_PIXEL_OTHER;  // native type requested from the plugin, so it does no value conversion
-  size_t read_bytes = 0;                     // bytes per sample of read_pixel
-  int channels = 1;                          // channels read per pixel (1, or 3 for Terrain-RGB)
+  int32_t read_pixel =
+      TERRAIN_PIXEL_OTHER;  // native type requested from the plugin, so it does no value conversion
+  size_t read_bytes = 0;    // bytes per sample of read_pixel
+  int channels = 1;         // channels read per pixel (1, or 3 for Terrain-RGB)
 };
 
 struct OpenedImage {
@@ -35,13 +36,16 @@ OpenedImage open_image(const std::string& path) {
   image.plugin = &image_plugin(IoErrorCode::UnknownType, path);
   Message message{};
   terrain_image_reader* reader = nullptr;
-  const int32_t status = image.plugin->open(path.c_str(), &reader, &image.header, message.data(), message.size());
+  const int32_t status =
+      image.plugin->open(path.c_str(), &reader, &image.header, message.data(), message.size());
   image.reader = ImageReaderHandle(reader, {image.plugin->close});
-  if (status != TERRAIN_IMAGE_OK) fail(IoErrorCode::CorruptData, path, "cannot decode image: " + std::string(message.data()));
+  if (status != TERRAIN_IMAGE_OK)
+    fail(IoErrorCode::CorruptData, path, "cannot decode image: " + std::string(message.data()));
   return image;
 }
 
-ImagePlan plan_image(const std::string& path, const terrain_image_header& header, const ReadOptions& options) {
+ImagePlan plan_image(const std::string& path, const terrain_image_header& header,
+                     const ReadOptions& options) {
   ImagePlan plan;
   GridInfo& g = plan.info;
   g.width = header.width;
@@ -118,12 +122,12 @@ class ImageBandReader final : public BandReader {
       const int64_t ahead = std::max<int64_t>(n, int64_t(std::max<size_t>(1, kReadAheadBytes / row_bytes)));
       const int64_t m = std::min(ahead, g.height - rows_read_);
       if (buffer_.size() < size_t(m) * row_bytes) buffer_.resize(size_t(m) * row_bytes);
-      if (image_.plugin->read_rows(image_.reader.get(), int32_t(rows_read_), int32_t(rows_read_ + m), plan_.channels,
-                                   plan_.read_pixel, buffer_.data(), message_.data(),
+      if (image_.plugin->read_rows(image_.reader.get(), int32_t(rows_read_), int32_t(rows_read_ + m),
+                                   plan_.channels, plan_.read_pixel, buffer_.data(), message_.data(),
                                    message_.size()) != TERRAIN_IMAGE_OK)
         fail(IoErrorCode::CorruptData, path_,
-             "cannot decode rows " + std::to_string(rows_read_) + ".." + std::to_string(rows_read_ + m - 1) + ": " +
-                 message_.data());
+             "cannot decode rows " + std::to_string(rows_read_) + ".." + std::to_string(rows_read_ + m - 1) +
+                 ": " + message_.data());
       buffer_y0_ = rows_read_;
       buffer_y1_ = rows_read_ + m;
     }
@@ -169,8 +173,8 @@ class ImageBandReader final : public BandReader {
         bool is_void = has_nodata && (bits == nodata_float_bits_ || f == nodata_as_float_);
         if (!is_void && !std::isfinite(f))
           fail(IoErrorCode::NonFinite, path_,
-               std::string(std::isnan(f) ? "NaN" : "Inf") + " at row " + std::to_string(rows_read_ + i / g.width) +
-                   ", column " + std::to_string(i % g.width));
+               std::string(std::isnan(f) ? "NaN" : "Inf") + " at row " +
+                   std::to_string(rows_read_ + i / g.width) + ", column " + std::to_string(i % g.width));
         values[i] = is_void ? 0.0 : double(f);
         valid[i] = is_void ? 0 : 1;
       }
@@ -195,12 +199,13 @@ class ImageBandReader final : public BandReader {
 // reason in message(). Destroying it before finish() abandons the file.
 class PluginImageWriter {
  public:
-  explicit PluginImageWriter(const ImagePlugin& plugin) : plugin_(plugin), writer_(nullptr, {plugin.destroy}) {}
+  explicit PluginImageWriter(const ImagePlugin& plugin)
+      : plugin_(plugin), writer_(nullptr, {plugin.destroy}) {}
   int32_t create(const std::string& file, int64_t width, int64_t height, int channels, int32_t pixel,
                  const char* compression, int32_t flags) {
     terrain_image_writer* writer = nullptr;
-    const int32_t status = plugin_.create(file.c_str(), int32_t(width), int32_t(height), channels, pixel, compression,
-                                          flags, &writer, message_.data(), message_.size());
+    const int32_t status = plugin_.create(file.c_str(), int32_t(width), int32_t(height), channels, pixel,
+                                          compression, flags, &writer, message_.data(), message_.size());
     writer_.reset(writer);
     return status;
   }
@@ -230,8 +235,10 @@ void write_image_bands(const std::string& path, const Heightmap& map, int32_t pi
   for (int64_t y = 0; y < g.height; ++y)
     for (int64_t x = 0; x < g.width; ++x) convert(value_for_writing(map, x, y, path), x, y);
   AtomicOutput target(path);
-  PluginImageWriter out(image_plugin(IoErrorCode::WriteFailed, path));  // closed before the temporary is removed
-  const int32_t created = out.create(target.temp_path(), g.width, g.height, 1, pixel, compression, TERRAIN_IMAGE_NO_TIMESTAMP);
+  PluginImageWriter out(
+      image_plugin(IoErrorCode::WriteFailed, path));  // closed before the temporary is removed
+  const int32_t created =
+      out.create(target.temp_path(), g.width, g.height, 1, pixel, compression, TERRAIN_IMAGE_NO_TIMESTAMP);
   if (created == TERRAIN_IMAGE_NO_WRITER)
     fail(IoErrorCode::WriteFailed, path, "no image writer for this extension: " + out.message());
   if (created != TERRAIN_IMAGE_OK) fail(IoErrorCode::WriteFailed, path, "cannot create: " + out.message());
@@ -240,11 +247,13 @@ void write_image_bands(const std::string& path, const Heightmap& map, int32_t pi
   for (int64_t y0 = 0; y0 < g.height; y0 += kBandRows) {
     int64_t n = std::min(kBandRows, g.height - y0);
     for (int64_t y = y0; y < y0 + n; ++y)
-      for (int64_t x = 0; x < g.width; ++x) band[size_t((y - y0) * g.width + x)] = convert(value_for_writing(map, x, y, path), x, y);
+      for (int64_t x = 0; x < g.width; ++x)
+        band[size_t((y - y0) * g.width + x)] = convert(value_for_writing(map, x, y, path), x, y);
     if (out.write_rows(y0, y0 + n, band.data()) != TERRAIN_IMAGE_OK)
       fail(IoErrorCode::WriteFailed, path, "write error: " + out.message());
   }
-  if (out.finish() != TERRAIN_IMAGE_OK) fail(IoErrorCode::WriteFailed, path, "write error on close: " + out.message());
+  if (out.finish() != TERRAIN_IMAGE_OK)
+    fail(IoErrorCode::WriteFailed, path, "write error on close: " + out.message());
   target.commit();
 }
 
@@ -282,8 +291,9 @@ void write_image16(const std::string& path, const Heightmap& map) {
   auto check = [&](double v, int64_t x, int64_t y) {
     if (!(v >= lo && v <= hi) || v != std::floor(v))
       io::fail(IoErrorCode::WriteFailed, path,
-               "value " + io::format_double(v) + " at row " + std::to_string(y) + ", column " + std::to_string(x) +
-                   " does not fit a " + (write_signed ? "signed" : "unsigned") + " 16-bit " + (is_tiff ? "TIFF" : "PNG"));
+               "value " + io::format_double(v) + " at row " + std::to_string(y) + ", column " +
+                   std::to_string(x) + " does not fit a " + (write_signed ? "signed" : "unsigned") +
+                   " 16-bit " + (is_tiff ? "TIFF" : "PNG"));
     return v;
   };
   const char* compression = is_tiff ? "zip" : nullptr;
@@ -296,13 +306,14 @@ void write_image16(const std::string& path, const Heightmap& map) {
 }
 
 void write_exr(const std::string& path, const Heightmap& map) {
-  if (!io::ends_with_ci(path, ".exr")) io::fail(IoErrorCode::WriteFailed, path, "float images are written as .exr");
+  if (!io::ends_with_ci(path, ".exr"))
+    io::fail(IoErrorCode::WriteFailed, path, "float images are written as .exr");
   io::write_image_bands<float>(path, map, TERRAIN_PIXEL_FLOAT, "zip", [&](double v, int64_t x, int64_t y) {
     float f = float(v);
     if (double(f) != v && !std::isnan(v))
       io::fail(IoErrorCode::WriteFailed, path,
-               "value " + io::format_double(v) + " at row " + std::to_string(y) + ", column " + std::to_string(x) +
-                   " is not exactly representable as float32");
+               "value " + io::format_double(v) + " at row " + std::to_string(y) + ", column " +
+                   std::to_string(x) + " is not exactly representable as float32");
     return f;
   });
 }

@@ -36,7 +36,10 @@ class Parser {
         }
         out.emplace(std::move(key), std::move(value));
         skip_ws();
-        if (peek() == ',') { ++pos_; continue; }
+        if (peek() == ',') {
+          ++pos_;
+          continue;
+        }
         if (!expect('}')) return report(error);
         break;
       }
@@ -60,16 +63,23 @@ class Parser {
   }
   char peek() const { return pos_ < s_.size() ? s_[pos_] : '\0'; }
   void skip_ws() {
-    while (pos_ < s_.size() && (s_[pos_] == ' ' || s_[pos_] == '\t' || s_[pos_] == '\n' || s_[pos_] == '\r')) ++pos_;
+    while (pos_ < s_.size() && (s_[pos_] == ' ' || s_[pos_] == '\t' || s_[pos_] == '\n' || s_[pos_] == '\r'))
+      ++pos_;
   }
   bool expect(char c) {
-    if (peek() == c && pos_ < s_.size()) { ++pos_; return true; }
+    if (peek() == c && pos_ < s_.size()) {
+      ++pos_;
+      return true;
+    }
     err_ = std::string("expected '") + c + "'";
     return false;
   }
   bool literal(const char* word) {
     size_t n = std::char_traits<char>::length(word);
-    if (s_.compare(pos_, n, word) == 0) { pos_ += n; return true; }
+    if (s_.compare(pos_, n, word) == 0) {
+      pos_ += n;
+      return true;
+    }
     err_ = "unknown literal";
     return false;
   }
@@ -93,15 +103,24 @@ class Parser {
   }
 
   bool parse_hex4(unsigned& cp) {
-    if (pos_ + 4 > s_.size()) { err_ = "short \\u escape"; return false; }
+    if (pos_ + 4 > s_.size()) {
+      err_ = "short \\u escape";
+      return false;
+    }
     cp = 0;
     for (int i = 0; i < 4; ++i) {
       char c = s_[pos_++];
       cp <<= 4;
-      if (c >= '0' && c <= '9') cp |= unsigned(c - '0');
-      else if (c >= 'a' && c <= 'f') cp |= unsigned(c - 'a' + 10);
-      else if (c >= 'A' && c <= 'F') cp |= unsigned(c - 'A' + 10);
-      else { err_ = "bad \\u escape"; return false; }
+      if (c >= '0' && c <= '9')
+        cp |= unsigned(c - '0');
+      else if (c >= 'a' && c <= 'f')
+        cp |= unsigned(c - 'a' + 10);
+      else if (c >= 'A' && c <= 'F')
+        cp |= unsigned(c - 'A' + 10);
+      else {
+        err_ = "bad \\u escape";
+        return false;
+      }
     }
     return true;
   }
@@ -109,22 +128,50 @@ class Parser {
   bool parse_string(std::string& out) {
     if (!expect('"')) return false;
     for (;;) {
-      if (pos_ >= s_.size()) { err_ = "unterminated string"; return false; }
+      if (pos_ >= s_.size()) {
+        err_ = "unterminated string";
+        return false;
+      }
       char c = s_[pos_++];
       if (c == '"') return true;
-      if (static_cast<unsigned char>(c) < 0x20) { err_ = "control character in string"; return false; }
-      if (c != '\\') { out += c; continue; }
-      if (pos_ >= s_.size()) { err_ = "unterminated escape"; return false; }
+      if (static_cast<unsigned char>(c) < 0x20) {
+        err_ = "control character in string";
+        return false;
+      }
+      if (c != '\\') {
+        out += c;
+        continue;
+      }
+      if (pos_ >= s_.size()) {
+        err_ = "unterminated escape";
+        return false;
+      }
       char e = s_[pos_++];
       switch (e) {
-        case '"': out += '"'; break;
-        case '\\': out += '\\'; break;
-        case '/': out += '/'; break;
-        case 'b': out += '\b'; break;
-        case 'f': out += '\f'; break;
-        case 'n': out += '\n'; break;
-        case 'r': out += '\r'; break;
-        case 't': out += '\t'; break;
+        case '"':
+          out += '"';
+          break;
+        case '\\':
+          out += '\\';
+          break;
+        case '/':
+          out += '/';
+          break;
+        case 'b':
+          out += '\b';
+          break;
+        case 'f':
+          out += '\f';
+          break;
+        case 'n':
+          out += '\n';
+          break;
+        case 'r':
+          out += '\r';
+          break;
+        case 't':
+          out += '\t';
+          break;
         case 'u': {
           unsigned cp = 0;
           if (!parse_hex4(cp)) return false;
@@ -140,7 +187,9 @@ class Parser {
           append_utf8(out, cp);
           break;
         }
-        default: err_ = "bad escape"; return false;
+        default:
+          err_ = "bad escape";
+          return false;
       }
     }
   }
@@ -154,35 +203,72 @@ class Parser {
       while (pos_ < s_.size() && s_[pos_] >= '0' && s_[pos_] <= '9') ++pos_;
       return pos_ - d;
     };
-    if (peek() == '0') ++pos_;
-    else if (digits() == 0) { err_ = "bad number"; return false; }
-    if (peek() == '.') { ++pos_; if (digits() == 0) { err_ = "bad number"; return false; } }
+    if (peek() == '0')
+      ++pos_;
+    else if (digits() == 0) {
+      err_ = "bad number";
+      return false;
+    }
+    if (peek() == '.') {
+      ++pos_;
+      if (digits() == 0) {
+        err_ = "bad number";
+        return false;
+      }
+    }
     if (peek() == 'e' || peek() == 'E') {
       ++pos_;
       if (peek() == '+' || peek() == '-') ++pos_;
-      if (digits() == 0) { err_ = "bad number"; return false; }
+      if (digits() == 0) {
+        err_ = "bad number";
+        return false;
+      }
     }
     out.kind = JsonScalar::Kind::Number;
     out.text = s_.substr(start, pos_ - start);
     auto res = std::from_chars(s_.data() + start, s_.data() + pos_, out.number);
-    if (res.ec != std::errc()) { err_ = "number out of range"; pos_ = start; return false; }
+    if (res.ec != std::errc()) {
+      err_ = "number out of range";
+      pos_ = start;
+      return false;
+    }
     return true;
   }
 
   bool parse_value(JsonScalar& out, int depth) {
-    if (depth > kMaxDepth) { err_ = "nesting too deep"; return false; }
+    if (depth > kMaxDepth) {
+      err_ = "nesting too deep";
+      return false;
+    }
     char c = peek();
-    if (c == '"') { out.kind = JsonScalar::Kind::String; return parse_string(out.text); }
+    if (c == '"') {
+      out.kind = JsonScalar::Kind::String;
+      return parse_string(out.text);
+    }
     if (c == '-' || (c >= '0' && c <= '9')) return parse_number(out);
-    if (c == 't') { out.kind = JsonScalar::Kind::Bool; out.number = 1; return literal("true"); }
-    if (c == 'f') { out.kind = JsonScalar::Kind::Bool; out.number = 0; return literal("false"); }
-    if (c == 'n') { out.kind = JsonScalar::Kind::Null; return literal("null"); }
+    if (c == 't') {
+      out.kind = JsonScalar::Kind::Bool;
+      out.number = 1;
+      return literal("true");
+    }
+    if (c == 'f') {
+      out.kind = JsonScalar::Kind::Bool;
+      out.number = 0;
+      return literal("false");
+    }
+    if (c == 'n') {
+      out.kind = JsonScalar::Kind::Null;
+      return literal("null");
+    }
     if (c == '{' || c == '[') {
       char close = c == '{' ? '}' : ']';
       ++pos_;
       out.kind = JsonScalar::Kind::Composite;
       skip_ws();
-      if (peek() == close) { ++pos_; return true; }
+      if (peek() == close) {
+        ++pos_;
+        return true;
+      }
       for (;;) {
         skip_ws();
         if (c == '{') {
@@ -195,7 +281,10 @@ class Parser {
         JsonScalar inner;
         if (!parse_value(inner, depth + 1)) return false;
         skip_ws();
-        if (peek() == ',') { ++pos_; continue; }
+        if (peek() == ',') {
+          ++pos_;
+          continue;
+        }
         return expect(close);
       }
     }
@@ -215,11 +304,21 @@ std::string json_quote(const std::string& s) {
   std::string out = "\"";
   for (char c : s) {
     switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
+      case '"':
+        out += "\\\"";
+        break;
+      case '\\':
+        out += "\\\\";
+        break;
+      case '\n':
+        out += "\\n";
+        break;
+      case '\r':
+        out += "\\r";
+        break;
+      case '\t':
+        out += "\\t";
+        break;
       default:
         if (static_cast<unsigned char>(c) < 0x20) {
           char buf[8];

@@ -10,8 +10,8 @@ namespace terrain::io {
 
 struct JsonScalar {
   enum class Kind { Null, Bool, Number, String, Composite } kind = Kind::Null;
-  double number = 0;   // Kind::Number (also 1/0 for Bool)
-  std::string text;    // Kind::String, or the literal text of a number
+  double number = 0;  // Kind::Number (also 1/0 for Bool)
+  std::string text;   // Kind::String, or the literal text of a number
 };
 
 // Top-level members of a JSON object; nested objects/arrays are accepted but kept only as Composite.

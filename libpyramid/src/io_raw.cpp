@@ -89,7 +89,8 @@ class RawStreamReader final : public BandReader {
       if (r < 0) {
         int errnum = 0;
         const char* msg = gzerror(gz_, &errnum);
-        fail(IoErrorCode::CorruptData, path_, std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
+        fail(IoErrorCode::CorruptData, path_,
+             std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
       }
       if (r == 0) break;
       got += size_t(r);
@@ -104,13 +105,13 @@ class RawStreamReader final : public BandReader {
     if (r < 0) {
       int errnum = 0;
       const char* msg = gzerror(gz_, &errnum);
-      fail(IoErrorCode::CorruptData, path_, std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
+      fail(IoErrorCode::CorruptData, path_,
+           std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
     }
     if (r > 0) fail(IoErrorCode::Oversized, path_, "gzip stream holds more bytes than the dimensions need");
   }
 
-  template <typename Fn>
-  void decode_with(const uint8_t* src, double* values, uint8_t* valid, Fn fetch) {
+  template <typename Fn> void decode_with(const uint8_t* src, double* values, uint8_t* valid, Fn fetch) {
     const int64_t w = layout_.info.width;
     const bool has_nodata = layout_.info.nodata.has_value();
     const double nodata = has_nodata ? *layout_.info.nodata : 0.0;
@@ -145,7 +146,9 @@ class RawStreamReader final : public BandReader {
       case StoredType::Int32:
         decode_with(src, values, valid, [this](const uint8_t* p) { return double(int32_t(load_u32(p))); });
         break;
-      case StoredType::Float32: decode_float_row(src, row, values, valid); break;
+      case StoredType::Float32:
+        decode_float_row(src, row, values, valid);
+        break;
     }
   }
 
@@ -159,7 +162,8 @@ class RawStreamReader final : public BandReader {
       // A NaN nodata value is matched by bit pattern, since NaN never compares equal.
       bool is_void = has_nodata && (bits == nodata_float_bits_ || f == nodata_as_float_);
       if (!is_void && !std::isfinite(f))
-        fail(IoErrorCode::NonFinite, path_, std::string(std::isnan(f) ? "NaN" : "Inf") + " at " + row_col(row, x));
+        fail(IoErrorCode::NonFinite, path_,
+             std::string(std::isnan(f) ? "NaN" : "Inf") + " at " + row_col(row, x));
       values[x] = is_void ? 0.0 : double(f);
       valid[x] = is_void ? 0 : 1;
     }
@@ -173,7 +177,8 @@ std::string read_small_text_file(const std::string& path, size_t limit) {
   text.resize(limit + 1);
   in.read(text.data(), std::streamsize(limit + 1));
   text.resize(size_t(in.gcount()));
-  if (text.size() > limit) fail(IoErrorCode::MissingField, path, "sidecar larger than " + std::to_string(limit) + " bytes");
+  if (text.size() > limit)
+    fail(IoErrorCode::MissingField, path, "sidecar larger than " + std::to_string(limit) + " bytes");
   return text;
 }
 
@@ -189,7 +194,8 @@ std::optional<std::string> find_sidecar(const std::string& path) {
 }
 
 // Reads a numeric member; MissingField if it is present but not a number.
-std::optional<double> number_member(const JsonObject& obj, const std::string& key, const std::string& sidecar) {
+std::optional<double> number_member(const JsonObject& obj, const std::string& key,
+                                    const std::string& sidecar) {
   auto it = obj.find(key);
   if (it == obj.end() || it->second.kind == JsonScalar::Kind::Null) return std::nullopt;
   const JsonScalar& v = it->second;
@@ -205,7 +211,8 @@ int64_t dimension_member(const JsonObject& obj, const std::string& key, const st
   auto v = number_member(obj, key, sidecar);
   if (!v) fail(IoErrorCode::MissingField, sidecar, "missing required field \"" + key + "\"");
   if (!(*v >= 1 && *v <= 2147483648.0) || *v != std::floor(*v))
-    fail(IoErrorCode::MissingField, sidecar, "field \"" + key + "\" must be a positive integer, got " + format_double(*v));
+    fail(IoErrorCode::MissingField, sidecar,
+         "field \"" + key + "\" must be a positive integer, got " + format_double(*v));
   return int64_t(*v);
 }
 
@@ -246,9 +253,12 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     if (bo != obj->end() && bo->second.kind != JsonScalar::Kind::Null) {
       std::string order = bo->second.kind == JsonScalar::Kind::String ? to_lower(bo->second.text) : "";
       bool big;
-      if (order == "little" || order == "little_endian" || order == "le") big = false;
-      else if (order == "big" || order == "big_endian" || order == "be") big = true;
-      else fail(IoErrorCode::UnknownType, *sidecar, "unknown byte_order (expected \"little\" or \"big\")");
+      if (order == "little" || order == "little_endian" || order == "le")
+        big = false;
+      else if (order == "big" || order == "big_endian" || order == "be")
+        big = true;
+      else
+        fail(IoErrorCode::UnknownType, *sidecar, "unknown byte_order (expected \"little\" or \"big\")");
       if (!big_endian) big_endian = big;
     }
     GridInfo& g = layout.info;
@@ -260,11 +270,14 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     if (auto v = number_member(*obj, "origin_x", *sidecar)) g.origin_x = *v;
     if (auto v = number_member(*obj, "origin_y", *sidecar)) g.origin_y = *v;
     auto units = obj->find("horizontal_units");
-    if (units != obj->end() && units->second.kind == JsonScalar::Kind::String) g.horizontal_units = units->second.text;
+    if (units != obj->end() && units->second.kind == JsonScalar::Kind::String)
+      g.horizontal_units = units->second.text;
   }
   if (!type) {
-    if (ends_with_ci(path, ".r16")) type = SampleType::UInt16;
-    else if (ends_with_ci(path, ".r32")) type = SampleType::Float32;
+    if (ends_with_ci(path, ".r16"))
+      type = SampleType::UInt16;
+    else if (ends_with_ci(path, ".r32"))
+      type = SampleType::Float32;
     else
       fail(IoErrorCode::DimensionMismatch, path,
            "raw grid without a sidecar (" + path + ".json): give --type and --width/--height");
@@ -279,16 +292,20 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     auto side = int64_t(std::llround(std::sqrt(double(samples))));
     if (size % bytes != 0 || side <= 0 || uint64_t(side) * uint64_t(side) != samples)
       fail(IoErrorCode::DimensionMismatch, path,
-           std::to_string(size) + " bytes is not a square " + sample_type_name(*type) + " grid: give --width/--height");
+           std::to_string(size) + " bytes is not a square " + sample_type_name(*type) +
+               " grid: give --width/--height");
     width = height = side;
   } else if (!height || !width) {
     int64_t known = width ? *width : *height;
     if (known <= 0 || size % (uint64_t(known) * bytes) != 0)
       fail(IoErrorCode::DimensionMismatch, path,
-           std::to_string(size) + " bytes is not a whole number of " + std::to_string(known) + "-sample lines");
+           std::to_string(size) + " bytes is not a whole number of " + std::to_string(known) +
+               "-sample lines");
     int64_t other = int64_t(size / (uint64_t(known) * bytes));
-    if (!width) width = other;
-    else height = other;
+    if (!width)
+      width = other;
+    else
+      height = other;
   }
   layout.info.width = *width;
   layout.info.height = *height;
@@ -350,7 +367,8 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
         }
         if (!fits)
           fail(IoErrorCode::WriteFailed, path,
-               "value " + format_double(v) + " at " + row_col(y, x) + " does not fit " + sample_type_name(written_type));
+               "value " + format_double(v) + " at " + row_col(y, x) + " does not fit " +
+                   sample_type_name(written_type));
       }
       if (std::fwrite(row.data(), 1, row.size(), f) != row.size())
         fail(IoErrorCode::WriteFailed, path, std::string("write error: ") + std::strerror(errno));
@@ -361,13 +379,17 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
   std::ostringstream js;
   js << "{\n  \"width\": " << g.width << ",\n  \"height\": " << g.height << ",\n  \"type\": \""
      << sample_type_name(written_type) << "\",\n  \"byte_order\": \"" << (big_endian ? "big" : "little")
-     << "\",\n  \"spacing_x\": " << format_double(g.spacing_x) << ",\n  \"spacing_y\": " << format_double(g.spacing_y)
+     << "\",\n  \"spacing_x\": " << format_double(g.spacing_x)
+     << ",\n  \"spacing_y\": " << format_double(g.spacing_y)
      << ",\n  \"horizontal_units\": " << json_quote(g.horizontal_units)
      << ",\n  \"vertical_scale\": " << format_double(g.vertical_scale)
      << ",\n  \"vertical_offset\": " << format_double(g.vertical_offset) << ",\n  \"nodata\": ";
-  if (!g.nodata) js << "null";
-  else if (std::isnan(*g.nodata)) js << "\"NaN\"";
-  else js << format_double(*g.nodata);
+  if (!g.nodata)
+    js << "null";
+  else if (std::isnan(*g.nodata))
+    js << "\"NaN\"";
+  else
+    js << format_double(*g.nodata);
   if (g.origin_x) js << ",\n  \"origin_x\": " << format_double(*g.origin_x);
   if (g.origin_y) js << ",\n  \"origin_y\": " << format_double(*g.origin_y);
   js << "\n}\n";
@@ -375,7 +397,8 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
   AtomicOutput side(path + ".json");
   {
     FILE* f = std::fopen(side.temp_path().c_str(), "wb");
-    if (!f) fail(IoErrorCode::WriteFailed, path + ".json", std::string("cannot create: ") + std::strerror(errno));
+    if (!f)
+      fail(IoErrorCode::WriteFailed, path + ".json", std::string("cannot create: ") + std::strerror(errno));
     bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
     ok = (std::fclose(f) == 0) && ok;
     if (!ok) fail(IoErrorCode::WriteFailed, path + ".json", "write error");
@@ -388,5 +411,7 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
 }  // namespace terrain::io
 
 namespace terrain {
-void write_raw(const std::string& path, const Heightmap& map, bool big_endian) { io::write_raw_with_sidecar(path, map, big_endian); }
+void write_raw(const std::string& path, const Heightmap& map, bool big_endian) {
+  io::write_raw_with_sidecar(path, map, big_endian);
+}
 }  // namespace terrain

@@ -57,7 +57,8 @@ GridStats stream_stats(BandReader& reader, int64_t band_rows) {
   std::vector<double> values(size_t(band_rows * g.width));
   std::vector<uint8_t> valid(values.size());
   StatsAccumulator acc;
-  while (int64_t n = reader.read_rows(band_rows, values.data(), valid.data())) acc.add(values.data(), valid.data(), n * g.width);
+  while (int64_t n = reader.read_rows(band_rows, values.data(), valid.data()))
+    acc.add(values.data(), valid.data(), n * g.width);
   return acc.finish(g);
 }
 

@@ -38,7 +38,8 @@ using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 inline int32_t saturate(int64_t v) {
-  return int32_t(std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
+  return int32_t(
+      std::clamp<int64_t>(v, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
 }
 
 void validate(const BuildOptions& o, const GridInfo& info) {
@@ -81,8 +82,9 @@ class InputConverter {
       const double v = values[k] * scale_;
       const double r = std::nearbyint(v) - offset_;
       if (!(std::abs(r) <= double(std::numeric_limits<int32_t>::max())))
-        throw std::invalid_argument("pyramid input: sample at row " + std::to_string(y + k / W) + ", column " +
-                                    std::to_string(k % W) + " does not fit int32 after scaling");
+        throw std::invalid_argument("pyramid input: sample at row " + std::to_string(y + k / W) +
+                                    ", column " + std::to_string(k % W) +
+                                    " does not fit int32 after scaling");
       if (exact_ && r + offset_ != v)
         throw std::invalid_argument("pyramid input: non-integer sample in an integer grid at row " +
                                     std::to_string(y + k / W) + ", column " + std::to_string(k % W));
@@ -113,8 +115,7 @@ struct BandWork {
 
 // Rows [first, end) of one level. Each row is its own buffer, recycled through a free list: the
 // store never copies rows to grow and holds no slack (these rows are most of the builder's memory).
-template <class T>
-class RowRing {
+template <class T> class RowRing {
  public:
   void reset(int64_t width) {
     width_ = width;
@@ -126,8 +127,7 @@ class RowRing {
   int64_t end() const { return end_; }
   int64_t peak() const { return peak_; }
   const T* row(int64_t r) const { return rows_[size_t(r - first_)].data(); }
-  template <class In>
-  void append(const In* rows, int64_t n) {
+  template <class In> void append(const In* rows, int64_t n) {
     for (int64_t k = 0; k < n; ++k) {
       std::vector<T> buf;
       if (!free_.empty()) {
@@ -150,8 +150,7 @@ class RowRing {
     // A few spare rows cover the steady state; more would only be memory held for nothing.
     while (free_.size() > 64) free_.pop_back();
   }
-  template <class Out>
-  void copy_rows(int64_t r0, int64_t n, Out* out) const {
+  template <class Out> void copy_rows(int64_t r0, int64_t n, Out* out) const {
     for (int64_t k = 0; k < n; ++k) std::copy(row(r0 + k), row(r0 + k) + width_, out + k * width_);
   }
 
@@ -233,7 +232,9 @@ class LevelOrderBuffer {
   void band(int level, int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
     record(*files_[size_t(level)], y0, rows, bytes);
   }
-  void mask_band(int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) { record(*mask_, y0, rows, bytes); }
+  void mask_band(int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
+    record(*mask_, y0, rows, bytes);
+  }
   void replay(PyramidSink& sink, const PyramidHeader& header, const std::vector<int64_t>& band_counts) {
     sink.begin(header);
     mask_->rewind_for_reading();
@@ -268,7 +269,8 @@ class LevelOrderBuffer {
     uint64_t v = 0;
     uint8_t b;
     for (int shift = 0;; shift += 7) {
-      if (shift > 63 || !f.read_byte(&b)) throw IoError(IoErrorCode::Truncated, f.path() + ": band spill truncated");
+      if (shift > 63 || !f.read_byte(&b))
+        throw IoError(IoErrorCode::Truncated, f.path() + ": band spill truncated");
       v |= uint64_t(b & 0x7f) << shift;
       if (!(b & 0x80)) return v;
     }
@@ -298,7 +300,8 @@ class StreamingBuilder {
     // until it is: halving the band height per coarser level keeps every level's lag near band_rows
     // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)).
     level_band_rows_.resize(size_t(L_));
-    for (int l = 0; l < L_; ++l) level_band_rows_[size_t(l)] = std::max<int64_t>(1, S_ >> std::min(62, m_ - l));
+    for (int l = 0; l < L_; ++l)
+      level_band_rows_[size_t(l)] = std::max<int64_t>(1, S_ >> std::min(62, m_ - l));
     T_.resize(size_t(L_));
     That_.resize(size_t(L_));
     for (int l = 0; l < L_; ++l) {
@@ -351,8 +354,8 @@ class StreamingBuilder {
       for (int64_t got = 0; got < b.rows;) {
         const int64_t n = input.read_rows(b.rows - got, b.values.data() + got * W, b.valid.data() + got * W);
         if (n <= 0 || n > b.rows - got)
-          throw IoError(IoErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) + " of " +
-                                                    std::to_string(H) + " rows");
+          throw IoError(IoErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) +
+                                                    " of " + std::to_string(H) + " rows");
         got += n;
       }
       b.voids = converter.convert(b.values.data(), b.valid.data(), y, b.rows, b.ints.data());
@@ -400,7 +403,8 @@ class StreamingBuilder {
     for (int l = m_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
     pump(true);
     for (int l = 0; l < L_; ++l)
-      if (next_band_[size_t(l)] != sizes_[size_t(l)].height) throw std::logic_error("pyramid: level not completed");
+      if (next_band_[size_t(l)] != sizes_[size_t(l)].height)
+        throw std::logic_error("pyramid: level not completed");
 
     for (int l = 0; l < L_; ++l) {
       LevelStats& st = result_.levels[size_t(l)];
@@ -416,7 +420,8 @@ class StreamingBuilder {
     for (int l = 0; l < L_; ++l) held << " " << T_[size_t(l)].peak() << "/" << That_[size_t(l)].peak();
     result_.log.push_back(held.str());
     if (result_.void_count)
-      result_.log.push_back("nodata: " + std::to_string(result_.void_count) + " void samples filled by push-pull");
+      result_.log.push_back("nodata: " + std::to_string(result_.void_count) +
+                            " void samples filled by push-pull");
     result_.seconds_pass_residual = seconds_since(t_start) - result_.seconds_pass_input;
     if (ordered_) {
       const auto t = Clock::now();
@@ -458,13 +463,14 @@ class StreamingBuilder {
         std::vector<int32_t> d(size_t(r.width * r.height));
         for (int64_t yy = 0; yy < r.height; ++yy) {
           T_[size_t(m_)].copy_rows(r.y0 + yy, 1, row_scratch_.data());
-          std::copy(row_scratch_.data() + r.x0, row_scratch_.data() + r.x0 + r.width, d.begin() + yy * r.width);
+          std::copy(row_scratch_.data() + r.x0, row_scratch_.data() + r.x0 + r.width,
+                    d.begin() + yy * r.width);
         }
         data.push_back(std::move(d));
       }
       filter_ = fit_optimal_filter(windows, data, opt_.fit, &result_.filter_report);
-      result_.log.push_back(result_.filter_report.summary() + " (fitted on the top " + std::to_string(fit_rows_) +
-                            " rows)");
+      result_.log.push_back(result_.filter_report.summary() + " (fitted on the top " +
+                            std::to_string(fit_rows_) + " rows)");
     }
     header_.filter = filter_;
     // Interleaved output starts now: nothing is coded before the filter exists, and voids further
@@ -500,7 +506,8 @@ class StreamingBuilder {
 
   // Last row of T^_{l-1} that U needs for fine rows [y0, y1) of level l, plus one.
   int64_t coarse_rows_needed(int l, int64_t y0, int64_t y1) const {
-    const Rect need = upsample_required_window(Rect{0, y0, sizes_[size_t(l)].width, y1 - y0}, sizes_[size_t(l)]);
+    const Rect need =
+        upsample_required_window(Rect{0, y0, sizes_[size_t(l)].width, y1 - y0}, sizes_[size_t(l)]);
     return need.y0 + need.height;
   }
 
@@ -520,7 +527,8 @@ class StreamingBuilder {
         const int64_t y0 = next_band_[size_t(l)];
         if (y0 >= h) break;
         int64_t nb = 0;
-        while (nb < group && y0 + nb * S < h && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S)))) ++nb;
+        while (nb < group && y0 + nb * S < h && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
+          ++nb;
         const bool more_after = y0 + nb * S < h;
         if (nb == 0 || (!final && nb < group && more_after)) break;
         code_group(l, y0, std::min(h, y0 + nb * S));
@@ -550,7 +558,8 @@ class StreamingBuilder {
         bw.y0 = gy0 + b * S;
         bw.rows = std::min(S, gy1 - bw.y0);
         const int64_t n = bw.rows * fw;
-        bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
+        bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)),
+            bw.rhat.resize(size_t(n));
         tin.copy_rows(bw.y0, bw.rows, bw.t.data());
         bw.valid.resize(finest ? size_t(n) : 0);
         if (finest) mask_.copy_rows(bw.y0, bw.rows, bw.valid.data());
@@ -586,7 +595,8 @@ class StreamingBuilder {
     T_[size_t(l)].drop_before(gy1);
     if (finest) mask_.drop_before(gy1);
     if (l > 0) {
-      const int64_t keep = gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0 : That_[size_t(l - 1)].end();
+      const int64_t keep =
+          gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0 : That_[size_t(l - 1)].end();
       That_[size_t(l - 1)].drop_before(keep);
     }
   }
@@ -599,7 +609,8 @@ class StreamingBuilder {
       upsample_region(cwin, fs, Rect{0, bw.y0, fs.width, bw.rows}, bw.pred.data(), fs.width, bw.scratch);
     else
       std::fill(bw.pred.begin(), bw.pred.end(), 0);
-    for (int64_t k = 0; k < n; ++k) bw.res[size_t(k)] = saturate(int64_t(bw.t[size_t(k)]) - bw.pred[size_t(k)]);
+    for (int64_t k = 0; k < n; ++k)
+      bw.res[size_t(k)] = saturate(int64_t(bw.t[size_t(k)]) - bw.pred[size_t(k)]);
     // Voids are restored from the mask, so their residual carries no information.
     if (with_mask)
       for (int64_t k = 0; k < n; ++k)
@@ -612,7 +623,8 @@ class StreamingBuilder {
     const int32_t* pred = bw.pred.data();
     const int32_t* res = bw.res.data();
     int32_t* rhat = bw.rhat.data();
-    const bool any_void = with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
+    const bool any_void =
+        with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
     for (int64_t k = 0; k < n; ++k) {
       const int32_t rec = saturate(int64_t(pred[k]) + rhat[k]);
       if (!any_void || bw.valid[size_t(k)]) {
@@ -658,7 +670,8 @@ class StreamingBuilder {
 
 }  // namespace
 
-BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink) {
+BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder,
+                          PyramidSink& sink) {
   StreamingBuilder builder(input.info(), opt, coder, sink);
   return builder.run(input);
 }
@@ -667,7 +680,8 @@ namespace {
 
 class MemoryBandReader final : public BandReader {
  public:
-  MemoryBandReader(const Heightmap& map, int64_t max_rows) : map_(map), max_rows_(std::max<int64_t>(1, max_rows)) {
+  MemoryBandReader(const Heightmap& map, int64_t max_rows)
+      : map_(map), max_rows_(std::max<int64_t>(1, max_rows)) {
     const int64_t n = map.width() * map.height();
     if (map.width() < 0 || map.height() < 0 || int64_t(map.values.size()) != n ||
         (!map.valid.empty() && int64_t(map.valid.size()) != n))
@@ -699,7 +713,8 @@ std::unique_ptr<BandReader> make_memory_band_reader(const Heightmap& map, int64_
   return std::make_unique<MemoryBandReader>(map, max_rows_per_call);
 }
 
-std::vector<int32_t> to_level_grid(const Heightmap& map, const BuildOptions& options, std::vector<uint8_t>* valid) {
+std::vector<int32_t> to_level_grid(const Heightmap& map, const BuildOptions& options,
+                                   std::vector<uint8_t>* valid) {
   validate(options, map.info);
   MemoryBandReader reader(map, int64_t(1) << 40);
   const int64_t W = map.width(), H = map.height();

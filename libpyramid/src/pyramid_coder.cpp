@@ -10,7 +10,8 @@
 
 namespace terrain {
 
-UniformQuantizerCoder::UniformQuantizerCoder(int32_t step, int64_t band_rows) : step_(step), band_rows_(band_rows) {
+UniformQuantizerCoder::UniformQuantizerCoder(int32_t step, int64_t band_rows)
+    : step_(step), band_rows_(band_rows) {
   if (step < 1) throw std::invalid_argument("UniformQuantizerCoder: step must be >= 1");
   if (band_rows < 1) throw std::invalid_argument("UniformQuantizerCoder: band_rows must be >= 1");
 }
@@ -60,8 +61,8 @@ bool UniformQuantizerCoder::decode(const uint8_t* data, size_t n, int64_t w, int
     uint64_t v;
     if (!detail::get_varint(&p, end, &v) || v > 0xffffffffu) return false;
     const int64_t q = detail::unzigzag(uint32_t(v));
-    out[k] = int32_t(std::clamp<int64_t>(q * s, std::numeric_limits<int32_t>::min(),
-                                         std::numeric_limits<int32_t>::max()));
+    out[k] = int32_t(
+        std::clamp<int64_t>(q * s, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
   }
   return p == end;
 }

@@ -22,7 +22,8 @@ void MemoryPyramid::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& b
   mask.push_back({y0, rows, std::move(bytes)});
 }
 
-void MemoryPyramid::reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) {
+void MemoryPyramid::reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width,
+                                       const int32_t* data) {
   if (size_t(level) >= recon.size()) recon.resize(size_t(level) + 1);
   auto& r = recon[size_t(level)];
   r.resize(size_t((y0 + rows) * width));
@@ -55,7 +56,8 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
     int64_t covered = 0;
     for (const auto& b : p.bands[size_t(l)]) {
       if (b.y0 != covered || b.rows <= 0 || b.y0 + b.rows > fs.height)
-        throw IoError(IoErrorCode::CorruptData, "pyramid: bands of level " + std::to_string(l) + " out of order");
+        throw IoError(IoErrorCode::CorruptData,
+                      "pyramid: bands of level " + std::to_string(l) + " out of order");
       rhat.resize(size_t(b.rows * fs.width));
       if (!coder.decode(b.bytes.data(), b.bytes.size(), fs.width, b.rows, rhat.data()))
         throw IoError(IoErrorCode::CorruptData, "pyramid: bad residual band at level " + std::to_string(l) +
@@ -77,8 +79,10 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
       int64_t covered = 0;
       for (const auto& b : p.mask) {
         if (b.y0 != covered || b.y0 + b.rows > fs.height ||
-            !decode_mask_rows(b.bytes.data(), b.bytes.size(), fs.width, b.rows, valid->data() + b.y0 * fs.width))
-          throw IoError(IoErrorCode::CorruptData, "pyramid: bad validity mask band at row " + std::to_string(b.y0));
+            !decode_mask_rows(b.bytes.data(), b.bytes.size(), fs.width, b.rows,
+                              valid->data() + b.y0 * fs.width))
+          throw IoError(IoErrorCode::CorruptData,
+                        "pyramid: bad validity mask band at row " + std::to_string(b.y0));
         covered += b.rows;
       }
       if (covered != fs.height) throw IoError(IoErrorCode::CorruptData, "pyramid: validity mask incomplete");

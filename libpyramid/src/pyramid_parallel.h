@@ -12,8 +12,7 @@ namespace terrain::detail {
 
 // Calls body(worker, begin, end) for `workers` contiguous chunks of [0, n); worker 0 runs on the
 // calling thread. The first exception thrown by any chunk is rethrown after all have finished.
-template <class Body>
-void parallel_chunks(int workers, int64_t n, Body&& body) {
+template <class Body> void parallel_chunks(int workers, int64_t n, Body&& body) {
   workers = int(std::clamp<int64_t>(workers, 1, std::max<int64_t>(n, 1)));
   if (workers == 1) {
     body(0, int64_t(0), n);

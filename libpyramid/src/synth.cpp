@@ -49,9 +49,9 @@ int64_t clamp_unit(int64_t v) { return std::clamp<int64_t>(v, 0, kOne); }
 
 Heightmap synthesize_terrain(const SynthOptions& options) {
   if (options.width <= 0 || options.height <= 0 || options.width > 65536 || options.height > 65536)
-    throw IoError(IoErrorCode::DimensionMismatch,
-                  "synthetic terrain: size " + std::to_string(options.width) + "x" + std::to_string(options.height) +
-                      " must be between 1 and 65536 per side");
+    throw IoError(IoErrorCode::DimensionMismatch, "synthetic terrain: size " + std::to_string(options.width) +
+                                                      "x" + std::to_string(options.height) +
+                                                      " must be between 1 and 65536 per side");
   Heightmap map;
   GridInfo& g = map.info;
   g.width = options.width;
@@ -80,7 +80,8 @@ Heightmap synthesize_terrain(const SynthOptions& options) {
     for (int64_t x = 0; x < g.width; ++x) {
       int64_t c = (4 * value_noise(continent_keys[0], x, y, continent_cell) +
                    2 * value_noise(continent_keys[1], x, y, continent_cell / 2) +
-                   value_noise(continent_keys[2], x, y, continent_cell / 4)) / 7;
+                   value_noise(continent_keys[2], x, y, continent_cell / 4)) /
+                  7;
       int64_t base = c + 32768;  // [0, kOne)
       // Mountains rise where the continent is high; lowlands stay gentle.
       int64_t mask = smooth(clamp_unit((base - kOne * 30 / 100) * 100 / 30));
@@ -93,7 +94,7 @@ Heightmap synthesize_terrain(const SynthOptions& options) {
         r = (r * weight) >> 16;  // fine ridges grow on coarse crests, not in the valleys
         weight = clamp_unit(r * 3 / 2);
         ridges += r >> k;
-        hills += n >> (k + 1);   // plain fBm: rolling relief everywhere
+        hills += n >> (k + 1);  // plain fBm: rolling relief everywhere
       }
       ridges = ridges * kOne / ridge_norm;
       int64_t h = base * 35 / 100 + ((mask * ridges) >> 16) * 65 / 100 + hills / 6;

@@ -1,12 +1,13 @@
 // Geometry clipmap update: desired regions, budgeted coarse-to-fine toroidal refill, zc, slopes,
 // tile z ranges, level switching by viewer height and active-region cropping (L&H 2004 §4-6.1).
+#include "runtime/clipmap.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 
-#include "runtime/clipmap.h"
 #include "toroidal_rows.h"
 
 namespace terrain::runtime {
@@ -26,7 +27,8 @@ LevelRegion intersect(const LevelRegion& a, const LevelRegion& b) {
 
 Rect intersect(const Rect& a, const Rect& b) {
   const int64_t x0 = std::max(a.x0, b.x0), y0 = std::max(a.y0, b.y0);
-  const int64_t x1 = std::min(a.x0 + a.width, b.x0 + b.width), y1 = std::min(a.y0 + a.height, b.y0 + b.height);
+  const int64_t x1 = std::min(a.x0 + a.width, b.x0 + b.width),
+                y1 = std::min(a.y0 + a.height, b.y0 + b.height);
   return Rect{x0, y0, std::max<int64_t>(x1 - x0, 0), std::max<int64_t>(y1 - y0, 0)};
 }
 
@@ -40,11 +42,13 @@ Rect trim(const Rect& band, const Rect& cut) {
   if (in.width == 0 || in.height == 0) return band;
   if (in.height == band.height) {
     if (in.x0 == band.x0) return Rect{in.x0 + in.width, band.y0, band.width - in.width, band.height};
-    if (in.x0 + in.width == band.x0 + band.width) return Rect{band.x0, band.y0, band.width - in.width, band.height};
+    if (in.x0 + in.width == band.x0 + band.width)
+      return Rect{band.x0, band.y0, band.width - in.width, band.height};
   }
   if (in.width == band.width) {
     if (in.y0 == band.y0) return Rect{band.x0, in.y0 + in.height, band.width, band.height - in.height};
-    if (in.y0 + in.height == band.y0 + band.height) return Rect{band.x0, band.y0, band.width, band.height - in.height};
+    if (in.y0 + in.height == band.y0 + band.height)
+      return Rect{band.x0, band.y0, band.width, band.height - in.height};
   }
   return band;
 }
@@ -66,8 +70,9 @@ constexpr float kU9 = 9.0f / 16.0f, kU1 = 1.0f / 16.0f;
 }
 
 // The half row between sample rows b and c (a and d the outer taps).
-[[gnu::target_clones("avx2", "default")]] void upsample_between(const float* a, const float* b, const float* c,
-                                                                const float* d, int64_t count, float* out) {
+[[gnu::target_clones("avx2", "default")]] void upsample_between(const float* a, const float* b,
+                                                                const float* c, const float* d, int64_t count,
+                                                                float* out) {
   for (int64_t i = 0; i < count; ++i) out[i] = kU9 * (b[i] + c[i]) - kU1 * (a[i] + d[i]);
 }
 
@@ -82,8 +87,8 @@ constexpr float kU9 = 9.0f / 16.0f, kU1 = 1.0f / 16.0f;
 }
 
 // Per-column range of z and zc over one more row (min/max: exact, the same in both clones).
-[[gnu::target_clones("avx2", "default")]] void accumulate_range(const float* z, const float* zc, int64_t count,
-                                                                float* lo, float* hi) {
+[[gnu::target_clones("avx2", "default")]] void accumulate_range(const float* z, const float* zc,
+                                                                int64_t count, float* lo, float* hi) {
   for (int64_t i = 0; i < count; ++i) {
     lo[i] = std::min(lo[i], std::min(z[i], zc[i]));
     hi[i] = std::max(hi[i], std::max(z[i], zc[i]));
@@ -100,9 +105,10 @@ Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(
   if (source_levels < 1) throw std::invalid_argument("clipmap: the height source has no levels");
   const int levels = clipmap_level_count(options, source_levels);
   if (levels < 1 || levels > source_levels || levels > kMaxLevels)
-    throw std::invalid_argument("clipmap: level count must be 1.." + std::to_string(source_levels) + " (the source's), got " +
-                                std::to_string(options.levels));
-  if (!(source.spacing_m() > 0)) throw std::invalid_argument("clipmap: the height source's spacing must be positive");
+    throw std::invalid_argument("clipmap: level count must be 1.." + std::to_string(source_levels) +
+                                " (the source's), got " + std::to_string(options.levels));
+  if (!(source.spacing_m() > 0))
+    throw std::invalid_argument("clipmap: the height source's spacing must be positive");
   first_source_level_ = source_levels - levels;
   budget_ = options.budget > 0 ? options.budget : int64_t(n_) * n_;
   tiles_ = (n_ - 1) / kTile + 2;
@@ -151,11 +157,13 @@ void Clipmap::fill_rect(int level, const Rect& r, FillSplit& split) {
   Level& L = levels_[size_t(level)];
   if (refines_units_) {
     // The paper's update: U of the coarser level as this clipmap holds it, plus the residual.
-    const Level* coarser = level > 0 && levels_[size_t(level) - 1].has_data ? &levels_[size_t(level) - 1] : nullptr;
-    const HeldUnits held = coarser ? HeldUnits{coarser->units.data(), n_, Rect{coarser->clip_x0, coarser->clip_y0, n_, n_}}
-                                   : HeldUnits{};
-    source_.fill_units(source_level(level), r, coarser ? &held : nullptr, scratch_.data(), unit_scratch_.data(), r.width,
-                       &split);
+    const Level* coarser =
+        level > 0 && levels_[size_t(level) - 1].has_data ? &levels_[size_t(level) - 1] : nullptr;
+    const HeldUnits held =
+        coarser ? HeldUnits{coarser->units.data(), n_, Rect{coarser->clip_x0, coarser->clip_y0, n_, n_}}
+                : HeldUnits{};
+    source_.fill_units(source_level(level), r, coarser ? &held : nullptr, scratch_.data(),
+                       unit_scratch_.data(), r.width, &split);
   } else {
     source_.fill(source_level(level), r, scratch_.data(), r.width);
   }
@@ -184,9 +192,9 @@ void Clipmap::compute_coarse(int level, const Rect& r) {
   // them inside whenever this level is refilled, the clamp only guards against misuse.
   const int64_t ccx0 = C.clip_x0, ccx1 = C.clip_x0 + n_ - 1, ccy0 = C.clip_y0, ccy1 = C.clip_y0 + n_ - 1;
   const int64_t gx0 = r.x0 >> 1, gw = ((r.x0 + r.width - 1) >> 1) + 2 - gx0;  // coarse columns used
-  float* g0 = rows_.data();       // coarse row y >> 1 at columns gx0 ..
-  float* g1 = g0 + gw;            // coarse row (y >> 1) + 1 (odd y)
-  float* fine = g1 + gw;          // the output row, fine columns x0 ..
+  float* g0 = rows_.data();  // coarse row y >> 1 at columns gx0 ..
+  float* g1 = g0 + gw;       // coarse row (y >> 1) + 1 (odd y)
+  float* fine = g1 + gw;     // the output row, fine columns x0 ..
   const RowRuns coarse_runs(n_, gx0, gw, ccx0, ccx1), fine_runs(n_, r.x0, r.width);
   // The coarse surface at a fine vertex: the coarse vertex, the midpoint of the coarse edge, or the
   // midpoint of the quad diagonal (x0, y0)-(x1, y1) that the renderer's triangulation uses.
@@ -234,10 +242,10 @@ void Clipmap::compute_normals(int level, const Rect& r) {
   // y0 - 2 .. y0 + h + 1), each texel row written once its half rows above and below exist.
   const int64_t zw = r.width + 4, hw = 2 * r.width + 2, hh = 2 * r.height + 2;
   const int64_t hy0 = 2 * r.y0 - 1;
-  float* zrow = rows_.data();      // one gathered sample row
-  float* xrows = zrow + zw;        // ring of 4 sample rows upsampled in x: sample row y0 - 2 + j in slot j & 3
-  float* even = xrows + 4 * hw;    // ring of 2 half rows between sample rows
-  int64_t next_j = 0;  // the next sample row to upsample in x
+  float* zrow = rows_.data();    // one gathered sample row
+  float* xrows = zrow + zw;      // ring of 4 sample rows upsampled in x: sample row y0 - 2 + j in slot j & 3
+  float* even = xrows + 4 * hw;  // ring of 2 half rows between sample rows
+  int64_t next_j = 0;            // the next sample row to upsample in x
   const RowRuns sample_runs(n_, r.x0 - 2, zw, cx0, cx1);
   auto upsample_rows_to = [&](int64_t j_last) {
     for (; next_j <= j_last; ++next_j) {
@@ -253,7 +261,7 @@ void Clipmap::compute_normals(int level, const Rect& r) {
   const int64_t tx0 = ((2 * r.x0) % m + m) % m, texels = 2 * r.width;
   const int64_t run1 = std::min(texels, m - tx0);
   const float* half[3] = {nullptr, nullptr, nullptr};  // half rows k - 2, k - 1, k
-  for (int64_t k = 0; k < hh; ++k) {  // half row hy0 + k (odd k: a sample row)
+  for (int64_t k = 0; k < hh; ++k) {                   // half row hy0 + k (odd k: a sample row)
     const float* row;
     if (k & 1) {
       upsample_rows_to(k / 2 + 2);
@@ -391,7 +399,8 @@ float Clipmap::level_height_at(int level, double gx, double gy) const {
   const double fx = std::floor(gx), fy = std::floor(gy);
   const int64_t x = std::min(int64_t(fx), L.clip_x0 + n_ - 2), y = std::min(int64_t(fy), L.clip_y0 + n_ - 2);
   const double tx = gx - double(x), ty = gy - double(y);
-  const double a = L.z[index(x, y)], b = L.z[index(x + 1, y)], c = L.z[index(x, y + 1)], d = L.z[index(x + 1, y + 1)];
+  const double a = L.z[index(x, y)], b = L.z[index(x + 1, y)], c = L.z[index(x, y + 1)],
+               d = L.z[index(x + 1, y + 1)];
   return float((a * (1 - tx) + b * tx) * (1 - ty) + (c * (1 - tx) + d * tx) * ty);
 }
 
@@ -409,7 +418,8 @@ float Clipmap::terrain_height_at(double x_m, double y_m) const {
 
 ZRange Clipmap::z_bounds(int level, const LevelRegion& r) const {
   const Level& L = lv(level);
-  const LevelRegion in = intersect(r, LevelRegion{L.clip_x0, L.clip_y0, L.clip_x0 + n_ - 1, L.clip_y0 + n_ - 1});
+  const LevelRegion in =
+      intersect(r, LevelRegion{L.clip_x0, L.clip_y0, L.clip_x0 + n_ - 1, L.clip_y0 + n_ - 1});
   if (in.empty() || !L.has_data) return ZRange{};
   float lo = std::numeric_limits<float>::infinity(), hi = -lo;
   for (int64_t ty = floor_div(in.y0, kTile); ty <= floor_div(in.y1, kTile); ++ty)
@@ -482,7 +492,8 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
     const bool current = L.has_data && L.clip_x0 == L.desired.x0 && L.clip_y0 == L.desired.y0;
     if (!current && !blocked) {
       const bool coarser_current =
-          l == 0 || (levels_[size_t(l) - 1].has_data && levels_[size_t(l) - 1].clip_x0 == levels_[size_t(l) - 1].desired.x0 &&
+          l == 0 || (levels_[size_t(l) - 1].has_data &&
+                     levels_[size_t(l) - 1].clip_x0 == levels_[size_t(l) - 1].desired.x0 &&
                      levels_[size_t(l) - 1].clip_y0 == levels_[size_t(l) - 1].desired.y0);
       const int64_t cost = exposed_samples(L, L.desired.x0, L.desired.y0);
       // The first refill of an update always goes ahead (at most n^2), so the clipmap makes progress

@@ -27,8 +27,8 @@ std::vector<GridSize> sizes_from_finest(GridSize finest, int levels) {
 
 // Level units to metres, in double as the decoder's decode_metres does. Compiled for AVX2 and for
 // the baseline (picked at load time); no FMA, so both round identically.
-[[gnu::target_clones("avx2", "default")]] void units_to_metres(const int32_t* units, int64_t count, double scale,
-                                                               double offset, float* out) {
+[[gnu::target_clones("avx2", "default")]] void units_to_metres(const int32_t* units, int64_t count,
+                                                               double scale, double offset, float* out) {
   for (int64_t i = 0; i < count; ++i) out[i] = float(units[i] * scale + offset);
 }
 
@@ -47,7 +47,8 @@ int RegionDecoderSource::level_count() const { return decoder_->file().level_cou
 GridSize RegionDecoderSource::level_size(int level) const { return decoder_->file().level_size(level); }
 
 void HeightSource::fill_units(int, const Rect&, const HeldUnits*, float*, int32_t*, int64_t, FillSplit*) {
-  throw std::logic_error("HeightSource::fill_units: this source has no integer units (refines_units() is false)");
+  throw std::logic_error(
+      "HeightSource::fill_units: this source has no integer units (refines_units() is false)");
 }
 
 void RegionDecoderSource::fill(int level, const Rect& rect, float* out, int64_t out_stride) {
@@ -59,8 +60,10 @@ void RegionDecoderSource::fill_units(int level, const Rect& rect, const HeldUnit
   if (rect.width <= 0 || rect.height <= 0) return;
   const GridSize size = level_size(level);
   // Decode the part of the level nearest to rect (at least one sample), then replicate its edges.
-  const int64_t cx0 = clamp64(rect.x0, 0, size.width - 1), cx1 = clamp64(rect.x0 + rect.width - 1, 0, size.width - 1);
-  const int64_t cy0 = clamp64(rect.y0, 0, size.height - 1), cy1 = clamp64(rect.y0 + rect.height - 1, 0, size.height - 1);
+  const int64_t cx0 = clamp64(rect.x0, 0, size.width - 1),
+                cx1 = clamp64(rect.x0 + rect.width - 1, 0, size.width - 1);
+  const int64_t cy0 = clamp64(rect.y0, 0, size.height - 1),
+                cy1 = clamp64(rect.y0 + rect.height - 1, 0, size.height - 1);
   const int64_t w = cx1 - cx0 + 1, h = cy1 - cy0 + 1;
   const Rect inside{cx0, cy0, w, h};
   units_.resize(size_t(w * h));
@@ -76,8 +79,9 @@ void RegionDecoderSource::fill_units(int level, const Rect& rect, const HeldUnit
       const RowRuns runs(n, need.x0, need.width);
       for (int64_t y = 0; y < need.height; ++y)
         runs.gather(coarser->data + ((need.y0 + y) % n + n) % n * n, window_.data() + y * need.width);
-      decoder_->decode_refined(level, inside, CoarseWindow{window_.data(), need.width, need, level_size(level - 1)},
-                               units_.data(), w, split ? &split->upsample : nullptr, split ? &split->residual : nullptr);
+      decoder_->decode_refined(
+          level, inside, CoarseWindow{window_.data(), need.width, need, level_size(level - 1)}, units_.data(),
+          w, split ? &split->upsample : nullptr, split ? &split->residual : nullptr);
       refined = true;
     }
   }
@@ -99,7 +103,8 @@ void RegionDecoderSource::fill_units(int level, const Rect& rect, const HeldUnit
     const uint8_t* ok = voids ? valid_.data() + sy * size.width + cx0 : nullptr;  // ok[i]: decoded column i
     auto metres = [&](int64_t i) { return ok && !ok[i] ? 0.0f : float(row[i] * scale + offset); };
     float* o = out + y * out_stride;
-    if (inside1 > inside0) units_to_metres(row + inside0 + shift, inside1 - inside0, scale, offset, o + inside0);
+    if (inside1 > inside0)
+      units_to_metres(row + inside0 + shift, inside1 - inside0, scale, offset, o + inside0);
     if (ok)
       for (int64_t x = inside0; x < inside1; ++x)
         if (!ok[x + shift]) o[x] = 0.0f;
@@ -114,10 +119,13 @@ void RegionDecoderSource::fill_units(int level, const Rect& rect, const HeldUnit
   }
 }
 
-FunctionHeightSource::FunctionHeightSource(int levels, GridSize finest, double spacing_m, Function f, bool unbounded)
+FunctionHeightSource::FunctionHeightSource(int levels, GridSize finest, double spacing_m, Function f,
+                                           bool unbounded)
     : levels_(levels), finest_(finest), spacing_m_(spacing_m), f_(std::move(f)), unbounded_(unbounded) {
-  if (levels < 1 || levels > 30) throw std::invalid_argument("FunctionHeightSource: level count must be 1..30");
-  if (finest.width < 1 || finest.height < 1) throw std::invalid_argument("FunctionHeightSource: empty finest level");
+  if (levels < 1 || levels > 30)
+    throw std::invalid_argument("FunctionHeightSource: level count must be 1..30");
+  if (finest.width < 1 || finest.height < 1)
+    throw std::invalid_argument("FunctionHeightSource: empty finest level");
   if (!f_) throw std::invalid_argument("FunctionHeightSource: no function");
 }
 

@@ -11,13 +11,16 @@
 
 namespace terrain::runtime {
 
-GridHeightSource::GridHeightSource(std::vector<GridSize> sizes, std::vector<std::vector<float>> levels, double spacing_m)
+GridHeightSource::GridHeightSource(std::vector<GridSize> sizes, std::vector<std::vector<float>> levels,
+                                   double spacing_m)
     : sizes_(std::move(sizes)), levels_(std::move(levels)), spacing_m_(spacing_m) {
   if (sizes_.empty() || sizes_.size() != levels_.size())
     throw std::invalid_argument("GridHeightSource: one grid per level needed");
   for (size_t l = 0; l < sizes_.size(); ++l)
-    if (sizes_[l].width < 1 || sizes_[l].height < 1 || levels_[l].size() != size_t(sizes_[l].width * sizes_[l].height))
-      throw std::invalid_argument("GridHeightSource: level " + std::to_string(l) + " has the wrong number of samples");
+    if (sizes_[l].width < 1 || sizes_[l].height < 1 ||
+        levels_[l].size() != size_t(sizes_[l].width * sizes_[l].height))
+      throw std::invalid_argument("GridHeightSource: level " + std::to_string(l) +
+                                  " has the wrong number of samples");
   if (!(spacing_m_ > 0) || !std::isfinite(spacing_m_))
     throw std::invalid_argument("GridHeightSource: spacing must be a positive number of metres");
 }
@@ -36,9 +39,10 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
                                  int level_count, const std::vector<double>& filter_11x11, double spacing_m) {
   const Heightmap map = read_heightmap(input, read_options);
   if (map.width() != finest.width || map.height() != finest.height)
-    throw std::invalid_argument(input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
-                                " samples, but the pyramid's finest level is " + std::to_string(finest.width) + "x" +
-                                std::to_string(finest.height));
+    throw std::invalid_argument(input + ": " + std::to_string(map.width()) + "x" +
+                                std::to_string(map.height()) +
+                                " samples, but the pyramid's finest level is " +
+                                std::to_string(finest.width) + "x" + std::to_string(finest.height));
   const LevelUnits units = level_units(map.info, 0);
   BuildOptions bo;
   bo.level_count = level_count;
@@ -57,7 +61,8 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
   if (int(pyramid.recon.size()) != level_count)
     throw std::invalid_argument(input + ": the lossless pyramid has " + std::to_string(pyramid.recon.size()) +
                                 " levels, expected " + std::to_string(level_count));
-  const double metres_per_unit = map.info.vertical_scale / units.value_scale, offset = map.info.vertical_offset;
+  const double metres_per_unit = map.info.vertical_scale / units.value_scale,
+               offset = map.info.vertical_offset;
   std::vector<std::vector<float>> levels(static_cast<size_t>(level_count));
   for (int l = 0; l < level_count; ++l) {
     const std::vector<int32_t>& r = pyramid.recon[size_t(l)];

@@ -23,14 +23,13 @@ inline constexpr uint32_t kSizeV1 = 64;
 
 // Index "info" block at the start of the index.
 namespace info {
-inline constexpr size_t kInfoSize = 0, kLevelCount = 4, kLevelRecordSize = 8, kFilterSize = 12,
-                        kWidth = 16, kHeight = 24, kSpacingX = 32, kSpacingY = 40,
-                        kHorizontalUnits = 48, kVerticalUnits = 80, kVerticalScale = 112,
-                        kVerticalOffset = 120, kHasGeoreference = 128, kFilterProvenance = 132,
-                        kOriginX = 136, kOriginY = 144, kGeoreferenceUnits = 152,
-                        kStepUnits = 184, kStepMetres = 192, kErrorMode = 200, kMaskEncoding = 204,
-                        kTarget = 208, kMaskOffset = 216, kMaskSize = 224, kVoidCount = 232,
-                        kMaskCrc = 240, kMetadataCrc = 244, kMetadataOffset = 248,
+inline constexpr size_t kInfoSize = 0, kLevelCount = 4, kLevelRecordSize = 8, kFilterSize = 12, kWidth = 16,
+                        kHeight = 24, kSpacingX = 32, kSpacingY = 40, kHorizontalUnits = 48,
+                        kVerticalUnits = 80, kVerticalScale = 112, kVerticalOffset = 120,
+                        kHasGeoreference = 128, kFilterProvenance = 132, kOriginX = 136, kOriginY = 144,
+                        kGeoreferenceUnits = 152, kStepUnits = 184, kStepMetres = 192, kErrorMode = 200,
+                        kMaskEncoding = 204, kTarget = 208, kMaskOffset = 216, kMaskSize = 224,
+                        kVoidCount = 232, kMaskCrc = 240, kMetadataCrc = 244, kMetadataOffset = 248,
                         kMetadataSize = 256;
 inline constexpr uint32_t kSizeV1 = 264;
 inline constexpr size_t kUnitsField = 32;
@@ -47,7 +46,7 @@ inline constexpr uint32_t kFlagHasCrc = 1;
 inline constexpr uint32_t kFlagHasError = 2;  // version 1.1: error_rms and error_max are recorded
 }  // namespace level
 
-inline constexpr uint32_t kMaskNone = 0;     // no voids: mask size 0
+inline constexpr uint32_t kMaskNone = 0;  // no voids: mask size 0
 inline constexpr uint32_t kMaskRunsLeb128 = 1;
 
 inline void put_u16(uint8_t* p, uint16_t v) {

@@ -9,26 +9,38 @@ namespace terrain::runtime {
 
 const char* format_error_code_name(FormatErrorCode code) {
   switch (code) {
-    case FormatErrorCode::NotFound: return "not found";
-    case FormatErrorCode::Truncated: return "truncated";
-    case FormatErrorCode::BadMagic: return "not a pyramid container";
-    case FormatErrorCode::UnsupportedVersion: return "unsupported version";
-    case FormatErrorCode::ChecksumMismatch: return "checksum mismatch";
-    case FormatErrorCode::Corrupt: return "corrupt";
-    case FormatErrorCode::WriteFailed: return "write failed";
+    case FormatErrorCode::NotFound:
+      return "not found";
+    case FormatErrorCode::Truncated:
+      return "truncated";
+    case FormatErrorCode::BadMagic:
+      return "not a pyramid container";
+    case FormatErrorCode::UnsupportedVersion:
+      return "unsupported version";
+    case FormatErrorCode::ChecksumMismatch:
+      return "checksum mismatch";
+    case FormatErrorCode::Corrupt:
+      return "corrupt";
+    case FormatErrorCode::WriteFailed:
+      return "write failed";
   }
   return "unknown";
 }
 
 int exit_code(FormatErrorCode code) {
   switch (code) {
-    case FormatErrorCode::NotFound: return 2;
-    case FormatErrorCode::Truncated: return 3;
-    case FormatErrorCode::BadMagic: return 6;
-    case FormatErrorCode::WriteFailed: return 9;
+    case FormatErrorCode::NotFound:
+      return 2;
+    case FormatErrorCode::Truncated:
+      return 3;
+    case FormatErrorCode::BadMagic:
+      return 6;
+    case FormatErrorCode::WriteFailed:
+      return 9;
     case FormatErrorCode::UnsupportedVersion:
     case FormatErrorCode::ChecksumMismatch:
-    case FormatErrorCode::Corrupt: return 10;
+    case FormatErrorCode::Corrupt:
+      return 10;
   }
   return 70;
 }
@@ -59,14 +71,15 @@ void validate_info(const ContainerInfo& info) {
     const LevelInfo& coarse = info.levels[l - 1];
     require(coarse.width == (fine.width + 1) / 2 && coarse.height == (fine.height + 1) / 2,
             "level " + std::to_string(l - 1) + " is " + std::to_string(coarse.width) + "x" +
-                std::to_string(coarse.height) + ", expected ceil-half of level " + std::to_string(l) +
-                " (" + std::to_string(fine.width) + "x" + std::to_string(fine.height) + ")");
+                std::to_string(coarse.height) + ", expected ceil-half of level " + std::to_string(l) + " (" +
+                std::to_string(fine.width) + "x" + std::to_string(fine.height) + ")");
   }
   require(std::isfinite(info.spacing_x) && std::isfinite(info.spacing_y) && info.spacing_x > 0 &&
               info.spacing_y > 0,
           "spacing must be finite and positive");
-  require(std::isfinite(info.vertical_scale) && std::isfinite(info.vertical_offset) && info.vertical_scale != 0,
-          "vertical scale must be finite and non-zero, offset finite");
+  require(
+      std::isfinite(info.vertical_scale) && std::isfinite(info.vertical_offset) && info.vertical_scale != 0,
+      "vertical scale must be finite and non-zero, offset finite");
   require(info.horizontal_units.size() <= kMaxUnitsLength && info.vertical_units.size() <= kMaxUnitsLength,
           "units strings are limited to " + std::to_string(kMaxUnitsLength) + " bytes");
   require(info.horizontal_units.find('\0') == std::string::npos &&

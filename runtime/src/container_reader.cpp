@@ -45,8 +45,8 @@ class Parser {
   void require_crc(const uint8_t* data, uint64_t size, uint32_t stored, const std::string& what) const {
     const uint32_t actual = crc32c(data, size_t(size));
     if (actual != stored) {
-      fail(FormatErrorCode::ChecksumMismatch, what + " checksum mismatch (stored " + hex(stored) +
-                                                  ", computed " + hex(actual) + ")");
+      fail(FormatErrorCode::ChecksumMismatch,
+           what + " checksum mismatch (stored " + hex(stored) + ", computed " + hex(actual) + ")");
     }
   }
   // A NUL-terminated string in a zero-padded fixed field.
@@ -91,20 +91,23 @@ Container Container::open(const std::string& path) {
   if (std::memcmp(base, kMagic, size_t(std::min<uint64_t>(size, sizeof kMagic))) != 0) {
     parse.fail(Code::BadMagic, "not a pyramid container (bad magic bytes)");
   }
-  if (size < 16) parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, too short for a header");
+  if (size < 16)
+    parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, too short for a header");
   const uint16_t major = get_u16(base + sb::kMajor), minor = get_u16(base + sb::kMinor);
   if (major != kFormatMajor) {
-    parse.fail(Code::UnsupportedVersion, "format version " + std::to_string(major) + "." + std::to_string(minor) +
-                                             " is not supported (this reader reads version " +
-                                             std::to_string(kFormatMajor) + ".x)");
+    parse.fail(Code::UnsupportedVersion,
+               "format version " + std::to_string(major) + "." + std::to_string(minor) +
+                   " is not supported (this reader reads version " + std::to_string(kFormatMajor) + ".x)");
   }
   c.minor_version_ = minor;
   // Newer minor versions may grow fixed-size structures; this reader reads the fields it knows.
   const bool newer = minor > kFormatMinor;
   const uint32_t sb_size = get_u32(base + sb::kSize);
-  parse.require(newer ? (sb_size >= sb::kSizeV1 && sb_size % 8 == 0 && sb_size <= 65536) : sb_size == sb::kSizeV1,
-                "superblock size " + std::to_string(sb_size) + " is invalid");
-  if (size < sb_size) parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, shorter than its header");
+  parse.require(
+      newer ? (sb_size >= sb::kSizeV1 && sb_size % 8 == 0 && sb_size <= 65536) : sb_size == sb::kSizeV1,
+      "superblock size " + std::to_string(sb_size) + " is invalid");
+  if (size < sb_size)
+    parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, shorter than its header");
   parse.require_crc(base, sb_size - 4, get_u32(base + sb_size - 4), "superblock");
   const uint64_t recorded_size = get_u64(base + sb::kFileSize);
   if (size < recorded_size) {
@@ -114,8 +117,9 @@ Container Container::open(const std::string& path) {
   parse.require(size == recorded_size, "file is " + std::to_string(size) + " bytes, its header says " +
                                            std::to_string(recorded_size) + ": trailing bytes");
   if (!newer) {
-    parse.require(get_u32(base + sb::kFlags) == 0 && Parser::all_zero(base + sb::kReserved, sb::kCrc - sb::kReserved),
-                  "reserved superblock fields are not zero");
+    parse.require(
+        get_u32(base + sb::kFlags) == 0 && Parser::all_zero(base + sb::kReserved, sb::kCrc - sb::kReserved),
+        "reserved superblock fields are not zero");
   }
   const uint64_t index_offset = get_u64(base + sb::kIndexOffset), index_size = get_u64(base + sb::kIndexSize);
   parse.require_region(index_offset, index_size, sb_size, "index");
@@ -136,21 +140,25 @@ Container Container::open(const std::string& path) {
   parse.require(
       newer ? (record_size >= known_record_size && record_size % 8 == 0) : record_size == known_record_size,
       "level record size " + std::to_string(record_size) + " is invalid");
-  parse.require(level_count >= 1 && level_count <= kMaxLevels, "level count " + std::to_string(level_count) +
-                                                                   " is outside 1.." + std::to_string(kMaxLevels));
-  parse.require(filter_size <= kMaxFilterSize, "filter size " + std::to_string(filter_size) + " is too large");
+  parse.require(
+      level_count >= 1 && level_count <= kMaxLevels,
+      "level count " + std::to_string(level_count) + " is outside 1.." + std::to_string(kMaxLevels));
+  parse.require(filter_size <= kMaxFilterSize,
+                "filter size " + std::to_string(filter_size) + " is too large");
   // Each term is below 2^38, so the sum cannot wrap.
-  const uint64_t needed = uint64_t(info_size) + uint64_t(level_count) * record_size +
-                          uint64_t(filter_size) * filter_size * 8;
-  parse.require(newer ? index_size >= needed : index_size == needed,
-                "index is " + std::to_string(index_size) + " bytes, its contents need " + std::to_string(needed));
+  const uint64_t needed =
+      uint64_t(info_size) + uint64_t(level_count) * record_size + uint64_t(filter_size) * filter_size * 8;
+  parse.require(
+      newer ? index_size >= needed : index_size == needed,
+      "index is " + std::to_string(index_size) + " bytes, its contents need " + std::to_string(needed));
 
   ContainerInfo& info = c.info_;
   info.width = get_u64(idx + info::kWidth);
   info.height = get_u64(idx + info::kHeight);
   info.spacing_x = get_f64(idx + info::kSpacingX);
   info.spacing_y = get_f64(idx + info::kSpacingY);
-  info.horizontal_units = parse.string_field(idx + info::kHorizontalUnits, info::kUnitsField, "horizontal units");
+  info.horizontal_units =
+      parse.string_field(idx + info::kHorizontalUnits, info::kUnitsField, "horizontal units");
   info.vertical_units = parse.string_field(idx + info::kVerticalUnits, info::kUnitsField, "vertical units");
   info.vertical_scale = get_f64(idx + info::kVerticalScale);
   info.vertical_offset = get_f64(idx + info::kVerticalOffset);
@@ -230,7 +238,8 @@ Container Container::open(const std::string& path) {
   parse.require_region(metadata_offset, metadata_size, sb_size, "metadata");
   parse.require_crc(base + metadata_offset, metadata_size, get_u32(idx + info::kMetadataCrc), "metadata");
   regions.push_back({metadata_offset, metadata_size, "metadata"});
-  c.metadata_json_ = std::string_view(reinterpret_cast<const char*>(base + metadata_offset), size_t(metadata_size));
+  c.metadata_json_ =
+      std::string_view(reinterpret_cast<const char*>(base + metadata_offset), size_t(metadata_size));
 
   const uint32_t mask_encoding = get_u32(idx + info::kMaskEncoding);
   const uint64_t mask_offset = get_u64(idx + info::kMaskOffset), mask_size = get_u64(idx + info::kMaskSize);
@@ -255,7 +264,8 @@ Container Container::open(const std::string& path) {
 
   // No two regions may share bytes (a corrupted offset pointing into the index, say).
   std::erase_if(regions, [](const Region& r) { return r.size == 0; });
-  std::sort(regions.begin(), regions.end(), [](const Region& a, const Region& b) { return a.offset < b.offset; });
+  std::sort(regions.begin(), regions.end(),
+            [](const Region& a, const Region& b) { return a.offset < b.offset; });
   // Regions were checked to lie inside the file, so offset + size cannot wrap. The bytes between
   // regions are alignment padding, covered by no checksum: requiring zeros there means a flipped
   // byte anywhere outside the blobs is caught by open(), and inside a blob by verify().
@@ -269,7 +279,8 @@ Container Container::open(const std::string& path) {
     }
     covered_to = regions[i].offset + regions[i].size;
   }
-  parse.require(Parser::all_zero(base + covered_to, size_t(size - covered_to)), "padding at the end is not zero");
+  parse.require(Parser::all_zero(base + covered_to, size_t(size - covered_to)),
+                "padding at the end is not zero");
   return c;
 }
 
@@ -292,8 +303,9 @@ std::vector<uint8_t> Container::mask() const {
 
 void Container::mask_rows(uint64_t first_row, uint64_t row_count, uint8_t* out) const {
   if (first_row > info_.height || row_count > info_.height - first_row) {
-    throw std::out_of_range(path_ + ": mask rows " + std::to_string(first_row) + "+" + std::to_string(row_count) +
-                            " requested, grid has " + std::to_string(info_.height));
+    throw std::out_of_range(path_ + ": mask rows " + std::to_string(first_row) + "+" +
+                            std::to_string(row_count) + " requested, grid has " +
+                            std::to_string(info_.height));
   }
   const uint64_t count = row_count * info_.width;
   if (info_.void_count == 0) {

@@ -90,10 +90,13 @@ void ContainerWriter::add_level(uint32_t level, const uint8_t* data, size_t size
 }
 
 void ContainerWriter::begin_level(uint32_t level) {
-  if (open_level_) throw std::logic_error("begin_level: level " + std::to_string(*open_level_) + " is still open");
-  if (level >= kMaxLevels) throw std::invalid_argument("begin_level: level index " + std::to_string(level) + " too large");
+  if (open_level_)
+    throw std::logic_error("begin_level: level " + std::to_string(*open_level_) + " is still open");
+  if (level >= kMaxLevels)
+    throw std::invalid_argument("begin_level: level index " + std::to_string(level) + " too large");
   if (records_.size() <= level) records_.resize(level + 1);
-  if (records_[level].written) throw std::invalid_argument("level " + std::to_string(level) + " written twice");
+  if (records_[level].written)
+    throw std::invalid_argument("level " + std::to_string(level) + " written twice");
   pad_to_alignment();
   open_level_ = level;
   open_level_start_ = position_;
@@ -148,14 +151,15 @@ void ContainerWriter::append_mask(const uint8_t* valid, size_t count) {
 void ContainerWriter::set_metadata_json(std::string json) { metadata_json_ = std::move(json); }
 
 void ContainerWriter::finish() {
-  if (finished_ || finish_started_) throw std::logic_error("finish() called again after it finished or failed");
+  if (finished_ || finish_started_)
+    throw std::logic_error("finish() called again after it finished or failed");
   if (open_level_) throw std::logic_error("finish: level " + std::to_string(*open_level_) + " is still open");
   if (!info_) throw std::invalid_argument("finish: set_info() was never called");
   const ContainerInfo& info = *info_;
   const size_t level_count = info.levels.size();
   if (records_.size() > level_count) {
-    throw std::invalid_argument("finish: level " + std::to_string(records_.size() - 1) + " written but info has " +
-                                std::to_string(level_count) + " levels");
+    throw std::invalid_argument("finish: level " + std::to_string(records_.size() - 1) +
+                                " written but info has " + std::to_string(level_count) + " levels");
   }
   for (size_t l = 0; l < level_count; ++l) {
     if (l >= records_.size() || !records_[l].written) {

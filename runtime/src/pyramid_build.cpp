@@ -25,12 +25,14 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 std::string json_escape(const std::string& s) {
   std::string out;
   for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\', out += c;
+    if (c == '"' || c == '\\')
+      out += '\\', out += c;
     else if (static_cast<unsigned char>(c) < 0x20) {
       char buf[8];
       std::snprintf(buf, sizeof buf, "\\u%04x", c);
       out += buf;
-    } else out += c;
+    } else
+      out += c;
   }
   return out;
 }
@@ -48,7 +50,8 @@ class ProgressReader final : public BandReader {
   int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
     const int64_t n = inner_.read_rows(rows, values, valid);
     rows_read_ += n;
-    if (progress_) progress_("reading input", double(rows_read_) / double(std::max<int64_t>(1, info().height)));
+    if (progress_)
+      progress_("reading input", double(rows_read_) / double(std::max<int64_t>(1, info().height)));
     return n;
   }
 
@@ -60,7 +63,8 @@ class ProgressReader final : public BandReader {
 // Forwards the builder's output to the file and reports the fraction of level rows coded.
 class ProgressSink final : public PyramidSink {
  public:
-  ProgressSink(PyramidFileWriter& inner, const BuildProgress& progress) : inner_(inner), progress_(progress) {}
+  ProgressSink(PyramidFileWriter& inner, const BuildProgress& progress)
+      : inner_(inner), progress_(progress) {}
   void begin(const PyramidHeader& h) override {
     total_ = 0;
     for (const GridSize& s : h.levels) total_ += s.height;
@@ -82,7 +86,8 @@ class ProgressSink final : public PyramidSink {
 };
 
 // The first calibration_rows rows of the input, cropped to the central calibration_cols columns.
-Heightmap read_calibration_window(const std::string& input, const ReadOptions& ro, const BuildFileOptions& o) {
+Heightmap read_calibration_window(const std::string& input, const ReadOptions& ro,
+                                  const BuildFileOptions& o) {
   auto reader = open_band_reader(input, ro);
   const GridInfo& g = reader->info();
   const int64_t cw = std::min(g.width, o.calibration_cols), ch = std::min(g.height, o.calibration_rows);
@@ -148,9 +153,9 @@ LevelUnits level_units(const GridInfo& info, double quantum_metres) {
   return u;
 }
 
-BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options, const std::string& output,
-                                   const BuildFileOptions& o, const std::string& metadata_json_extra,
-                                   const BuildProgress& progress) {
+BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
+                                   const std::string& output, const BuildFileOptions& o,
+                                   const std::string& metadata_json_extra, const BuildProgress& progress) {
   BuildFileResult out;
   auto reader = open_band_reader(input, read_options);
   const GridInfo g = reader->info();
@@ -164,14 +169,16 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
   bo.temp_dir = o.temp_dir.empty() ? directory_of(output) : o.temp_dir;
-  bo.temp_name = output.substr(output.find_last_of('/') == std::string::npos ? 0 : output.find_last_of('/') + 1);
+  bo.temp_name =
+      output.substr(output.find_last_of('/') == std::string::npos ? 0 : output.find_last_of('/') + 1);
 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
   // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
   // the first rows' mid-range. Ordinary DEMs keep their native units (offset 0).
   const Heightmap window = read_calibration_window(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
-  const LevelUnits stored = LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
+  const LevelUnits stored =
+      LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
 
   PtcCoderOptions co;
   co.tile_size = o.tile_size;
@@ -180,15 +187,16 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   switch (o.target) {
     case ErrorTarget::Lossless:
       if (!g.integer_valued() && o.quantum_metres <= 0)
-        throw std::invalid_argument("lossless needs integer input; float input is quantised to --quantum (give one)");
+        throw std::invalid_argument(
+            "lossless needs integer input; float input is quantised to --quantum (give one)");
       co.step = 1;
       break;
     case ErrorTarget::Step:
       mode = ErrorMode::Step;
       co.step = o.target_metres / mpu;
       if (!(co.step >= 1))
-        throw std::invalid_argument("step " + std::to_string(o.target_metres) + " m is below the input's unit of " +
-                                    std::to_string(mpu) + " m");
+        throw std::invalid_argument("step " + std::to_string(o.target_metres) +
+                                    " m is below the input's unit of " + std::to_string(mpu) + " m");
       break;
     case ErrorTarget::Rms: {
       mode = ErrorMode::RmsTarget;
@@ -206,8 +214,9 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       for (int i = 0; i < 10; ++i) {
         co.step = step;
         const Trial t = trial_build(window, bo, co);
-        out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " + std::to_string(t.rms * mpu) +
-                                      " m, " + std::to_string(t.bytes) + " bytes");
+        out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " +
+                                      std::to_string(t.rms * mpu) + " m, " + std::to_string(t.bytes) +
+                                      " bytes");
         if (progress) progress("calibrating step", (i + 1) / 10.0);
         if (t.rms <= 1.02 * target) {
           if (!have_below || t.step > below.step) below = t, have_below = true;
@@ -232,10 +241,12 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
     case ErrorTarget::MaxError: {
       mode = ErrorMode::MaxError;
       // Float input loses up to half a quantum when it is rounded to level units.
-      const double budget = g.integer_valued() && o.quantum_metres <= 0 ? o.target_metres : o.target_metres - 0.5 * mpu;
+      const double budget =
+          g.integer_valued() && o.quantum_metres <= 0 ? o.target_metres : o.target_metres - 0.5 * mpu;
       const double e_units = std::floor(budget / mpu + 1e-9);
       if (!(e_units >= 0))
-        throw std::invalid_argument("max error " + std::to_string(o.target_metres) + " m is below the input's unit");
+        throw std::invalid_argument("max error " + std::to_string(o.target_metres) +
+                                    " m is below the input's unit");
       out.max_error_units = uint32_t(std::min<double>(e_units, codec::kMaxAbsSample));
       co.bound_max_error = true;
       co.max_error = out.max_error_units;
@@ -247,8 +258,9 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
         for (double f : {1.0, 1.5, 2.0, 3.0, 4.0}) {
           co.step = std::max(1.0, f * out.max_error_units);
           const Trial t = trial_build(window, bo, co);
-          out.calibration_log.push_back("step " + std::to_string(t.step) + " units: max " + std::to_string(t.max_abs) +
-                                        " units, " + std::to_string(t.bytes) + " bytes");
+          out.calibration_log.push_back("step " + std::to_string(t.step) + " units: max " +
+                                        std::to_string(t.max_abs) + " units, " + std::to_string(t.bytes) +
+                                        " bytes");
           if (best.bytes == 0 || t.bytes < best.bytes) best = t;
         }
         co.step = best.step;
@@ -275,7 +287,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   info.vertical_scale = mpu;
   info.vertical_offset = stored.offset_metres;
   if (g.origin_x && g.origin_y)
-    info.georeference = Georeference{*g.origin_x, *g.origin_y, g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
+    info.georeference = Georeference{*g.origin_x, *g.origin_y,
+                                     g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
   info.quantisation.step_units = co.step;
   info.quantisation.step_metres = co.step * mpu;
   info.quantisation.mode = mode;
@@ -286,10 +299,11 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   std::ostringstream meta;
   meta.precision(10);
   meta << "{\"tool\":\"pyramid-build\",\"version\":\"0.1.0\",\"source\":\"" << json_escape(input) << "\""
-       << ",\"source_format\":\"" << file_format_name(g.format) << "\",\"source_type\":\"" << sample_type_name(g.sample_type)
-       << "\",\"step_units\":" << co.step << ",\"max_error_units\":" << out.max_error_units
-       << ",\"tile_size\":" << co.tile_size << ",\"band_rows\":" << coder.band_rows()
-       << ",\"filter\":\"" << json_escape(out.build.filter_report.summary()) << "\""
+       << ",\"source_format\":\"" << file_format_name(g.format) << "\",\"source_type\":\""
+       << sample_type_name(g.sample_type) << "\",\"step_units\":" << co.step
+       << ",\"max_error_units\":" << out.max_error_units << ",\"tile_size\":" << co.tile_size
+       << ",\"band_rows\":" << coder.band_rows() << ",\"filter\":\""
+       << json_escape(out.build.filter_report.summary()) << "\""
        << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
   writer.finish(out.build, info, meta.str());
   out.file_bytes = uint64_t(std::filesystem::file_size(output));

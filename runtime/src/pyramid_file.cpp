@@ -86,7 +86,8 @@ void PyramidFileWriter::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>
   writer_.append_mask(mask_scratch_.data(), mask_scratch_.size());
 }
 
-void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info, const std::string& metadata_json) {
+void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
+                               const std::string& metadata_json) {
   close_level();
   const auto& levels = result.header.levels;
   info.width = uint64_t(levels.back().width);
@@ -108,7 +109,8 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info, co
   const DownsampleFilter& f = result.header.filter;
   info.filter_size = DownsampleFilter::kSize;
   info.filter.assign(f.taps.begin(), f.taps.end());
-  info.filter_provenance = result.filter_report.fallback ? FilterProvenance::Fallback : FilterProvenance::Optimal;
+  info.filter_provenance =
+      result.filter_report.fallback ? FilterProvenance::Fallback : FilterProvenance::Optimal;
   writer_.set_info(info);
   writer_.set_metadata_json(metadata_json);
   writer_.finish();
@@ -116,7 +118,9 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info, co
 
 std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
                                        const std::string& what) {
-  auto corrupt = [&](const std::string& why) { return FormatError(FormatErrorCode::Corrupt, what + ": " + why); };
+  auto corrupt = [&](const std::string& why) {
+    return FormatError(FormatErrorCode::Corrupt, what + ": " + why);
+  };
   if (size < kFooterSize) throw corrupt("level blob too small for its band table");
   const uint8_t* footer = blob + size - kFooterSize;
   const uint64_t count = get_u64(footer);
@@ -132,7 +136,8 @@ std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t
   for (uint64_t i = 0; i < count; ++i) {
     const uint8_t* r = table + i * kBandRecordSize;
     const uint64_t off = get_u64(r), sz = get_u64(r + 8), y0 = get_u64(r + 16), rows = get_u64(r + 24);
-    if (off > data_end || sz > data_end - off) throw corrupt("band " + std::to_string(i) + " lies outside the blob");
+    if (off > data_end || sz > data_end - off)
+      throw corrupt("band " + std::to_string(i) + " lies outside the blob");
     if (y0 != next_row || rows == 0 || rows > uint64_t(level_height) - y0)
       throw corrupt("band " + std::to_string(i) + " rows do not tile the level");
     next_row = y0 + rows;

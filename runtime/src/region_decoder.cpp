@@ -52,7 +52,8 @@ int32_t saturating_add(int32_t a, int32_t b) {
 }
 
 // out[rect] += residual (rows of `width` samples starting at `res`, `res_stride` apart).
-void add_rows(int32_t* out, int64_t out_stride, const int32_t* res, int64_t res_stride, int64_t width, int64_t rows) {
+void add_rows(int32_t* out, int64_t out_stride, const int32_t* res, int64_t res_stride, int64_t width,
+              int64_t rows) {
   for (int64_t y = 0; y < rows; ++y) {
     int32_t* o = out + y * out_stride;
     const int32_t* r = res + y * res_stride;
@@ -79,7 +80,8 @@ GridSize checked_size(const PyramidFile& file, int level, const Rect& rect) {
 RegionDecoder::RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes)
     : file_(std::move(file)), cache_capacity_(cache_bytes) {
   if (file_->level_count() > kMaxLevels)
-    throw FormatError(FormatErrorCode::Corrupt, file_->path() + ": more than " + std::to_string(kMaxLevels) + " levels");
+    throw FormatError(FormatErrorCode::Corrupt,
+                      file_->path() + ": more than " + std::to_string(kMaxLevels) + " levels");
   bands_.resize(size_t(file_->level_count()));
   for (int l = 0; l < file_->level_count(); ++l) {
     bands_[size_t(l)].resize(file_->bands(l).size());
@@ -91,7 +93,8 @@ RegionDecoder::~RegionDecoder() = default;
 
 RegionStats RegionDecoder::stats() const {
   RegionStats s{samples_.load(), tiles_.load(), residual_samples_.load(), hits_.load(), {}};
-  for (int l = 0; l < file_->level_count(); ++l) s.residual_samples_by_level.push_back(by_level_[size_t(l)].load());
+  for (int l = 0; l < file_->level_count(); ++l)
+    s.residual_samples_by_level.push_back(by_level_[size_t(l)].load());
   return s;
 }
 
@@ -114,12 +117,13 @@ void RegionDecoder::count_decoded(int level, uint64_t tiles, uint64_t samples) c
 }
 
 namespace {
-[[noreturn]] void throw_band_error(const PyramidFile& file, int level, size_t b, const BandView& band, int64_t x0,
-                                   int64_t width, codec::Status s) {
-  throw FormatError(s == codec::Status::ChecksumMismatch ? FormatErrorCode::ChecksumMismatch : FormatErrorCode::Corrupt,
-                    file.path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
-                        std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) + "), columns " +
-                        std::to_string(x0) + ".." + std::to_string(x0 + width - 1) + ": " + codec::status_name(s));
+[[noreturn]] void throw_band_error(const PyramidFile& file, int level, size_t b, const BandView& band,
+                                   int64_t x0, int64_t width, codec::Status s) {
+  throw FormatError(
+      s == codec::Status::ChecksumMismatch ? FormatErrorCode::ChecksumMismatch : FormatErrorCode::Corrupt,
+      file.path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
+          std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) + "), columns " +
+          std::to_string(x0) + ".." + std::to_string(x0 + width - 1) + ": " + codec::status_name(s));
 }
 }  // namespace
 
@@ -128,17 +132,18 @@ const RegionDecoder::Band& RegionDecoder::band(int level, size_t b) const {
   std::call_once(band.once, [&] {
     const BandView& v = file_->bands(level)[b];
     band.status = band.decoder.open(v.data, v.size);
-    if (band.status == codec::Status::Ok &&
-        (band.decoder.header().width != file_->level_size(level).width || band.decoder.header().height != v.rows))
+    if (band.status == codec::Status::Ok && (band.decoder.header().width != file_->level_size(level).width ||
+                                             band.decoder.header().height != v.rows))
       band.status = codec::Status::Corrupt;
   });
   if (band.status != codec::Status::Ok)
-    throw_band_error(*file_, level, b, file_->bands(level)[b], 0, file_->level_size(level).width, band.status);
+    throw_band_error(*file_, level, b, file_->bands(level)[b], 0, file_->level_size(level).width,
+                     band.status);
   return band;
 }
 
-std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int level, size_t b, const Band& bd, int64_t tx,
-                                                                        int64_t ty) const {
+std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int level, size_t b, const Band& bd,
+                                                                        int64_t tx, int64_t ty) const {
   const codec::HeaderInfo& h = bd.decoder.header();
   const uint64_t key = tile_key(level, b, ty * h.tiles_x + tx);
   {
@@ -182,7 +187,8 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
     const codec::Rect cr{rect.x0, y0 - view.y0, rect.width, y1 - y0};
     const codec::HeaderInfo& h = bd.decoder.header();
     const int64_t ts = h.tile_size;
-    const int64_t tx0 = cr.x / ts, tx1 = (cr.x + cr.width - 1) / ts, ty0 = cr.y / ts, ty1 = (cr.y + cr.height - 1) / ts;
+    const int64_t tx0 = cr.x / ts, tx1 = (cr.x + cr.width - 1) / ts, ty0 = cr.y / ts,
+                  ty1 = (cr.y + cr.height - 1) / ts;
     int32_t* band_out = out + (y0 - rect.y0) * out_stride;
     if (cache_capacity_ == 0) {
       thread_local std::vector<int32_t> residual;
@@ -207,7 +213,8 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
 }
 
 void RegionDecoder::decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const {
-  if (level < 0 || level >= file_->level_count()) throw std::out_of_range("region decoder: no level " + std::to_string(level));
+  if (level < 0 || level >= file_->level_count())
+    throw std::out_of_range("region decoder: no level " + std::to_string(level));
   const GridSize size = checked_size(*file_, level, rect);
   if (rect.width == 0 || rect.height == 0) return;
   if (level == 0) {
@@ -221,12 +228,13 @@ void RegionDecoder::decode_units(int level, const Rect& rect, int32_t* out, int6
   std::vector<int32_t>& coarse = thread_window(level - 1);
   coarse.resize(size_t(need.width * need.height));
   decode_units(level - 1, need, coarse.data(), need.width);
-  decode_refined(level, rect, CoarseWindow{coarse.data(), need.width, need, file_->level_size(level - 1)}, out,
-                 out_stride);
+  decode_refined(level, rect, CoarseWindow{coarse.data(), need.width, need, file_->level_size(level - 1)},
+                 out, out_stride);
 }
 
 void RegionDecoder::decode_refined(int level, const Rect& rect, const CoarseWindow& coarser, int32_t* out,
-                                   int64_t out_stride, double* seconds_upsample, double* seconds_residual) const {
+                                   int64_t out_stride, double* seconds_upsample,
+                                   double* seconds_residual) const {
   if (level < 1 || level >= file_->level_count())
     throw std::out_of_range("region decoder: no level " + std::to_string(level) + " above a coarser one");
   const GridSize size = checked_size(*file_, level, rect);

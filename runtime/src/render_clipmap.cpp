@@ -152,21 +152,51 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
 }
 
 Mat4 view_projection(const Camera& cam, double aspect, double near_m, double far_m) {
-  const double cp = std::cos(cam.pitch), sp = std::sin(cam.pitch), cy = std::cos(cam.yaw), sy = std::sin(cam.yaw);
+  const double cp = std::cos(cam.pitch), sp = std::sin(cam.pitch), cy = std::cos(cam.yaw),
+               sy = std::sin(cam.yaw);
   const double f[3] = {cp * cy, cp * sy, sp};
   // right = f x up(0,0,1), normalised; up' = right x f
   double r[3] = {f[1], -f[0], 0};
   const double rl = std::hypot(r[0], r[1]);
-  if (rl < 1e-9) r[0] = 1, r[1] = 0;  // looking straight up or down: any right vector will do
-  else r[0] /= rl, r[1] /= rl;
+  if (rl < 1e-9)
+    r[0] = 1, r[1] = 0;  // looking straight up or down: any right vector will do
+  else
+    r[0] /= rl, r[1] /= rl;
   const double u[3] = {r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]};
   const double* e = cam.position;
-  Mat4 view{r[0], u[0], -f[0], 0, r[1], u[1], -f[1], 0, r[2], u[2], -f[2], 0,
-            -(r[0] * e[0] + r[1] * e[1] + r[2] * e[2]), -(u[0] * e[0] + u[1] * e[1] + u[2] * e[2]),
-            (f[0] * e[0] + f[1] * e[1] + f[2] * e[2]), 1};
+  Mat4 view{r[0],
+            u[0],
+            -f[0],
+            0,
+            r[1],
+            u[1],
+            -f[1],
+            0,
+            r[2],
+            u[2],
+            -f[2],
+            0,
+            -(r[0] * e[0] + r[1] * e[1] + r[2] * e[2]),
+            -(u[0] * e[0] + u[1] * e[1] + u[2] * e[2]),
+            (f[0] * e[0] + f[1] * e[1] + f[2] * e[2]),
+            1};
   const double t = 1.0 / std::tan(cam.fov_y_deg * M_PI / 360.0);
-  Mat4 proj{t / aspect, 0, 0, 0, 0, t, 0, 0, 0, 0, (far_m + near_m) / (near_m - far_m), -1,
-            0, 0, 2 * far_m * near_m / (near_m - far_m), 0};
+  Mat4 proj{t / aspect,
+            0,
+            0,
+            0,
+            0,
+            t,
+            0,
+            0,
+            0,
+            0,
+            (far_m + near_m) / (near_m - far_m),
+            -1,
+            0,
+            0,
+            2 * far_m * near_m / (near_m - far_m),
+            0};
   return multiply(proj, view);
 }
 
@@ -207,7 +237,8 @@ bool dirty_covers_move(const Rect& before, const Rect& now, const std::vector<Re
   } else {
     if (dx != 0) gained.push_back(Rect{dx > 0 ? before.x0 + n : now.x0, now.y0, std::abs(dx), n});
     if (dy != 0)
-      gained.push_back(Rect{std::max(now.x0, before.x0), dy > 0 ? before.y0 + n : now.y0, n - std::abs(dx), std::abs(dy)});
+      gained.push_back(
+          Rect{std::max(now.x0, before.x0), dy > 0 ? before.y0 + n : now.y0, n - std::abs(dx), std::abs(dy)});
   }
   for (const Rect& g : gained)
     if (std::none_of(dirty.begin(), dirty.end(), [&](const Rect& d) { return contains(d, g); })) return false;
@@ -244,7 +275,8 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   Gl& g = *gl_;
   g.uploaded_clip.assign(size_t(levels), Rect{});
   g.uploaded.assign(size_t(levels), false);
-  const GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader), fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
+  const GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader),
+               fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
   g.program = glCreateProgram();
   glAttachShader(g.program, vs);
   glAttachShader(g.program, fs);
@@ -261,9 +293,11 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   auto loc = [&](const char* name) { return glGetUniformLocation(g.program, name); };
   g.u_origin = loc("u_origin"), g.u_extent = loc("u_extent"), g.u_transpose = loc("u_transpose");
   g.u_level = loc("u_level"), g.u_n = loc("u_n"), g.u_wrap_base = loc("u_wrap_base"), g.u_g = loc("u_g");
-  g.u_viewer = loc("u_viewer"), g.u_active = loc("u_active"), g.u_w = loc("u_w"), g.u_transitions = loc("u_transitions");
+  g.u_viewer = loc("u_viewer"), g.u_active = loc("u_active"), g.u_w = loc("u_w"),
+  g.u_transitions = loc("u_transitions");
   g.u_mvp = loc("u_mvp"), g.u_coarse_layer = loc("u_coarse_layer"), g.u_coarse_scale = loc("u_coarse_scale");
-  g.u_light = loc("u_light"), g.u_flat = loc("u_flat"), g.u_flat_rgb = loc("u_flat_rgb"), g.u_zrange = loc("u_zrange");
+  g.u_light = loc("u_light"), g.u_flat = loc("u_flat"), g.u_flat_rgb = loc("u_flat_rgb"),
+  g.u_zrange = loc("u_zrange");
   glUseProgram(g.program);
   glUniform1i(loc("u_z"), 0);
   glUniform1i(loc("u_zc"), 1);
@@ -376,22 +410,25 @@ void ClipmapRenderer::upload(const Clipmap& cm, bool everything) {
     for (const Rect& r : *rects) {
       // A rectangle of the level maps to up to 2 x 2 pieces of the toroidal texture.
       const int64_t tx = cm.wrap(r.x0), ty = cm.wrap(r.y0);
-      const int64_t wx[2] = {std::min<int64_t>(r.width, n_ - tx), r.width - std::min<int64_t>(r.width, n_ - tx)};
-      const int64_t wy[2] = {std::min<int64_t>(r.height, n_ - ty), r.height - std::min<int64_t>(r.height, n_ - ty)};
+      const int64_t wx[2] = {std::min<int64_t>(r.width, n_ - tx),
+                             r.width - std::min<int64_t>(r.width, n_ - tx)};
+      const int64_t wy[2] = {std::min<int64_t>(r.height, n_ - ty),
+                             r.height - std::min<int64_t>(r.height, n_ - ty)};
       for (int py = 0; py < 2; ++py)
         for (int px = 0; px < 2; ++px) {
           if (wx[px] <= 0 || wy[py] <= 0) continue;
           const int64_t ox = px == 0 ? tx : 0, oy = py == 0 ? ty : 0;
           const size_t at = size_t(oy * n_ + ox);
-          glTextureSubImage3D(g.tex_z, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1, GL_RED, GL_FLOAT,
-                              cm.heights(l) + at);
-          glTextureSubImage3D(g.tex_zc, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1, GL_RED, GL_FLOAT,
-                              cm.coarse_heights(l) + at);
+          glTextureSubImage3D(g.tex_z, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1,
+                              GL_RED, GL_FLOAT, cm.heights(l) + at);
+          glTextureSubImage3D(g.tex_zc, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1,
+                              GL_RED, GL_FLOAT, cm.coarse_heights(l) + at);
           upload_samples_ += wx[px] * wy[py];
           // The normal map's texels of these samples: the same piece at twice the resolution.
           glPixelStorei(GL_UNPACK_ROW_LENGTH, 2 * n_);
-          glTextureSubImage3D(g.tex_normal, 0, GLint(2 * ox), GLint(2 * oy), l, GLsizei(2 * wx[px]), GLsizei(2 * wy[py]), 1,
-                              GL_RG, GL_FLOAT, cm.normal_map(l) + 2 * size_t(2 * oy * 2 * n_ + 2 * ox));
+          glTextureSubImage3D(g.tex_normal, 0, GLint(2 * ox), GLint(2 * oy), l, GLsizei(2 * wx[px]),
+                              GLsizei(2 * wy[py]), 1, GL_RG, GL_FLOAT,
+                              cm.normal_map(l) + 2 * size_t(2 * oy * 2 * n_ + 2 * ox));
           glPixelStorei(GL_UNPACK_ROW_LENGTH, n_);
         }
     }
@@ -465,7 +502,8 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
     const double gm = cm.spacing(l);
     const auto v = cm.viewer_grid(l);
     const Rect clip = cm.clip_region(l);
-    const GLint base_x = GLint(n_ * (std::abs(clip.x0) / n_ + 2)), base_y = GLint(n_ * (std::abs(clip.y0) / n_ + 2));
+    const GLint base_x = GLint(n_ * (std::abs(clip.x0) / n_ + 2)),
+                base_y = GLint(n_ * (std::abs(clip.y0) / n_ + 2));
     glUniform1i(g.u_level, l);
     glUniform2i(g.u_wrap_base, base_x, base_y);
     glUniform1f(g.u_g, float(gm));
@@ -540,7 +578,8 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
       const struct {
         int64_t x, y, len;
         bool along_x;
-      } sides[4] = {{a.x0, a.y0, wx, true}, {a.x0, a.y1, wx, true}, {a.x0, a.y0, wy, false}, {a.x1, a.y0, wy, false}};
+      } sides[4] = {
+          {a.x0, a.y0, wx, true}, {a.x0, a.y1, wx, true}, {a.x0, a.y0, wy, false}, {a.x1, a.y0, wy, false}};
       for (const auto& sd : sides) {
         // The stitch line is local x with one row of triangles per 2 quads: extent (len, 0).
         const int64_t tris = sd.len / 2;
@@ -548,7 +587,8 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
         glUniform2i(g.u_extent, GLint(sd.along_x ? sd.len : 0), GLint(sd.along_x ? 0 : sd.len));
         glUniform1i(g.u_transpose, sd.along_x ? 0 : 1);
         glDrawElementsBaseVertex(GL_TRIANGLES, GLsizei(tris * 3), GL_UNSIGNED_SHORT,
-                                 reinterpret_cast<const void*>(g.stitch.first_index * sizeof(uint16_t)), g.stitch.base_vertex);
+                                 reinterpret_cast<const void*>(g.stitch.first_index * sizeof(uint16_t)),
+                                 g.stitch.base_vertex);
         ++stats.draw_calls;
         stats.triangles += tris;
       }

@@ -41,8 +41,10 @@ HeadlessGL::HeadlessGL() {
     if (get_platform_display) {
       dpy = get_platform_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
       EGLint major = 0, minor = 0;
-      if (dpy != EGL_NO_DISPLAY && eglInitialize(dpy, &major, &minor)) platform_ = "surfaceless";
-      else dpy = EGL_NO_DISPLAY;
+      if (dpy != EGL_NO_DISPLAY && eglInitialize(dpy, &major, &minor))
+        platform_ = "surfaceless";
+      else
+        dpy = EGL_NO_DISPLAY;
     }
   }
   if (dpy == EGL_NO_DISPLAY) {
@@ -55,12 +57,19 @@ HeadlessGL::HeadlessGL() {
   if (!eglBindAPI(EGL_OPENGL_API)) egl_fail("eglBindAPI(OpenGL)");
   // The default EGL_SURFACE_TYPE (window) matches nothing on the surfaceless platform: ask for
   // pbuffer-capable configs, which every headless driver offers, although no surface is made.
-  const EGLint config_attribs[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_NONE};
+  const EGLint config_attribs[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT,
+                                   EGL_NONE};
   EGLConfig config = nullptr;
   EGLint count = 0;
-  if (!eglChooseConfig(dpy, config_attribs, &config, 1, &count) || count < 1) egl_fail("eglChooseConfig (pbuffer, OpenGL)");
-  const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 5,
-                                    EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+  if (!eglChooseConfig(dpy, config_attribs, &config, 1, &count) || count < 1)
+    egl_fail("eglChooseConfig (pbuffer, OpenGL)");
+  const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION,
+                                    4,
+                                    EGL_CONTEXT_MINOR_VERSION,
+                                    5,
+                                    EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                                    EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                                    EGL_NONE};
   EGLContext ctx = eglCreateContext(dpy, config, EGL_NO_CONTEXT, context_attribs);
   if (ctx == EGL_NO_CONTEXT) egl_fail("eglCreateContext(OpenGL 4.5 core)");
   context_ = ctx;

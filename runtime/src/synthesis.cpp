@@ -73,7 +73,8 @@ std::vector<double> extrapolate_residual_std(const std::vector<double>& stored_v
   }
   // The line passes through the centroid of the fitted points (also with a clamped slope).
   f.intercept = my - f.slope * mx;
-  for (int k = 0; k < count; ++k) out[size_t(k)] = std::sqrt(std::exp2(f.intercept + f.slope * double(stored + k)));
+  for (int k = 0; k < count; ++k)
+    out[size_t(k)] = std::sqrt(std::exp2(f.intercept + f.slope * double(stored + k)));
   if (fit) *fit = f;
   return out;
 }
@@ -86,8 +87,8 @@ std::vector<double> stored_residual_variance_m2(const PyramidFile& file) {
   return v;
 }
 
-SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint64_t seed, double detail_scale,
-                                       ResidualFit* fit) {
+SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint64_t seed,
+                                       double detail_scale, ResidualFit* fit) {
   if (!(detail_scale >= 0) || !std::isfinite(detail_scale))
     throw std::invalid_argument("synthesis: detail scale must be a finite number >= 0");
   SynthesisOptions o;
@@ -105,7 +106,8 @@ std::vector<double> fractal_std(double std0_m, double hurst, int count) {
 }
 
 std::vector<double> gaussian_noise_table(uint64_t seed, int table_log2) {
-  if (table_log2 < 5 || table_log2 > 10) throw std::invalid_argument("synthesis: table side must be 2^5..2^10");
+  if (table_log2 < 5 || table_log2 > 10)
+    throw std::invalid_argument("synthesis: table side must be 2^5..2^10");
   const size_t count = size_t(1) << (2 * table_log2);
   std::vector<double> t(count);
   uint64_t state = seed ^ 0x5DEECE66Dull;
@@ -138,13 +140,14 @@ SynthesisSource::SynthesisSource(HeightSource& base, const SynthesisOptions& opt
   const int K = options_.levels;
   if (base_levels_ < 1) throw std::invalid_argument("synthesis: the base source has no levels");
   if (K < 1 || K > SynthesisOptions::kMaxLevels)
-    throw std::invalid_argument("synthesis: level count must be 1.." + std::to_string(SynthesisOptions::kMaxLevels) +
-                                ", got " + std::to_string(K));
+    throw std::invalid_argument("synthesis: level count must be 1.." +
+                                std::to_string(SynthesisOptions::kMaxLevels) + ", got " + std::to_string(K));
   if (int(options_.std_m.size()) != K)
-    throw std::invalid_argument("synthesis: need one noise std per synthesised level (" + std::to_string(K) + "), got " +
-                                std::to_string(options_.std_m.size()));
+    throw std::invalid_argument("synthesis: need one noise std per synthesised level (" + std::to_string(K) +
+                                "), got " + std::to_string(options_.std_m.size()));
   for (double s : options_.std_m)
-    if (!(s >= 0) || !std::isfinite(s)) throw std::invalid_argument("synthesis: noise std must be finite and >= 0");
+    if (!(s >= 0) || !std::isfinite(s))
+      throw std::invalid_argument("synthesis: noise std must be finite and >= 0");
   if (!(options_.quantum_m > 0) || !std::isfinite(options_.quantum_m))
     throw std::invalid_argument("synthesis: quantum must be a positive number of metres");
   if (!(base.spacing_m() > 0)) throw std::invalid_argument("synthesis: the base's spacing must be positive");
@@ -177,7 +180,8 @@ SynthesisSource::SynthesisSource(HeightSource& base, const SynthesisOptions& opt
 }
 
 GridSize SynthesisSource::level_size(int level) const {
-  if (level < 0 || level >= level_count()) throw std::out_of_range("synthesis: no level " + std::to_string(level));
+  if (level < 0 || level >= level_count())
+    throw std::out_of_range("synthesis: no level " + std::to_string(level));
   return level < base_levels_ ? base_.level_size(level) : sizes_[size_t(level - base_levels_)];
 }
 
@@ -222,10 +226,10 @@ void SynthesisSource::compute(int level, const Rect& rect, int32_t* out, int64_t
   }
 }
 
-void SynthesisSource::fill_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) {
+void SynthesisSource::fill_quanta(int level, const Rect& rect, int32_t* out, int64_t out_stride) {
   if (level < base_levels_ - 1 || level >= level_count())
-    throw std::out_of_range("synthesis: fill_units needs a level in " + std::to_string(base_levels_ - 1) + ".." +
-                            std::to_string(level_count() - 1) + ", got " + std::to_string(level));
+    throw std::out_of_range("synthesis: fill_quanta needs a level in " + std::to_string(base_levels_ - 1) +
+                            ".." + std::to_string(level_count() - 1) + ", got " + std::to_string(level));
   const GridSize size = level_size(level);
   if (rect.x0 < 0 || rect.y0 < 0 || rect.width < 0 || rect.height < 0 || rect.x0 + rect.width > size.width ||
       rect.y0 + rect.height > size.height)
@@ -247,7 +251,7 @@ void SynthesisSource::fill(int level, const Rect& rect, float* out, int64_t out_
   const Rect inside{cx0, cy0, cx1 - cx0 + 1, cy1 - cy0 + 1};
   std::vector<int32_t>& units = scratch_.back();  // never a recursion buffer of `level` (depth <= K - 1)
   units.resize(size_t(inside.width * inside.height));
-  fill_units(level, inside, units.data(), inside.width);
+  fill_quanta(level, inside, units.data(), inside.width);
   const double q = options_.quantum_m;
   for (int64_t y = 0; y < rect.height; ++y) {
     const int64_t sy = std::clamp(rect.y0 + y, cy0, cy1) - cy0;

@@ -27,15 +27,13 @@ struct RowRuns {
   }
   // Columns without clamping (they lie in the clip region): count <= n.
   RowRuns(int64_t n, int64_t x0, int64_t count_) : RowRuns(n, x0, count_, x0, x0 + count_ - 1) {}
-  template <typename T>
-  void gather(const T* row, T* dst) const {
+  template <typename T> void gather(const T* row, T* dst) const {
     std::fill(dst, dst + in0, row[left]);
     std::copy_n(row + start, run1, dst + in0);
     std::copy_n(row, in1 - in0 - run1, dst + in0 + run1);
     std::fill(dst + in1, dst + count, row[right]);
   }
-  template <typename T>
-  void scatter(const T* src, T* row) const {  // the inverse, for unclamped runs
+  template <typename T> void scatter(const T* src, T* row) const {  // the inverse, for unclamped runs
     std::copy_n(src, run1, row + start);
     std::copy_n(src + run1, count - run1, row);
   }

@@ -1,8 +1,7 @@
 // libcodec tests: lossless round trips, quantiser error predictions, max-error guarantee, region
 // decoding, and rejection of corrupted / truncated streams.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -32,8 +31,9 @@ std::vector<uint8_t> encode_image(const Image& img, const codec::EncodeOptions& 
   REQUIRE(!out.empty());
   size_t written = 0;
   if (recon) recon->assign(img.samples.size(), 0);
-  const codec::Status s = codec::encode(img.samples.data(), img.width, img.width, img.height, options, out.data(),
-                                        out.size(), &written, scratch, recon ? recon->data() : nullptr, img.width);
+  const codec::Status s =
+      codec::encode(img.samples.data(), img.width, img.width, img.height, options, out.data(), out.size(),
+                    &written, scratch, recon ? recon->data() : nullptr, img.width);
   REQUIRE(codec::status_name(s) == std::string("ok"));
   out.resize(written);
   return out;
@@ -162,7 +162,8 @@ TEST_CASE("lossless round trip on residual-like and extreme synthetic data", "[c
   Image stripes = checker;
   for (int64_t y = 0; y < 50; ++y)
     for (int64_t x = 0; x < 70; ++x)
-      stripes.samples[size_t(y * 70 + x)] = ((x / 2 + y / 3) & 1) ? codec::kMaxAbsSample : -codec::kMaxAbsSample;
+      stripes.samples[size_t(y * 70 + x)] =
+          ((x / 2 + y / 3) & 1) ? codec::kMaxAbsSample : -codec::kMaxAbsSample;
   CHECK(first_difference(decode_image(encode_image(stripes, {}), stripes), stripes.samples) == -1);
   // Lossy at a large step on extreme data stays consistent with the encoder's reconstruction.
   codec::EncodeOptions lossy;
@@ -317,7 +318,8 @@ TEST_CASE("decode_region equals the same window of a full decode", "[codec]") {
       CHECK(same);
     }
     std::vector<int32_t> one(1);
-    CHECK(decoder.decode_region({img.width, 0, 1, 1}, one.data(), 1, scratch) == codec::Status::InvalidArgument);
+    CHECK(decoder.decode_region({img.width, 0, 1, 1}, one.data(), 1, scratch) ==
+          codec::Status::InvalidArgument);
     CHECK(decoder.decode_region({0, 0, 0, 1}, one.data(), 1, scratch) == codec::Status::InvalidArgument);
   }
 }
@@ -429,7 +431,8 @@ TEST_CASE("truncated and corrupted streams are rejected", "[codec]") {
         codec::Status::UnsupportedVersion);
   auto wrong_magic = stream;
   wrong_magic[0] = 'X';
-  CHECK(codec::decode(wrong_magic.data(), wrong_magic.size(), out.data(), img.width, scratch) == codec::Status::Corrupt);
+  CHECK(codec::decode(wrong_magic.data(), wrong_magic.size(), out.data(), img.width, scratch) ==
+        codec::Status::Corrupt);
 }
 
 TEST_CASE("bad arguments return a status", "[codec]") {
@@ -490,7 +493,8 @@ std::vector<int32_t> coefficient_tile(int kind, int w, int h, bool lossy, std::m
       break;
     }
     case 1: {  // extremes and the limits valid streams stay within
-      constexpr int32_t kValues[] = {INT32_MIN, INT32_MAX, 0, 1, -1, 1 << 25, -(1 << 25), 1 << 29, -(1 << 29), 255, -256};
+      constexpr int32_t kValues[] = {INT32_MIN,  INT32_MAX, 0,          1,   -1,  1 << 25,
+                                     -(1 << 25), 1 << 29,   -(1 << 29), 255, -256};
       std::uniform_int_distribution<size_t> pick(0, std::size(kValues) - 1);
       for (auto& v : tile) v = kValues[pick(rng)];
       break;
@@ -535,7 +539,8 @@ TEST_CASE("vector inverse transforms equal the scalar reference on random and ex
             vector_ran = true;
             CHECK(first_difference(vector, reference) == -1);
           }
-          if (avx2 && inverse_lapped_avx2(wide.data(), w, h, lossy)) CHECK(first_difference(wide, reference) == -1);
+          if (avx2 && inverse_lapped_avx2(wide.data(), w, h, lossy))
+            CHECK(first_difference(wide, reference) == -1);
           if (avx512 && inverse_lapped_avx512(wider.data(), w, h, lossy))
             CHECK(first_difference(wider, reference) == -1);
         }

@@ -1,8 +1,8 @@
 // The streaming band reader yields exactly the samples of a whole-file read, whatever the band height,
 // for .hgt, .hgt.gz (made here with zlib), PNG and raw input.
-#include <catch2/catch.hpp>
 #include <zlib.h>
 
+#include <catch2/catch.hpp>
 #include <cstring>
 
 #include "io_test_util.h"

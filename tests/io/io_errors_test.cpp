@@ -1,8 +1,8 @@
 // Malformed input is rejected with the documented exit status and a message naming the file:
 // checked by running the terrain-info executable on files written here, plus library-level checks.
-#include <catch2/catch.hpp>
 #include <zlib.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -66,7 +66,8 @@ TEST_CASE("terrain-info exits with the documented status on malformed input", "[
 
   std::string complex_raw = dir.file("complex.raw");
   iotest::write_file(complex_raw, std::vector<uint8_t>(200, 0));
-  iotest::write_file(complex_raw + ".json", std::string(R"({"width": 10, "height": 10, "type": "complex64"})"));
+  iotest::write_file(complex_raw + ".json",
+                     std::string(R"({"width": 10, "height": 10, "type": "complex64"})"));
   cases.push_back({"unknown sample type in sidecar", complex_raw, {}, 6, "complex64"});
 
   std::vector<float> v(12 * 5, 1.0f);
@@ -120,7 +121,8 @@ TEST_CASE("terrain-info usage, help and success paths", "[io][errors]") {
   v[4] = std::numeric_limits<float>::quiet_NaN();
   std::string f = dir.file("nan_nodata.raw");
   iotest::write_file(f, float_le(v));
-  iotest::write_file(f + ".json", std::string(R"({"width": 3, "height": 2, "type": "float32", "nodata": "NaN"})"));
+  iotest::write_file(f + ".json",
+                     std::string(R"({"width": 3, "height": 2, "type": "float32", "nodata": "NaN"})"));
   auto r = iotest::run_tools(dir, {{"terrain-info", {"--no-such-option"}},
                                    {"terrain-info", {}},
                                    {"terrain-info", {"--help"}},
@@ -150,7 +152,8 @@ TEST_CASE("library error codes match the classes", "[io][errors]") {
   terrain::ReadOptions wrong;
   wrong.width = 11;  // options override the sidecar, and 11x10 int16 needs 220 bytes
   CHECK(library_error(f, wrong) == IoErrorCode::DimensionMismatch);
-  iotest::write_file(f + ".json", std::string(R"({"width": 10, "height": 10, "type": "int16", "byte_order": "middle"})"));
+  iotest::write_file(f + ".json",
+                     std::string(R"({"width": 10, "height": 10, "type": "int16", "byte_order": "middle"})"));
   CHECK(library_error(f) == IoErrorCode::UnknownType);
   iotest::write_file(f + ".json", std::string(R"({"width": -10, "height": 10, "type": "int16"})"));
   CHECK(library_error(f) == IoErrorCode::MissingField);
@@ -183,7 +186,8 @@ TEST_CASE("library error codes match the classes", "[io][errors]") {
   std::string no_hdr = dir.file("nohdr.bil");
   iotest::write_file(no_hdr, std::vector<uint8_t>(200, 0));
   CHECK(library_error(no_hdr) == IoErrorCode::MissingField);
-  iotest::write_file(dir.file("nohdr.hdr"), std::string("NROWS 10\nNCOLS 10\nNBITS 16\nPIXELTYPE SIGNEDINT\nBYTEORDER X\n"));
+  iotest::write_file(dir.file("nohdr.hdr"),
+                     std::string("NROWS 10\nNCOLS 10\nNBITS 16\nPIXELTYPE SIGNEDINT\nBYTEORDER X\n"));
   CHECK(library_error(no_hdr) == IoErrorCode::UnknownType);
   iotest::write_file(dir.file("nohdr.hdr"), std::string("NROWS 10\nNBITS 16\n"));
   CHECK(library_error(no_hdr) == IoErrorCode::MissingField);

@@ -1,7 +1,6 @@
 // Every DEM in ../shared/data is read and checked against the figures in its MANIFEST.md table
 // (dimensions, min/max in metres over valid samples, void count where the manifest states one).
 #include <catch2/catch.hpp>
-
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -32,8 +31,8 @@ std::string trim(const std::string& s) {
 // e.g. "1201x1201" or "192 / 8840 (2572, 1608)". std::regex is avoided: GCC 12 warns inside it.
 bool find_pair(const std::string& text, char sep, double& a, double& b) {
   for (size_t i = 0; i < text.size(); ++i) {
-    if (!(std::isdigit(static_cast<unsigned char>(text[i])) || (text[i] == '-' && i + 1 < text.size() &&
-                                                                  std::isdigit(static_cast<unsigned char>(text[i + 1])))))
+    if (!(std::isdigit(static_cast<unsigned char>(text[i])) ||
+          (text[i] == '-' && i + 1 < text.size() && std::isdigit(static_cast<unsigned char>(text[i + 1])))))
       continue;
     if (i > 0 && (std::isdigit(static_cast<unsigned char>(text[i - 1])) || text[i - 1] == '.')) continue;
     const char* start = text.c_str() + i;
@@ -65,7 +64,8 @@ std::map<std::string, ManifestRow> parse_manifest(const std::string& path) {
     while (std::getline(ss, col, '|')) cols.push_back(trim(col));
     if (cols.size() < 10) continue;
     const std::string& name = cols[0];
-    if (name.size() < 5 || (name.substr(name.size() - 4) != ".hgt" && name.substr(name.size() - 4) != ".png")) continue;
+    if (name.size() < 5 || (name.substr(name.size() - 4) != ".hgt" && name.substr(name.size() - 4) != ".png"))
+      continue;
     ManifestRow r;
     double w = 0, h = 0;
     REQUIRE(find_pair(cols[5], 'x', w, h));
@@ -75,8 +75,10 @@ std::map<std::string, ManifestRow> parse_manifest(const std::string& path) {
     std::string mm = cols[8];
     if (auto arrow = mm.find("->"); arrow != std::string::npos) mm = mm.substr(arrow + 2);
     REQUIRE(find_pair(mm, '/', r.min_m, r.max_m));
-    if (cols[9] == "0") r.voids = 0;
-    else if (cols[9].find(" sample") != std::string::npos && std::isdigit(static_cast<unsigned char>(cols[9][0])))
+    if (cols[9] == "0")
+      r.voids = 0;
+    else if (cols[9].find(" sample") != std::string::npos &&
+             std::isdigit(static_cast<unsigned char>(cols[9][0])))
       r.voids = std::stoll(cols[9]);  // "160 samples (1.11e-4)"
     rows[name] = r;
   }

@@ -2,28 +2,28 @@
 // naming a file that does not exist, non-image work still succeeds, and image work fails with the
 // documented status and a message naming the image, the plugin path and the loader's reason.
 #include <catch2/catch.hpp>
-
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
 #include "io_test_util.h"
 
-
 TEST_CASE("the image plugin is loaded only for images, and a missing one is a clear error", "[io][plugin]") {
   iotest::TempDir dir;
   const std::string png = dir.file("grid.png"), raw = dir.file("grid.raw");
   // Written with the real plugin, before it is taken away.
-  auto made = iotest::run_tools(dir, {{"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}},
-                                      {"terrain-synth", {"-o", raw, "--width", "20", "--height", "10", "-q"}}});
+  auto made =
+      iotest::run_tools(dir, {{"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}},
+                              {"terrain-synth", {"-o", raw, "--width", "20", "--height", "10", "-q"}}});
   REQUIRE(made[0].status == 0);
   REQUIRE(made[1].status == 0);
 
   const std::string missing = dir.file("no-such-plugin.so");
   iotest::ScopedEnv env("TERRAIN_IMAGE_PLUGIN", missing);
-  auto r = iotest::run_tools(dir, {{"terrain-info", {raw, "-q"}},
-                                   {"terrain-info", {png, "-q"}},
-                                   {"terrain-synth", {"-o", dir.file("out.png"), "--width", "5", "--height", "5", "-q"}}});
+  auto r = iotest::run_tools(
+      dir, {{"terrain-info", {raw, "-q"}},
+            {"terrain-info", {png, "-q"}},
+            {"terrain-synth", {"-o", dir.file("out.png"), "--width", "5", "--height", "5", "-q"}}});
   CHECK(r[0].status == 0);
   INFO(r[1].err);
   CHECK(r[1].status == 6);
@@ -41,15 +41,19 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
           "[io][plugin][install]") {
   iotest::TempDir dir;
   const std::string png = dir.file("grid.png");
-  REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}}).status == 0);
+  REQUIRE(
+      iotest::run_tool(dir, {"terrain-synth", {"-o", png, "--width", "20", "--height", "10", "-q"}}).status ==
+      0);
   const std::string prefix = dir.file("inst"), moved = dir.file("moved");
   const std::string install = "cmake --install " + iotest::shell_quote(TERRAIN_BINARY_DIR) + " --prefix " +
-                              iotest::shell_quote(prefix) + " >" + iotest::shell_quote(dir.file("install.log")) + " 2>&1";
+                              iotest::shell_quote(prefix) + " >" +
+                              iotest::shell_quote(dir.file("install.log")) + " 2>&1";
   REQUIRE(std::system(install.c_str()) == 0);
   std::filesystem::rename(prefix, moved);
   // glibc's loader names every object it maps; the plugin must come from the moved tree.
   const std::string run = "LD_DEBUG=files " + iotest::shell_quote(moved + "/bin/terrain-info") + " " +
-                          iotest::shell_quote(png) + " -q >/dev/null 2>" + iotest::shell_quote(dir.file("ld.log"));
+                          iotest::shell_quote(png) + " -q >/dev/null 2>" +
+                          iotest::shell_quote(dir.file("ld.log"));
   CHECK(std::system(run.c_str()) == 0);
   const auto log = iotest::read_file(dir.file("ld.log"));
   const std::string text(log.begin(), log.end());
@@ -59,7 +63,8 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
   REQUIRE(at != std::string::npos);
   const std::string loaded = text.substr(at + 5, text.find_first_of(" \n", at) - at - 5);
   CHECK(loaded.size() > moved.size());
-  CHECK(loaded.find("/terrain/libterrain_image_oiio.so") == loaded.size() - std::string("/terrain/libterrain_image_oiio.so").size());
+  CHECK(loaded.find("/terrain/libterrain_image_oiio.so") ==
+        loaded.size() - std::string("/terrain/libterrain_image_oiio.so").size());
 
   // A program that embeds the libraries through the installed CMake package.
   const std::string project = dir.file("consumer");
@@ -86,7 +91,8 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
   const std::string to_log = " >>" + iotest::shell_quote(dir.file("consumer.log")) + " 2>&1";
   const std::string configure = "cmake -S " + iotest::shell_quote(project) + " -B " + build +
                                 " -DCMAKE_PREFIX_PATH=" + iotest::shell_quote(moved) + flags + to_log;
-  const bool built = std::system(configure.c_str()) == 0 && std::system(("cmake --build " + build + to_log).c_str()) == 0;
+  const bool built =
+      std::system(configure.c_str()) == 0 && std::system(("cmake --build " + build + to_log).c_str()) == 0;
   const auto consumer_log = iotest::read_file(dir.file("consumer.log"));
   INFO(std::string(consumer_log.begin(), consumer_log.end()).substr(0, 4000));
   REQUIRE(built);

@@ -1,7 +1,6 @@
 // Every writer/reader pair returns exactly the samples it was given (bit-exact for float32),
 // and hand-written ESRI .bil/.flt files decode as their headers say.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -36,15 +35,25 @@ Heightmap test_grid(SampleType type, int64_t w = 37, int64_t h = 23) {
   m.values.resize(size_t(w * h));
   double lo = 0, hi = 0;
   switch (type) {
-    case SampleType::Int16: lo = -32767, hi = 32767; break;  // -32768 is the nodata value below
-    case SampleType::UInt16: lo = 0, hi = 65534; break;
-    case SampleType::Int32: lo = -2147483647.0, hi = 2147483647.0; break;
-    default: lo = double(float(-1e30)), hi = double(float(3.4e38)); break;
+    case SampleType::Int16:
+      lo = -32767, hi = 32767;
+      break;  // -32768 is the nodata value below
+    case SampleType::UInt16:
+      lo = 0, hi = 65534;
+      break;
+    case SampleType::Int32:
+      lo = -2147483647.0, hi = 2147483647.0;
+      break;
+    default:
+      lo = double(float(-1e30)), hi = double(float(3.4e38));
+      break;
   }
   for (int64_t i = 0; i < w * h; ++i) {
     double v;
-    if (type == SampleType::Float32) v = double(float(std::sin(double(i) * 0.37) * 4321.123 + double(i) * 1e-3));
-    else v = std::floor(lo + (hi - lo) * double((i * 7919) % (w * h)) / double(w * h - 1));
+    if (type == SampleType::Float32)
+      v = double(float(std::sin(double(i) * 0.37) * 4321.123 + double(i) * 1e-3));
+    else
+      v = std::floor(lo + (hi - lo) * double((i * 7919) % (w * h)) / double(w * h - 1));
     m.values[size_t(i)] = v;
   }
   m.values[0] = lo;
@@ -91,7 +100,8 @@ TEST_CASE("raw + JSON sidecar round-trips all four types in both byte orders", "
     for (bool big : {false, true}) {
       INFO(terrain::sample_type_name(type) << (big ? " big" : " little") << " endian");
       Heightmap m = test_grid(type);
-      std::string path = dir.file(std::string("grid_") + terrain::sample_type_name(type) + (big ? "_be" : "_le") + ".raw");
+      std::string path =
+          dir.file(std::string("grid_") + terrain::sample_type_name(type) + (big ? "_be" : "_le") + ".raw");
       terrain::write_raw(path, m, big);
       Heightmap r = terrain::read_heightmap(path);
       CHECK(r.info.format == terrain::FileFormat::Raw);
@@ -108,8 +118,9 @@ TEST_CASE("raw + JSON sidecar round-trips all four types in both byte orders", "
       auto bytes = iotest::read_file(path);
       int n = type == SampleType::Int16 || type == SampleType::UInt16 ? 2 : 4;
       REQUIRE(bytes.size() == size_t(m.width() * m.height() * n));
-      uint32_t expect = n == 2 ? uint32_t(uint16_t(int32_t(m.values[0])))
-                               : (type == SampleType::Float32 ? float_bits(m.values[0]) : uint32_t(int32_t(m.values[0])));
+      uint32_t expect =
+          n == 2 ? uint32_t(uint16_t(int32_t(m.values[0])))
+                 : (type == SampleType::Float32 ? float_bits(m.values[0]) : uint32_t(int32_t(m.values[0])));
       uint32_t got = 0;
       for (int i = 0; i < n; ++i) got |= uint32_t(bytes[size_t(i)]) << (big ? 8 * (n - 1 - i) : 8 * i);
       CHECK(got == expect);
@@ -174,8 +185,8 @@ TEST_CASE("float32 EXR round-trips bit-exactly", "[io][image]") {
 namespace {
 
 // Writes the samples of `m` as an ESRI grid with the given header lines.
-void write_esri(const std::string& data_path, const std::string& hdr_path, const Heightmap& m, int bytes, bool big,
-                bool is_float, const std::string& header) {
+void write_esri(const std::string& data_path, const std::string& hdr_path, const Heightmap& m, int bytes,
+                bool big, bool is_float, const std::string& header) {
   std::vector<uint8_t> out;
   for (double v : m.values) {
     uint32_t u = is_float ? float_bits(v) : uint32_t(int32_t(v));
@@ -209,12 +220,13 @@ TEST_CASE("ESRI .bil and .flt written by hand decode as their headers say", "[io
     m.values[size_t(m.width() + 5)] = -9999;
     m.info.nodata = -9999;
     write_esri(dir.file("dem.flt"), dir.file("dem.hdr"), m, 4, false, true,
-               "ncols 13\nnrows 9\nxllcorner 100\nyllcorner 200\ncellsize 10\nNODATA_value -9999\nbyteorder LSBFIRST\n");
+               "ncols 13\nnrows 9\nxllcorner 100\nyllcorner 200\ncellsize 10\nNODATA_value -9999\nbyteorder "
+               "LSBFIRST\n");
     Heightmap r = terrain::read_heightmap(dir.file("dem.flt"));
     CHECK(r.info.format == terrain::FileFormat::EsriFlt);
     CHECK(r.info.sample_type == SampleType::Float32);
-    CHECK(*r.info.origin_x == 105);               // centre of the first column
-    CHECK(*r.info.origin_y == 200 + 8.5 * 10);    // centre of the top row
+    CHECK(*r.info.origin_x == 105);             // centre of the first column
+    CHECK(*r.info.origin_y == 200 + 8.5 * 10);  // centre of the top row
     require_same_samples(m, r);
   }
   SECTION("32-bit unsigned BIL is rejected as an unknown type") {

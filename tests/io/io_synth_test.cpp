@@ -1,6 +1,5 @@
 // The synthetic terrain generator is deterministic and plausible.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 
 #include "io_test_util.h"
@@ -44,9 +43,9 @@ TEST_CASE("synthetic terrain has plausible relief", "[io][synth]") {
       terrain::Heightmap m = make(seed, size, size + 3);
       REQUIRE(m.values.size() == size_t(size * (size + 3)));
       terrain::GridStats s = terrain::compute_stats(m);
-      CHECK(s.min_m == 0);      // sea level
-      CHECK(s.max_m == 3100);   // the documented top of the relief
-      CHECK(s.mean_m > 150);    // land is not all lowland: mountains hold real volume
+      CHECK(s.min_m == 0);     // sea level
+      CHECK(s.max_m == 3100);  // the documented top of the relief
+      CHECK(s.mean_m > 150);   // land is not all lowland: mountains hold real volume
       CHECK(s.mean_m < 1500);
       double slope_sum = 0;
       int64_t zeros = 0;
@@ -75,7 +74,8 @@ TEST_CASE("terrain-synth writes the generator's output in every format, reproduc
   const std::vector<std::string> exts{".raw", ".png", ".tif", ".exr"};
   std::vector<iotest::Invocation> calls;
   for (const auto& ext : exts)
-    calls.push_back({"terrain-synth", {"-o", dir.file("tool" + ext), "--width", "70", "--height", "50", "--seed", "9", "-q"}});
+    calls.push_back({"terrain-synth",
+                     {"-o", dir.file("tool" + ext), "--width", "70", "--height", "50", "--seed", "9", "-q"}});
   calls.push_back({"terrain-synth", {"-o", dir.file("x.jpg"), "--width", "5", "--height", "5"}});
   calls.push_back({"terrain-synth", {"-o", dir.file("no/such/dir/x.raw"), "--width", "5", "--height", "5"}});
   calls.push_back({"terrain-synth", {"-o", dir.file("y.raw"), "--width", "0", "--height", "5"}});
@@ -87,9 +87,12 @@ TEST_CASE("terrain-synth writes the generator's output in every format, reproduc
     INFO(ext << ": " << results[i].err);
     REQUIRE(results[i].status == 0);
     std::string tool_file = dir.file("tool" + ext), lib_file = dir.file("lib" + ext);
-    if (ext == ".raw") terrain::write_raw(lib_file, expected);
-    else if (ext == ".exr") terrain::write_exr(lib_file, expected);
-    else terrain::write_image16(lib_file, expected);
+    if (ext == ".raw")
+      terrain::write_raw(lib_file, expected);
+    else if (ext == ".exr")
+      terrain::write_exr(lib_file, expected);
+    else
+      terrain::write_image16(lib_file, expected);
     // Byte-identical files from another process: no time stamps or other run-dependent bytes.
     CHECK(iotest::read_file(tool_file) == iotest::read_file(lib_file));
     CHECK(terrain::read_heightmap(tool_file).values == expected.values);

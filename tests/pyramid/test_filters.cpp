@@ -1,7 +1,6 @@
 // U (four-point subdivision) and D (11x11 downsampling, least-squares optimal fit).
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <iostream>
 #include <map>
@@ -33,9 +32,9 @@ std::vector<int32_t> smooth_terrain(GridSize s, double amplitude = 800) {
   std::vector<int32_t> g(size_t(s.width * s.height));
   for (int64_t y = 0; y < s.height; ++y)
     for (int64_t x = 0; x < s.width; ++x)
-      g[size_t(y * s.width + x)] = int32_t(std::lround(
-          amplitude * (std::sin(x * 0.05) * std::cos(y * 0.041) + 0.3 * std::sin(x * 0.23 + y * 0.17) +
-                       0.1 * std::cos(x * 0.71 - y * 0.53))));
+      g[size_t(y * s.width + x)] = int32_t(std::lround(amplitude * (std::sin(x * 0.05) * std::cos(y * 0.041) +
+                                                                    0.3 * std::sin(x * 0.23 + y * 0.17) +
+                                                                    0.1 * std::cos(x * 0.71 - y * 0.53))));
   return g;
 }
 
@@ -150,7 +149,8 @@ TEST_CASE("U reproduces bicubic polynomials exactly in the interior") {
   const GridSize fine{41, 38};
   const GridSize cs{coarse_extent(fine.width), coarse_extent(fine.height)};
   auto poly = [](double x, double y) {
-    return 0.002 * x * x * x - 0.05 * x * x * y + 0.3 * x * y - 0.001 * y * y * y + 0.0004 * x * x * x * y * y + 7;
+    return 0.002 * x * x * x - 0.05 * x * x * y + 0.3 * x * y - 0.001 * y * y * y +
+           0.0004 * x * x * x * y * y + 7;
   };
   std::vector<double> c(size_t(cs.width * cs.height)), f(size_t(fine.width * fine.height));
   for (int64_t j = 0; j < cs.height; ++j)
@@ -163,7 +163,9 @@ TEST_CASE("U reproduces bicubic polynomials exactly in the interior") {
 
   // Integer U on integer cubics is exact too (the four-point sum is divisible, so rounding is a no-op).
   std::vector<int32_t> ci(c.size());
-  auto ipoly = [](int64_t x, int64_t y) { return int32_t(x * x * x - 3 * x * x * y + 5 * x * y * y - 2 * y * y * y); };
+  auto ipoly = [](int64_t x, int64_t y) {
+    return int32_t(x * x * x - 3 * x * x * y + 5 * x * y * y - 2 * y * y * y);
+  };
   for (int64_t j = 0; j < cs.height; ++j)
     for (int64_t i = 0; i < cs.width; ++i) ci[size_t(j * cs.width + i)] = ipoly(2 * i, 2 * j);
   auto fi = upsampled(ci, fine);
@@ -214,7 +216,8 @@ TEST_CASE("upsample_region rejects a window that does not cover the rectangle") 
   std::vector<int32_t> c(100, 0), out(400);
   UpsampleScratch scratch;
   CoarseWindow small{c.data(), 10, Rect{2, 2, 3, 3}, cs};
-  CHECK_THROWS_AS(upsample_region(small, fine, Rect{0, 0, 20, 20}, out.data(), 20, scratch), std::invalid_argument);
+  CHECK_THROWS_AS(upsample_region(small, fine, Rect{0, 0, 20, 20}, out.data(), 20, scratch),
+                  std::invalid_argument);
   CoarseWindow wrong_level{c.data(), 10, Rect{0, 0, 10, 10}, GridSize{11, 10}};
   CHECK_THROWS_AS(upsample_region(wrong_level, fine, Rect{0, 0, 20, 20}, out.data(), 20, scratch),
                   std::invalid_argument);
@@ -328,8 +331,9 @@ TEST_CASE("optimal D beats the 2x2 box and plain subsampling on every shared DEM
     const double opt_rms = prediction_rms(d, grid.data(), s, 2);
     const double box_rms = prediction_rms(DownsampleFilter::box2x2(), grid.data(), s, 2);
     const double imp_rms = prediction_rms(DownsampleFilter::impulse(), grid.data(), s, 2);
-    std::cout << "[D fit] " << std::filesystem::path(path).filename().string() << "  rms |T-U(D(T))|: optimal "
-              << opt_rms << ", box2x2 " << box_rms << ", impulse " << imp_rms << "  (" << report.summary() << ")\n";
+    std::cout << "[D fit] " << std::filesystem::path(path).filename().string()
+              << "  rms |T-U(D(T))|: optimal " << opt_rms << ", box2x2 " << box_rms << ", impulse " << imp_rms
+              << "  (" << report.summary() << ")\n";
     CHECK_FALSE(report.fallback);
     CHECK(d.sum() == Approx(1.0).margin(1e-12));
     CHECK(d.symmetric8());

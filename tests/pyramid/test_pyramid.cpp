@@ -1,11 +1,11 @@
 // The closed-loop residual pyramid: coding, decoding, streaming, nodata, tiny grids.
-#include <catch2/catch.hpp>
+#include <unistd.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <random>
-#include <unistd.h>
 
 #include "pyramid/pyramid.h"
 #include "shared_data.h"
@@ -152,9 +152,9 @@ TEST_CASE("closed loop: finest-level error does not grow with the number of leve
       out.keep_reconstruction = false;
       BuildResult res = build_pyramid(map, options(levels), coder, out);
       const LevelStats& fin = res.levels.back();
-      std::cout << "[closed loop] " << name << " step " << step << ", " << levels << " levels: finest error rms "
-                << fin.error_rms << ", max " << fin.error_max_abs << ", residual rms " << fin.residual_rms
-                << ", bytes " << out.total_bytes() << "\n";
+      std::cout << "[closed loop] " << name << " step " << step << ", " << levels
+                << " levels: finest error rms " << fin.error_rms << ", max " << fin.error_max_abs
+                << ", residual rms " << fin.residual_rms << ", bytes " << out.total_bytes() << "\n";
       CHECK(fin.error_max_abs <= step / 2);
       rms.push_back(fin.error_rms);
     }
@@ -225,10 +225,10 @@ TEST_CASE("nodata: voids survive a round trip, valid samples stay within step/2"
     map.values[size_t(y * 300 + x)] = -32768;  // what a reader might leave behind
   };
   for (int64_t y = 100; y < 160; ++y)
-    for (int64_t x = 40; x < 120; ++x) void_at(x, y);  // a lake-sized hole
-  for (int64_t x = 0; x < 300; ++x) void_at(x, 7);   // a whole void row
+    for (int64_t x = 40; x < 120; ++x) void_at(x, y);                         // a lake-sized hole
+  for (int64_t x = 0; x < 300; ++x) void_at(x, 7);                            // a whole void row
   for (int64_t k = 0; k < 500; ++k) void_at((k * 97) % 300, (k * 61) % 270);  // scattered
-  for (int64_t y = 0; y < 270; ++y) void_at(299, y);  // the east edge column
+  for (int64_t y = 0; y < 270; ++y) void_at(299, y);                          // the east edge column
   const int32_t step = 4;
   UniformQuantizerCoder coder(step);
   MemoryPyramid out;
@@ -268,7 +268,8 @@ TEST_CASE("tiny grids 1x1..7x7 and strips round-trip losslessly at step 1") {
   std::vector<GridSize> sizes;
   for (int64_t w = 1; w <= 7; ++w)
     for (int64_t h = 1; h <= 7; ++h) sizes.push_back({w, h});
-  for (GridSize s : {GridSize{1, 300}, GridSize{300, 1}, GridSize{2, 515}, GridSize{515, 3}}) sizes.push_back(s);
+  for (GridSize s : {GridSize{1, 300}, GridSize{300, 1}, GridSize{2, 515}, GridSize{515, 3}})
+    sizes.push_back(s);
   UniformQuantizerCoder coder(1, 4);
   for (GridSize s : sizes)
     for (int levels : {0, 3, 20}) {

@@ -1,8 +1,7 @@
 // The clipmap over a real compressed pyramid file: RegionDecoderSource fills each clipmap level with
 // exactly the decoder's T^_level (inside the terrain) and with the nearest edge sample outside it.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <random>
 
@@ -60,12 +59,14 @@ TEST_CASE("clipmap: a decoded pyramid fills the levels with the decoder's sample
     for (int l = 0; l < cm.level_count(); ++l) {
       const GridSize size = source.level_size(cm.source_level(l));
       std::vector<float> level(size_t(size.width * size.height));
-      decoder->decode_metres(cm.source_level(l), Rect{0, 0, size.width, size.height}, level.data(), size.width);
+      decoder->decode_metres(cm.source_level(l), Rect{0, 0, size.width, size.height}, level.data(),
+                             size.width);
       const Rect c = cm.clip_region(l);
       int64_t outside = 0;
       for (int64_t y = c.y0; y < c.y0 + c.height; ++y)
         for (int64_t x = c.x0; x < c.x0 + c.width; ++x) {
-          const int64_t sx = std::clamp<int64_t>(x, 0, size.width - 1), sy = std::clamp<int64_t>(y, 0, size.height - 1);
+          const int64_t sx = std::clamp<int64_t>(x, 0, size.width - 1),
+                        sy = std::clamp<int64_t>(y, 0, size.height - 1);
           outside += (sx != x || sy != y) ? 1 : 0;
           REQUIRE(cm.heights(l)[cm.index(x, y)] == level[size_t(sy * size.width + sx)]);
         }
@@ -91,7 +92,8 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   auto file = PyramidFile::open(dir.file("lossless.pyr"));
   const int finest = file->level_count() - 1;
   const GridHeightSource original =
-      original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(finest), file->level_count(), file->info().filter, 30.0);
+      original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(finest), file->level_count(),
+                      file->info().filter, 30.0);
   REQUIRE(original.level_count() == 3);
   RegionDecoderSource lossless(std::make_shared<const RegionDecoder>(file), 30.0);
   for (int l = 0; l < 3; ++l) {
@@ -214,7 +216,8 @@ TEST_CASE("clipmap: the screen-space error estimate from the pyramid alone, and 
   CHECK(unreachable.n == 1023);
 }
 
-TEST_CASE("clipmap: levels refined from the coarser clipmap level equal the decoder's, voids too", "[clipmap]") {
+TEST_CASE("clipmap: levels refined from the coarser clipmap level equal the decoder's, voids too",
+          "[clipmap]") {
   // The clipmap keeps each level's integer units and decodes only the residual of a finer level
   // (U of its own coarser level + R^, paper §5). Whatever the path, every level must hold exactly
   // the decoder's T^ (edges repeated outside the terrain, voids as 0 m), during a walk in and out.
@@ -265,7 +268,8 @@ TEST_CASE("clipmap: levels refined from the coarser clipmap level equal the deco
       bool same = true;
       for (int64_t v = c.y0; v < c.y0 + c.height; ++v)
         for (int64_t u = c.x0; u < c.x0 + c.width; ++u) {
-          const int64_t su = std::clamp<int64_t>(u, 0, size.width - 1), sv = std::clamp<int64_t>(v, 0, size.height - 1);
+          const int64_t su = std::clamp<int64_t>(u, 0, size.width - 1),
+                        sv = std::clamp<int64_t>(v, 0, size.height - 1);
           same = same && cm.heights(l)[cm.index(u, v)] == levels[size_t(l)][size_t(sv * size.width + su)];
         }
       INFO("frame " << frame << " level " << l);

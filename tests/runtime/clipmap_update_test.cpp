@@ -1,7 +1,6 @@
 // Geometry clipmap (CPU side): toroidal addressing, incremental update == fill from scratch,
 // per-frame budget and cropping of the levels that fall behind, level switching by height.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -16,7 +15,8 @@ namespace {
 // Integer-valued, position-dependent heights (a different value at every sample of every level), so
 // any addressing mistake shows up as a mismatch.
 float hashed_height(int level, int64_t x, int64_t y) {
-  uint64_t h = uint64_t(x) * 0x9E3779B97F4A7C15ull ^ uint64_t(y) * 0xC2B2AE3D27D4EB4Full ^ uint64_t(level) * 0x165667B19E3779F9ull;
+  uint64_t h = uint64_t(x) * 0x9E3779B97F4A7C15ull ^ uint64_t(y) * 0xC2B2AE3D27D4EB4Full ^
+               uint64_t(level) * 0x165667B19E3779F9ull;
   h ^= h >> 29;
   h *= 0xBF58476D1CE4E5B9ull;
   h ^= h >> 32;
@@ -43,7 +43,8 @@ bool same_level(const Clipmap& a, const Clipmap& b, int l, std::string& why) {
       if (a.coarse_heights(l)[i] != b.coarse_heights(l)[i]) return why = "zc", false;
       for (int64_t t = 0; t < 4; ++t) {  // the sample's four normal-map texels
         const size_t k = a.normal_index(2 * x + (t & 1), 2 * y + (t >> 1));
-        if (a.normal_map(l)[2 * k] != b.normal_map(l)[2 * k] || a.normal_map(l)[2 * k + 1] != b.normal_map(l)[2 * k + 1])
+        if (a.normal_map(l)[2 * k] != b.normal_map(l)[2 * k] ||
+            a.normal_map(l)[2 * k + 1] != b.normal_map(l)[2 * k + 1])
           return why = "normal map at sample " + std::to_string(x) + "," + std::to_string(y), false;
       }
     }
@@ -83,11 +84,16 @@ TEST_CASE("clipmap: toroidal storage holds the source's samples at their level c
           const int cl = l == 0 ? l : l - 1;
           auto C = [&](int64_t cx, int64_t cy) { return hashed_height(cm.source_level(cl), cx, cy); };
           float want;
-          if (l == 0) want = hashed_height(cm.source_level(0), xx, yy);
-          else if (!(xx & 1) && !(yy & 1)) want = C(xx >> 1, yy >> 1);
-          else if (xx & 1 && !(yy & 1)) want = 0.5f * (C(xx >> 1, yy >> 1) + C((xx >> 1) + 1, yy >> 1));
-          else if (!(xx & 1)) want = 0.5f * (C(xx >> 1, yy >> 1) + C(xx >> 1, (yy >> 1) + 1));
-          else want = 0.5f * (C(xx >> 1, yy >> 1) + C((xx >> 1) + 1, (yy >> 1) + 1));
+          if (l == 0)
+            want = hashed_height(cm.source_level(0), xx, yy);
+          else if (!(xx & 1) && !(yy & 1))
+            want = C(xx >> 1, yy >> 1);
+          else if (xx & 1 && !(yy & 1))
+            want = 0.5f * (C(xx >> 1, yy >> 1) + C((xx >> 1) + 1, yy >> 1));
+          else if (!(xx & 1))
+            want = 0.5f * (C(xx >> 1, yy >> 1) + C(xx >> 1, (yy >> 1) + 1));
+          else
+            want = 0.5f * (C(xx >> 1, yy >> 1) + C((xx >> 1) + 1, (yy >> 1) + 1));
           REQUIRE(cm.coarse_heights(l)[cm.index(xx, yy)] == want);
         }
     }
@@ -227,7 +233,8 @@ TEST_CASE("clipmap: the per-frame budget is respected and lagging levels are cro
 }
 
 TEST_CASE("clipmap: levels switch off when the viewer is high above the terrain", "[clipmap]") {
-  FunctionHeightSource flat(kLevels, GridSize{1 << 12, 1 << 12}, 2.0, [](int, int64_t, int64_t) { return 100.0f; }, true);
+  FunctionHeightSource flat(
+      kLevels, GridSize{1 << 12, 1 << 12}, 2.0, [](int, int64_t, int64_t) { return 100.0f; }, true);
   ClipmapOptions o;
   o.n = 31;
   o.budget = 1 << 30;
@@ -288,15 +295,17 @@ TEST_CASE("clipmap: bad options are rejected with a clear error", "[clipmap]") {
   CHECK_THROWS_WITH(Clipmap(src, o), Catch::Contains("level count"));
 }
 
-TEST_CASE("clipmap: the normal map has twice the geometry's resolution (slopes of U's cubic surface)", "[clipmap]") {
+TEST_CASE("clipmap: the normal map has twice the geometry's resolution (slopes of U's cubic surface)",
+          "[clipmap]") {
   // U's four-point rule reproduces cubics, so on z = c x^3 + d y (sample units) every texel away from
   // the clip border is exact: at a vertex the slope between the half positions x -+ 1/2, between
   // vertices the secant slope; neither is an interpolation of per-vertex normals.
   constexpr double c = 1e-4, d = 0.25, g = 2.0;
   const int levels = 3;
-  FunctionHeightSource src(levels, GridSize{1 << 10, 1 << 10}, g,
-                           [](int, int64_t x, int64_t y) { return float(c * double(x) * double(x) * double(x) + d * double(y)); },
-                           true);
+  FunctionHeightSource src(
+      levels, GridSize{1 << 10, 1 << 10}, g,
+      [](int, int64_t x, int64_t y) { return float(c * double(x) * double(x) * double(x) + d * double(y)); },
+      true);
   ClipmapOptions o;
   o.n = 31;
   o.budget = 1 << 30;

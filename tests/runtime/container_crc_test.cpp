@@ -1,6 +1,5 @@
 // CRC-32C: published check value, hardware/portable agreement, and chunked continuation.
 #include <catch2/catch.hpp>
-
 #include <cstring>
 #include <random>
 #include <vector>
@@ -23,7 +22,8 @@ TEST_CASE("crc32c matches the published CRC-32C check value", "[runtime][contain
   CHECK(crc32c(ones.data(), ones.size()) == 0x62A8AB43u);
 }
 
-TEST_CASE("crc32c hardware and portable paths agree at every length and alignment", "[runtime][container][crc]") {
+TEST_CASE("crc32c hardware and portable paths agree at every length and alignment",
+          "[runtime][container][crc]") {
   std::mt19937_64 rng(12345);
   std::vector<uint8_t> buffer(4096 + 16);
   for (auto& b : buffer) b = uint8_t(rng());

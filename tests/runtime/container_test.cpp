@@ -1,11 +1,12 @@
 // Pyramid container: writer/reader round trips, atomic writing, and rejection of damaged files.
-#include <catch2/catch.hpp>
+#include "runtime/container.h"
 
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <bit>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -15,8 +16,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include "runtime/container.h"
 
 namespace fs = std::filesystem;
 using namespace terrain::runtime;
@@ -38,7 +37,9 @@ class TempDir {
     fs::remove_all(path_, ec);
   }
   std::string file(const std::string& name) const { return (path_ / name).string(); }
-  size_t entry_count() const { return size_t(std::distance(fs::directory_iterator(path_), fs::directory_iterator())); }
+  size_t entry_count() const {
+    return size_t(std::distance(fs::directory_iterator(path_), fs::directory_iterator()));
+  }
 
  private:
   fs::path path_;
@@ -119,7 +120,8 @@ Sample random_sample(std::mt19937_64& rng, uint64_t width, uint64_t height, size
   info.filter.resize(size_t(info.filter_size) * info.filter_size);
   for (double& c : info.filter) c = unit(rng);
   info.filter_provenance = (rng() % 2) ? FilterProvenance::Optimal : FilterProvenance::Fallback;
-  info.quantisation = {double(1 + rng() % 8), 0.25 * double(1 + rng() % 8), ErrorMode(rng() % 4), unit(rng) + 2};
+  info.quantisation = {double(1 + rng() % 8), 0.25 * double(1 + rng() % 8), ErrorMode(rng() % 4),
+                       unit(rng) + 2};
 
   for (size_t l = 0; l < level_count; ++l) {
     // Some empty blobs; otherwise sizes not multiple of 8 to exercise padding.
@@ -130,9 +132,14 @@ Sample random_sample(std::mt19937_64& rng, uint64_t width, uint64_t height, size
   }
   const uint64_t samples = width * height;
   switch (rng() % 4) {
-    case 0: break;  // no mask given
-    case 1: s.mask.assign(size_t(samples), 1); break;  // mask given, all valid
-    case 2: s.mask.assign(size_t(samples), 0); break;  // all void
+    case 0:
+      break;  // no mask given
+    case 1:
+      s.mask.assign(size_t(samples), 1);
+      break;  // mask given, all valid
+    case 2:
+      s.mask.assign(size_t(samples), 0);
+      break;  // all void
     default:
       s.mask.resize(size_t(samples));
       for (size_t i = 0; i < s.mask.size(); ++i) s.mask[i] = (rng() % 7 == 0) ? 0 : uint8_t(1 + rng() % 255);
@@ -298,7 +305,7 @@ TEST_CASE("container round trip with random pyramids", "[runtime][container]") {
     uint64_t w, h;
     size_t levels;
   };
-  const Shape shapes[] = {{1, 1, 1},  {1, 1, 3},   {2, 1, 2},  {7, 5, 3},   {64, 64, 7},
+  const Shape shapes[] = {{1, 1, 1},   {1, 1, 3},   {2, 1, 2},   {7, 5, 3},    {64, 64, 7},
                           {100, 3, 4}, {33, 65, 6}, {5, 200, 9}, {129, 127, 8}};
   int trial = 0;
   for (const Shape& shape : shapes) {
@@ -467,9 +474,7 @@ TEST_CASE("container writer rejects inconsistent input", "[runtime][container]")
     w.append_mask(s.mask.data(), s.mask.size() - 1);
     CHECK_THROWS_AS(w.finish(), std::invalid_argument);
   }
-  SECTION("finish without info") {
-    CHECK_THROWS_AS(w.finish(), std::invalid_argument);
-  }
+  SECTION("finish without info") { CHECK_THROWS_AS(w.finish(), std::invalid_argument); }
   SECTION("unbalanced streaming calls") {
     CHECK_THROWS_AS(w.end_level(), std::logic_error);
     CHECK_THROWS_AS(w.append_level(nullptr, 0), std::logic_error);
@@ -715,14 +720,22 @@ TEST_CASE("container: resealed random index edits never crash the reader", "[run
   int accepted = 0;
   const auto interesting = [&](uint64_t v) -> uint64_t {
     switch (rng() % 8) {
-      case 0: return 0;
-      case 1: return ~uint64_t(0);
-      case 2: return ~uint64_t(0) - rng() % 64;
-      case 3: return uint64_t(1) << (rng() % 64);
-      case 4: return v + 1 + rng() % 16;
-      case 5: return v - 1 - rng() % 16;
-      case 6: return good.size() + rng() % 16 - 8;
-      default: return rng();
+      case 0:
+        return 0;
+      case 1:
+        return ~uint64_t(0);
+      case 2:
+        return ~uint64_t(0) - rng() % 64;
+      case 3:
+        return uint64_t(1) << (rng() % 64);
+      case 4:
+        return v + 1 + rng() % 16;
+      case 5:
+        return v - 1 - rng() % 16;
+      case 6:
+        return good.size() + rng() % 16 - 8;
+      default:
+        return rng();
     }
   };
   for (int trial = 0; trial < 3000; ++trial) {
@@ -853,11 +866,11 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(index + index_size == b.size());
   CHECK(get_le(b, kSbIndexCrc, 4) == crc32c(b.data() + index, size_t(index_size)));
   CHECK(get_le(b, kSbCrc, 4) == crc32c(b.data(), 60));
-  CHECK(get_le(b, index + 4, 4) == 3);                     // level count
-  CHECK(get_le(b, index + 16, 8) == 13);                   // width
-  CHECK(get_le(b, index + 24, 8) == 6);                    // height
-  CHECK(get_le(b, index + 204, 4) == 1);                   // mask encoding: runs
-  CHECK(get_le(b, index + 232, 8) == 3);                   // void count
+  CHECK(get_le(b, index + 4, 4) == 3);    // level count
+  CHECK(get_le(b, index + 16, 8) == 13);  // width
+  CHECK(get_le(b, index + 24, 8) == 6);   // height
+  CHECK(get_le(b, index + 204, 4) == 1);  // mask encoding: runs
+  CHECK(get_le(b, index + 232, 8) == 3);  // void count
   // Mask runs: data 3, void 1, data 36, void 2, data 36 (13 x 6 = 78 samples).
   const uint64_t mask = get_le(b, index + 216, 8);
   CHECK(get_le(b, index + 224, 8) == 5);

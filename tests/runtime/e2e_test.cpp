@@ -64,8 +64,7 @@ double bits_per_sample(uint64_t file_bytes, const Heightmap& map) {
 }
 
 // Calls body(dem, read options, heightmap, stem, scratch .pyr path) for each DEM of the heavy set.
-template <class Body>
-void for_each_heavy_dem(Body&& body) {
+template <class Body> void for_each_heavy_dem(Body&& body) {
   iotest::TempDir dir;
   for (const std::string& dem : testdata::dems_for_heavy_tests()) {
     const ReadOptions ro = options_for(dem);
@@ -100,10 +99,13 @@ TEST_CASE("e2e: every shared DEM meets rms 1 m", "[e2e]") {
     const Finest f = compare_finest(pyr, map);
     // Integer-metre inputs that code losslessly at step 1 cannot reach 1 m rms from below; the
     // target is then met as closely as the quantum allows (the check states it).
-    if (r.step_units > 1.0) CHECK(std::abs(f.rms - 1.0) <= 0.10);
-    else CHECK(f.rms <= 1.10);
+    if (r.step_units > 1.0)
+      CHECK(std::abs(f.rms - 1.0) <= 0.10);
+    else
+      CHECK(f.rms <= 1.10);
     CHECK(f.nan_mismatch == 0);
-    std::printf("e2e %-45s rms1: %.3f b/s rms %.3f m\n", name.c_str(), bits_per_sample(r.file_bytes, map), f.rms);
+    std::printf("e2e %-45s rms1: %.3f b/s rms %.3f m\n", name.c_str(), bits_per_sample(r.file_bytes, map),
+                f.rms);
   });
 }
 
@@ -140,7 +142,8 @@ TEST_CASE("e2e: decode_region equals the same window of a full decode, any level
     full_dec.decode_units(l, terrain::Rect{0, 0, s.width, s.height}, full.data(), s.width);
     for (int k = 0; k < 25; ++k) {
       const int64_t x0 = int64_t(rng() % uint64_t(s.width)), y0 = int64_t(rng() % uint64_t(s.height));
-      const int64_t w = 1 + int64_t(rng() % uint64_t(s.width - x0)), h = 1 + int64_t(rng() % uint64_t(s.height - y0));
+      const int64_t w = 1 + int64_t(rng() % uint64_t(s.width - x0)),
+                    h = 1 + int64_t(rng() % uint64_t(s.height - y0));
       std::vector<int32_t> win(size_t(w * h));
       roi_dec.decode_units(l, terrain::Rect{x0, y0, w, h}, win.data(), w);
       bool same = true;
@@ -179,9 +182,10 @@ TEST_CASE("e2e: a 255x255 window touches at most 1.3x its area at its level", "[
       worst_reconstructed = std::max(worst_reconstructed, double(s.samples_reconstructed) / area);
     }
   }
-  std::printf("255x255 window at the finest level, cold cache, worst of 40: residual samples decoded at that level "
-              "/ area = %.3f; all levels = %.3f; samples reconstructed (U + residual, all levels) / area = %.3f\n",
-              worst_level, worst_all, worst_reconstructed);
+  std::printf(
+      "255x255 window at the finest level, cold cache, worst of 40: residual samples decoded at that level "
+      "/ area = %.3f; all levels = %.3f; samples reconstructed (U + residual, all levels) / area = %.3f\n",
+      worst_level, worst_all, worst_reconstructed);
   CHECK(worst_level <= 1.3);
   // The coarser windows (about 131, 69, 38 ... samples wide) also round up to whole 32-sample tiles,
   // so all levels together cost about 2.2x; a clipmap already holds those coarser levels.
@@ -220,7 +224,8 @@ TEST_CASE("e2e: corrupted pyramid files are rejected or the damaged tile reporte
       (std::string(e.what()).find("band") != std::string::npos ? reported : rejected)++;
     }
   }
-  std::printf("corruption: %d rejected on open, %d damaged tiles reported, %d unaffected\n", rejected, reported, unaffected);
+  std::printf("corruption: %d rejected on open, %d damaged tiles reported, %d unaffected\n", rejected,
+              reported, unaffected);
   CHECK(rejected + reported >= 140);
 }
 
@@ -254,6 +259,20 @@ TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the o
   REQUIRE(iotest::run_tool(dir, {"pyramid-build", {in, "-o", pyr, "--rms", "1", "-q"}}).status == 0);
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--n", "255", "--max-screen-error", "1"}}).status == 1);
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--max-screen-error", "0"}}).status == 1);
+  {  // damaged pyramids: the documented exit codes (6 not a pyramid, 3 truncated), the file named
+    const std::string text = dir.file("text.pyr"), cut = dir.file("cut.pyr");
+    iotest::write_file(text,
+                       std::string("this is not a pyramid file, though it is long enough for a header"));
+    std::vector<uint8_t> bytes = iotest::read_file(pyr);
+    bytes.resize(bytes.size() / 2);
+    iotest::write_file(cut, bytes);
+    const auto not_pyramid = iotest::run_tool(dir, {"clipmap-view", {text}});
+    CHECK(not_pyramid.status == 6);
+    CHECK(not_pyramid.err.find(text) != std::string::npos);
+    const auto truncated = iotest::run_tool(dir, {"clipmap-view", {cut}});
+    CHECK(truncated.status == 3);
+    CHECK(truncated.err.find(cut) != std::string::npos);
+  }
   const auto r = iotest::run_tool(dir, {"clipmap-view",
                                         {pyr, "--original", in, "--max-screen-error", "1", "--fov", "73.74",
                                          "--frames", "1", "--png-every", "0", "--out", out}});

@@ -1,7 +1,6 @@
 // Headless rendering of the clipmap (Mesa llvmpipe without a GPU): watertight rings, culling that
 // never removes visible terrain, and transitions that remove popping.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 #include <memory>
 
@@ -99,7 +98,8 @@ TEST_CASE("render: rings are watertight from many viewpoints", "[render]") {
     auto background = [&] { return rendertest::background_pixels(scene.pixels); };
     const RenderStats s = scene.draw(cam, opt);
     levels_seen = std::max(levels_seen, s.levels_drawn);
-    INFO("view " << i << " at (" << x << ", " << y << ") " << above << " m above, yaw " << yaw << " pitch " << pitch);
+    INFO("view " << i << " at (" << x << ", " << y << ") " << above << " m above, yaw " << yaw << " pitch "
+                 << pitch);
     CHECK(background() == 0);
     scene.draw(cam, broken);
     broken_background += background();
@@ -123,7 +123,8 @@ TEST_CASE("render: cropped active regions stay watertight", "[render]") {
   double along = 0;
   for (int f = 0; f < 30; ++f) {
     along += f % 3 == 0 ? 450.0 : 40.0;  // a jump the budget cannot follow, then time to catch up
-    cam = camera_at(500.0 + 0.88 * along, 300.0 + 0.47 * along, 40.0 + 3.0 * (f % 5), 0.3 + 0.2 * f, -0.9 - 0.02 * (f % 7));
+    cam = camera_at(500.0 + 0.88 * along, 300.0 + 0.47 * along, 40.0 + 3.0 * (f % 5), 0.3 + 0.2 * f,
+                    -0.9 - 0.02 * (f % 7));
     scene.move(cam);
     bool cropped = false;
     for (int l = 0; l < kLevels; ++l) {
@@ -145,7 +146,8 @@ TEST_CASE("render: frustum culling never removes a visible block", "[render]") {
   off.culling = false;
   int culled = 0;
   for (int i = 0; i < 12; ++i) {
-    const Camera cam = camera_at(300.0 + 151.0 * i, 90.0 * i, 20.0 + 40.0 * (i % 4), 0.53 * i, -0.1 - 0.12 * (i % 5));
+    const Camera cam =
+        camera_at(300.0 + 151.0 * i, 90.0 * i, 20.0 + 40.0 * (i % 4), 0.53 * i, -0.1 - 0.12 * (i % 5));
     scene.move(cam);
     const RenderStats a = scene.draw(cam, on);
     const std::vector<uint8_t> culled_image = scene.pixels;
@@ -174,8 +176,8 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
       [](int level, int64_t x, int64_t y) {
         const double s = std::ldexp(spacing, kGrazingLevels - 1 - level);
         const double xm = double(x) * s, ym = double(y) * s;
-        return float(80.0 * std::sin(xm * 0.0013) * std::cos(ym * 0.0011) + 8.0 * std::sin(xm * 0.007 + ym * 0.005) +
-                     2.0 * std::cos(xm * 0.031 - ym * 0.023));
+        return float(80.0 * std::sin(xm * 0.0013) * std::cos(ym * 0.0011) +
+                     8.0 * std::sin(xm * 0.007 + ym * 0.005) + 2.0 * std::cos(xm * 0.031 - ym * 0.023));
       },
       false);
   ClipmapRenderer renderer((gl(), n), kGrazingLevels, kW, kH);
@@ -201,7 +203,7 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
     drawn += a.blocks_drawn;
     INFO("view " << i << " at (" << x << ", " << y << "), culled " << a.blocks_culled << " of "
                  << a.blocks_culled + a.blocks_drawn);
-    CHECK(rendertest::background_pixels(pixels) == 0);        // the whole frame is terrain
+    CHECK(rendertest::background_pixels(pixels) == 0);  // the whole frame is terrain
     CHECK(rendertest::background_pixels(culled_image) == 0);
     CHECK(culled_image == pixels);
   }
@@ -251,12 +253,12 @@ TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") 
       previous = scene.pixels;
     }
   }
-  INFO("worst count of pixels changing by more than " << kStep << " between consecutive frames: without transitions "
-                                                      << worst[0] << ", with " << worst[1] << "; finest-level shifts "
-                                                      << level_shifts);
-  CHECK(level_shifts >= 3);     // the flight did move the levels
-  CHECK(worst[1] <= kBound);    // with transitions: no pop
-  CHECK(worst[0] > kBound);     // without: pops, so the measure does see them
+  INFO("worst count of pixels changing by more than "
+       << kStep << " between consecutive frames: without transitions " << worst[0] << ", with " << worst[1]
+       << "; finest-level shifts " << level_shifts);
+  CHECK(level_shifts >= 3);   // the flight did move the levels
+  CHECK(worst[1] <= kBound);  // with transitions: no pop
+  CHECK(worst[0] > kBound);   // without: pops, so the measure does see them
   WARN("popping measure (pixels changing by > " << kStep << "): without transitions " << worst[0] << ", with "
                                                 << worst[1]);
 }

@@ -10,7 +10,6 @@
 
 #include "runtime/renderer.h"
 
-
 namespace rendertest {
 
 // One context for the whole test program (inline: every test file shares it, so renderers created
@@ -46,8 +45,8 @@ inline terrain::runtime::RenderOptions cracked_options() {
 // (x, y) metres, yaw 0.41 i, the top of the frame 0.15 rad below the horizon (the frame reaches from
 // below the camera to where the rays meet the ground, hundreds of metres ahead or more). The height
 // above that sample goes to *above_m when given.
-inline terrain::runtime::Camera low_grazing_view(terrain::runtime::HeightSource& source, int i, double x, double y,
-                                                 double* above_m = nullptr) {
+inline terrain::runtime::Camera low_grazing_view(terrain::runtime::HeightSource& source, int i, double x,
+                                                 double y, double* above_m = nullptr) {
   float ground = 0;
   const double g = source.spacing_m();
   source.fill(source.level_count() - 1, terrain::Rect{int64_t(x / g), int64_t(y / g), 1, 1}, &ground, 1);

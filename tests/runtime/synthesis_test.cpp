@@ -1,9 +1,10 @@
 // Terrain synthesis beyond the stored resolution: the variance model, spatial determinism (any
 // order and shape of fills, a clipmap moving away and back), the variance of the synthesised
 // residuals, and watertight rendering where stored and synthesised levels meet.
-#include <catch2/catch.hpp>
+#include "runtime/synthesis.h"
 
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <random>
 
@@ -14,7 +15,6 @@
 #include "runtime/pyramid_build.h"
 #include "runtime/region_decoder.h"
 #include "runtime/renderer.h"
-#include "runtime/synthesis.h"
 
 using namespace terrain;
 using namespace terrain::runtime;
@@ -74,13 +74,13 @@ Moments moments(const std::vector<double>& v, int64_t w, int64_t h) {
 // The synthesised residual R = T_level - U(T_level-1) on rect (metres), with libpyramid's U.
 std::vector<double> synthesised_residual(SynthesisSource& s, int level, const Rect& rect) {
   std::vector<int32_t> fine(size_t(rect.width * rect.height)), predicted(fine.size());
-  s.fill_units(level, rect, fine.data(), rect.width);
+  s.fill_quanta(level, rect, fine.data(), rect.width);
   const Rect need = upsample_required_window(rect, s.level_size(level));
   std::vector<int32_t> coarse(size_t(need.width * need.height));
-  s.fill_units(level - 1, need, coarse.data(), need.width);
+  s.fill_quanta(level - 1, need, coarse.data(), need.width);
   UpsampleScratch scratch;
-  upsample_region(CoarseWindow{coarse.data(), need.width, need, s.level_size(level - 1)}, s.level_size(level), rect,
-                  predicted.data(), rect.width, scratch);
+  upsample_region(CoarseWindow{coarse.data(), need.width, need, s.level_size(level - 1)}, s.level_size(level),
+                  rect, predicted.data(), rect.width, scratch);
   std::vector<double> r(fine.size());
   for (size_t i = 0; i < r.size(); ++i) r[i] = double(int64_t(fine[i]) - predicted[i]) * s.quantum_m();
   return r;
@@ -91,20 +91,23 @@ bool same_heights(const Clipmap& a, const Clipmap& b, std::string& why) {
   for (int l = 0; l < a.level_count(); ++l) {
     if (a.has_data(l) != b.has_data(l)) return why = "has_data of level " + std::to_string(l), false;
     if (!a.has_data(l)) continue;
-    if (!(a.clip_region(l) == b.clip_region(l))) return why = "clip region of level " + std::to_string(l), false;
+    if (!(a.clip_region(l) == b.clip_region(l)))
+      return why = "clip region of level " + std::to_string(l), false;
     const Rect c = a.clip_region(l);
     for (int64_t y = c.y0; y < c.y0 + a.n(); ++y)
       for (int64_t x = c.x0; x < c.x0 + a.n(); ++x)
         if (a.heights(l)[a.index(x, y)] != b.heights(l)[b.index(x, y)] ||
             a.coarse_heights(l)[a.index(x, y)] != b.coarse_heights(l)[b.index(x, y)])
-          return why = "level " + std::to_string(l) + " at " + std::to_string(x) + "," + std::to_string(y), false;
+          return why = "level " + std::to_string(l) + " at " + std::to_string(x) + "," + std::to_string(y),
+                 false;
   }
   return true;
 }
 
 }  // namespace
 
-TEST_CASE("synthesis: the residual variance is extrapolated along the stored levels' power law", "[synthesis]") {
+TEST_CASE("synthesis: the residual variance is extrapolated along the stored levels' power law",
+          "[synthesis]") {
   // Exact power law 2^(10 - 1.4 l) m^2 on levels 1..6 (level 0 is the terrain itself: ignored).
   std::vector<double> v{1e6};
   for (int l = 1; l <= 6; ++l) v.push_back(std::exp2(10.0 - 1.4 * l));
@@ -187,7 +190,8 @@ TEST_CASE("synthesis: the same position gives the same height whatever the fills
       tmp.resize(size_t(w * h));
       pieces.fill(level, Rect{x0, y0, w, h}, tmp.data(), w);
       for (int64_t y = 0; y < h; ++y)
-        for (int64_t x = 0; x < w; ++x) got[size_t((y0 - ref.y0 + y) * ref.width + (x0 - ref.x0 + x))] = tmp[size_t(y * w + x)];
+        for (int64_t x = 0; x < w; ++x)
+          got[size_t((y0 - ref.y0 + y) * ref.width + (x0 - ref.x0 + x))] = tmp[size_t(y * w + x)];
       const int other = kBaseLevels - 1 + int(rng() % 4);  // disturb any caches and scratch
       pieces.fill(other, Rect{int64_t(rng() % 200), int64_t(rng() % 200), 33, 17}, tmp.data(), 33);
     }
@@ -233,7 +237,8 @@ TEST_CASE("synthesis: a clipmap over synthesised levels gives the same heights a
     a_src.fill(b.source_level(l), c, z.data(), c.width);
     int64_t bad = 0;
     for (int64_t y = 0; y < c.height; ++y)
-      for (int64_t x = 0; x < c.width; ++x) bad += z[size_t(y * c.width + x)] != b.heights(l)[b.index(c.x0 + x, c.y0 + y)];
+      for (int64_t x = 0; x < c.width; ++x)
+        bad += z[size_t(y * c.width + x)] != b.heights(l)[b.index(c.x0 + x, c.y0 + y)];
     INFO("level " << l);
     CHECK(bad == 0);
   }
@@ -248,8 +253,8 @@ TEST_CASE("synthesis: synthesised residuals have the target variance per level a
     const std::vector<double> r = synthesised_residual(s, level, rect);
     const Moments m = moments(r, rect.width, rect.height);
     const double target = s.noise_std_m(level) * s.noise_std_m(level);
-    INFO("level " << level << ": variance " << m.variance << " m^2, target " << target << ", lag-1 correlation x "
-                  << m.corr_x << " y " << m.corr_y);
+    INFO("level " << level << ": variance " << m.variance << " m^2, target " << target
+                  << ", lag-1 correlation x " << m.corr_x << " y " << m.corr_y);
     CHECK(std::abs(m.variance / target - 1.0) < 0.10);
     CHECK(std::abs(m.corr_x) < 0.05);
     CHECK(std::abs(m.corr_y) < 0.05);
@@ -262,7 +267,8 @@ TEST_CASE("synthesis: synthesised residuals have the target variance per level a
   CHECK(*std::min_element(r.begin(), r.end()) == 0.0);
 }
 
-TEST_CASE("synthesis: below a pyramid file the variance comes from its stored residual statistics", "[synthesis]") {
+TEST_CASE("synthesis: below a pyramid file the variance comes from its stored residual statistics",
+          "[synthesis]") {
   iotest::TempDir dir;
   SynthOptions so;
   so.width = 300;
@@ -286,7 +292,8 @@ TEST_CASE("synthesis: below a pyramid file the variance comes from its stored re
   // Each synthesised level continues the fitted line: successive variances fall by 2^slope, and the
   // first one is the line's value one level below the finest stored level.
   CHECK(o.std_m[0] * o.std_m[0] == Approx(std::exp2(fit.intercept + fit.slope * 5)));
-  for (size_t k = 1; k < 3; ++k) CHECK(o.std_m[k] * o.std_m[k] / (o.std_m[k - 1] * o.std_m[k - 1]) == Approx(std::exp2(fit.slope)));
+  for (size_t k = 1; k < 3; ++k)
+    CHECK(o.std_m[k] * o.std_m[k] / (o.std_m[k - 1] * o.std_m[k - 1]) == Approx(std::exp2(fit.slope)));
 
   RegionDecoderSource stored_source(std::make_shared<const RegionDecoder>(file), 30.0);
   SynthesisSource s(stored_source, o);
@@ -301,8 +308,8 @@ TEST_CASE("synthesis: below a pyramid file the variance comes from its stored re
 
 TEST_CASE("synthesis: the generator amplifies a coarse base deterministically from a seed", "[synthesis]") {
   FunctionHeightSource coarse(
-      1, GridSize{17, 13}, 400.0, [](int, int64_t x, int64_t y) { return float(100.0 * std::sin(0.5 * x) + 20.0 * y); },
-      false);
+      1, GridSize{17, 13}, 400.0,
+      [](int, int64_t x, int64_t y) { return float(100.0 * std::sin(0.5 * x) + 20.0 * y); }, false);
   SynthesisOptions o;
   o.levels = 4;
   o.std_m = fractal_std(8.0, 0.9, 4);
@@ -381,8 +388,9 @@ TEST_CASE("synthesis: terrain-synth --detail-levels amplifies a coarser generato
     args.insert(args.end(), extra.begin(), extra.end());
     return iotest::Invocation{"terrain-synth", args};
   };
-  const auto results = iotest::run_tools(dir, {call("a.raw", {"--detail-levels", "2"}), call("b.raw", {"--detail-levels", "2"}),
-                                               call("c.raw", {"--detail-levels", "2", "--detail-std", "-1"})});
+  const auto results = iotest::run_tools(
+      dir, {call("a.raw", {"--detail-levels", "2"}), call("b.raw", {"--detail-levels", "2"}),
+            call("c.raw", {"--detail-levels", "2", "--detail-std", "-1"})});
   REQUIRE(results[0].status == 0);
   REQUIRE(results[1].status == 0);
   CHECK(iotest::read_file(dir.file("a.raw")) == iotest::read_file(dir.file("b.raw")));  // reproducible

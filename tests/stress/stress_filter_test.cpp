@@ -3,7 +3,6 @@
 // max_abs_tap, degenerate inputs fall back to the default filter with a reason, and the
 // prediction rms of whatever filter comes back is finite.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 #include <cstdint>
 #include <string>

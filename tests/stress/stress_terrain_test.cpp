@@ -10,7 +10,6 @@
 // Two cases reproduce defects this suite found in the builder (flat-terrain rms calibration, level
 // units beyond libcodec's range); both are fixed and the cases now guard them.
 #include <catch2/catch.hpp>
-
 #include <cstdint>
 #include <fstream>
 #include <iterator>
@@ -95,8 +94,10 @@ TEST_CASE("stress: the full int16 range, alternating extremes and noise", "[stre
   for (int64_t y = 0; y < 97; ++y)
     for (int64_t x = 0; x < 131; ++x) {
       const size_t i = size_t(y * 131 + x);
-      if (x < 40) m.values[i] = ((x + y) & 1) ? 32767 : -32768;  // worst-case swing, every sample
-      else m.values[i] = double(int32_t(rng() % 65536u) - 32768);
+      if (x < 40)
+        m.values[i] = ((x + y) & 1) ? 32767 : -32768;  // worst-case swing, every sample
+      else
+        m.values[i] = double(int32_t(rng() % 65536u) - 32768);
     }
   const std::string src = dir.file("range.raw");
   write_raw(src, m);
@@ -122,7 +123,8 @@ TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range"
     Heightmap m = make_grid(150, 120, SampleType::Float32);
     m.info.vertical_offset = 1e6;
     for (int64_t y = 0; y < 120; ++y)
-      for (int64_t x = 0; x < 150; ++x) m.values[size_t(y * 150 + x)] = double(float(0.01 * double((x * 7 + y * 13) % 23)));
+      for (int64_t x = 0; x < 150; ++x)
+        m.values[size_t(y * 150 + x)] = double(float(0.01 * double((x * 7 + y * 13) % 23)));
     const std::string src = dir.file("offset_f32b.raw");
     write_raw(src, m);
     const Outcome out = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.01));
@@ -133,7 +135,8 @@ TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range"
     Heightmap m = make_grid(150, 120, SampleType::Float32);
     for (int64_t y = 0; y < 120; ++y)
       for (int64_t x = 0; x < 150; ++x)
-        m.values[size_t(y * 150 + x)] = double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 5 * std::sin(0.1 * double(x))));
+        m.values[size_t(y * 150 + x)] =
+            double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 5 * std::sin(0.1 * double(x))));
     const std::string src = dir.file("offset_f32.raw");
     write_raw(src, m);
     BuildFileOptions o = target(ErrorTarget::MaxError, 2);
@@ -144,8 +147,7 @@ TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range"
   }
 }
 
-TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by the builder",
-          "[stress]") {
+TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by the builder", "[stress]") {
   // The coarsest level is coded as absolute values; inputs whose level units exceed
   // codec::kMaxAbsSample = 2^20 (1e6 m at the default 0.01 m float quantum, float bathymetry of
   // -11000 m = 1.1e6 centimetre units, int32 millimetre heights above 1048 m) used to fail with
@@ -156,7 +158,8 @@ TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by t
     m.info.vertical_scale = 0.01;
     for (int64_t y = 0; y < 120; ++y)
       for (int64_t x = 0; x < 150; ++x)
-        m.values[size_t(y * 150 + x)] = std::round(1e8 + double((x * 7 + y * 13) % 23) + 50 * std::sin(0.1 * double(x)));
+        m.values[size_t(y * 150 + x)] =
+            std::round(1e8 + double((x * 7 + y * 13) % 23) + 50 * std::sin(0.1 * double(x)));
     const std::string src = dir.file("offset_i32.raw");
     write_raw(src, m);
     lossless_and_max_error(src, dir, 0.05);
@@ -165,7 +168,8 @@ TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by t
     Heightmap m = make_grid(150, 120, SampleType::Float32);
     for (int64_t y = 0; y < 120; ++y)
       for (int64_t x = 0; x < 150; ++x)
-        m.values[size_t(y * 150 + x)] = double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 0.5 * std::sin(0.1 * double(x))));
+        m.values[size_t(y * 150 + x)] =
+            double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 0.5 * std::sin(0.1 * double(x))));
     const std::string src = dir.file("offset_f32.raw");
     write_raw(src, m);
     const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.1));
@@ -174,7 +178,8 @@ TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by t
   }
   SECTION("float32 bathymetry near -11000 m, default 0.01 m quantum: max error 0.5 m") {
     Heightmap m = make_grid(200, 150, SampleType::Float32);
-    for (int64_t i = 0; i < 200 * 150; ++i) m.values[size_t(i)] = double(float(-11000 + 50 * std::sin(double(i) / 300.0)));
+    for (int64_t i = 0; i < 200 * 150; ++i)
+      m.values[size_t(i)] = double(float(-11000 + 50 * std::sin(double(i) / 300.0)));
     const std::string src = dir.file("trench.raw");
     write_raw(src, m);
     const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.5));
@@ -191,7 +196,8 @@ TEST_CASE("stress: NaN and nodata regions stay voids, the rest within bounds", "
     for (int64_t y = 0; y < 150; ++y)
       for (int64_t x = 0; x < 180; ++x) {
         double v = 500 + 300 * std::sin(0.05 * double(x)) * std::cos(0.07 * double(y));
-        if ((x >= 20 && x < 90 && y >= 30 && y < 100) || y == 120 || x == 150 || (x * 31 + y * 17) % 97 == 0) v = -32768;
+        if ((x >= 20 && x < 90 && y >= 30 && y < 100) || y == 120 || x == 150 || (x * 31 + y * 17) % 97 == 0)
+          v = -32768;
         m.values[size_t(y * 180 + x)] = std::round(v);
       }
     const std::string src = dir.file("voids.raw");
@@ -242,7 +248,8 @@ TEST_CASE("stress: 1e5 x 3 and 3 x 1e5 strips", "[stress]") {
     const int64_t w = wide ? 100000 : 3, h = wide ? 3 : 100000;
     INFO(w << "x" << h);
     Heightmap m = make_grid(w, h, SampleType::Int16);
-    for (int64_t i = 0; i < w * h; ++i) m.values[size_t(i)] = std::round(1000 * std::sin(1e-3 * double(i)) + double(i % 7));
+    for (int64_t i = 0; i < w * h; ++i)
+      m.values[size_t(i)] = std::round(1000 * std::sin(1e-3 * double(i)) + double(i % 7));
     const std::string src = dir.file("strip.raw");
     write_raw(src, m);
     lossless_and_max_error(src, dir, 2);
@@ -254,7 +261,8 @@ TEST_CASE("stress: a 20-level pyramid", "[stress]") {
   // 2^19 + 1 columns halve (rounding up) to 2 after 19 steps, so 20 levels exist above 1x1.
   const int64_t w = (int64_t(1) << 19) + 1;
   Heightmap m = make_grid(w, 1, SampleType::Int16);
-  for (int64_t x = 0; x < w; ++x) m.values[size_t(x)] = std::round(2000 * std::sin(double(x) * 1e-4) + double(x % 13));
+  for (int64_t x = 0; x < w; ++x)
+    m.values[size_t(x)] = std::round(2000 * std::sin(double(x) * 1e-4) + double(x % 13));
   const std::string src = dir.file("deep.raw");
   write_raw(src, m);
   BuildFileOptions o = target(ErrorTarget::Lossless);
@@ -289,7 +297,8 @@ TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
   std::mt19937 rng(5);
   for (int64_t y = 0; y < 170; ++y)
     for (int64_t x = 0; x < 190; ++x)
-      m.values[size_t(y * 190 + x)] = std::round(800 * std::sin(0.04 * double(x)) * std::cos(0.05 * double(y)) + double(rng() % 9));
+      m.values[size_t(y * 190 + x)] =
+          std::round(800 * std::sin(0.04 * double(x)) * std::cos(0.05 * double(y)) + double(rng() % 9));
   const std::vector<double> original = m.values;
   const double E = 3;
   const int generations = 10;
@@ -316,8 +325,8 @@ TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
       CHECK(std::abs(rms - previous_rms) <= 0.02 * first_rms);
       CHECK(double(changed) <= (gen >= 7 ? 0.01 : 0.05) * double(original.size()));
     }
-    std::printf("stress drift: generation %d: rms vs original %.4f m, max %.1f m, %lld samples changed\n", gen, rms,
-                worst, (long long)changed);
+    std::printf("stress drift: generation %d: rms vs original %.4f m, max %.1f m, %lld samples changed\n",
+                gen, rms, worst, (long long)changed);
     previous_rms = rms;
     m.values = o.finest;  // decoded metres are whole numbers here (integer input, integer step)
   }

@@ -38,7 +38,7 @@ struct Outcome {
                                     // (R = the input's range, s = the quantiser step in metres)
   int levels = 0;
   double bits_per_sample = 0;
-  std::vector<double> finest;       // decoded finest level in metres (NaN at voids)
+  std::vector<double> finest;  // decoded finest level in metres (NaN at voids)
 };
 
 inline BuildFileOptions target(ErrorTarget t, double metres = 0) {
@@ -50,8 +50,8 @@ inline BuildFileOptions target(ErrorTarget t, double metres = 0) {
 
 // Builds `pyr` from `input` and decodes every level whole. The input is read back with the same
 // reader the builder uses, so the comparison is against exactly what the builder saw.
-inline Outcome build_and_measure(const std::string& input, const std::string& pyr, const BuildFileOptions& options,
-                                 const ReadOptions& read_options = {}) {
+inline Outcome build_and_measure(const std::string& input, const std::string& pyr,
+                                 const BuildFileOptions& options, const ReadOptions& read_options = {}) {
   const Heightmap map = read_heightmap(input, read_options);
   const BuildFileResult built = build_pyramid_file(input, read_options, pyr, options);
   auto file = PyramidFile::open(pyr);
@@ -62,7 +62,8 @@ inline Outcome build_and_measure(const std::string& input, const std::string& py
   double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
   for (int64_t y = 0; y < map.height(); ++y)
     for (int64_t x = 0; x < map.width(); ++x)
-      if (map.is_valid(x, y)) zmin = std::min(zmin, map.metres(x, y)), zmax = std::max(zmax, map.metres(x, y));
+      if (map.is_valid(x, y))
+        zmin = std::min(zmin, map.metres(x, y)), zmax = std::max(zmax, map.metres(x, y));
   const double range = zmax - zmin;
   const double slack = 4 * range + built.step_units * built.metres_per_unit;
   for (int level = 0; level + 1 < out.levels; ++level) {

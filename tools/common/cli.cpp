@@ -54,7 +54,8 @@ void ArgParser::option(const std::string& names, const std::string& metavar, con
   options_.push_back({split_names(names), metavar, help, std::move(set), true});
 }
 
-void ArgParser::positional(const std::string& name, const std::string& help, std::string* target, bool required) {
+void ArgParser::positional(const std::string& name, const std::string& help, std::string* target,
+                           bool required) {
   positionals_.push_back({name, help, target, required});
 }
 
@@ -106,7 +107,8 @@ std::optional<int> ArgParser::parse(int argc, char** argv) {
         only_positionals = true;
         continue;
       }
-      if (!only_positionals && arg.size() > 1 && arg[0] == '-' && !(std::isdigit(static_cast<unsigned char>(arg[1])))) {
+      if (!only_positionals && arg.size() > 1 && arg[0] == '-' &&
+          !(std::isdigit(static_cast<unsigned char>(arg[1])))) {
         std::string name = arg, inline_value;
         bool has_inline = false;
         if (auto eq = arg.find('='); arg.rfind("--", 0) == 0 && eq != std::string::npos) {
@@ -134,7 +136,8 @@ std::optional<int> ArgParser::parse(int argc, char** argv) {
     for (size_t p = next_positional; p < positionals_.size(); ++p)
       if (positionals_[p].required) throw UsageError("missing argument " + positionals_[p].name);
   } catch (const UsageError& e) {
-    std::cerr << program_ << ": " << e.what() << "\n" << "Try '" << program_ << " --help'.\n";
+    std::cerr << program_ << ": " << e.what() << "\n"
+              << "Try '" << program_ << " --help'.\n";
     return kExitUsage;
   }
   return std::nullopt;
@@ -165,7 +168,8 @@ void add_read_options(ArgParser& p, terrain::ReadOptions& o) {
   p.option("--vscale", "S", "metres per stored unit (e.g. 0.1 for the Puget Sound PNG); overrides the file",
            [&o](const std::string& v) {
              o.vertical_scale = parse_double("--vscale", v);
-             if (!std::isfinite(*o.vertical_scale) || *o.vertical_scale == 0) throw UsageError("--vscale must be finite and non-zero");
+             if (!std::isfinite(*o.vertical_scale) || *o.vertical_scale == 0)
+               throw UsageError("--vscale must be finite and non-zero");
            });
   p.option("--voffset", "M", "metres added after scaling", [&o](const std::string& v) {
     o.vertical_offset = parse_double("--voffset", v);
@@ -175,26 +179,33 @@ void add_read_options(ArgParser& p, terrain::ReadOptions& o) {
     auto comma = v.find(',');
     o.spacing_x = parse_double("--spacing", v.substr(0, comma));
     o.spacing_y = comma == std::string::npos ? *o.spacing_x : parse_double("--spacing", v.substr(comma + 1));
-    if (!(*o.spacing_x > 0) || !(*o.spacing_y > 0) || !std::isfinite(*o.spacing_x) || !std::isfinite(*o.spacing_y))
+    if (!(*o.spacing_x > 0) || !(*o.spacing_y > 0) || !std::isfinite(*o.spacing_x) ||
+        !std::isfinite(*o.spacing_y))
       throw UsageError("--spacing must be positive");
   });
   p.option("--width", "N", "samples per row (raw grids)",
            [&o](const std::string& v) { o.width = parse_int("--width", v, 1, int64_t(1) << 31); });
   p.option("--height", "N", "rows (raw grids)",
            [&o](const std::string& v) { o.height = parse_int("--height", v, 1, int64_t(1) << 31); });
-  p.option("--type", "T", "sample type of raw grids: int16, uint16, int32, float32", [&o](const std::string& v) {
-    o.sample_type = terrain::sample_type_from_name(v);
-    if (!o.sample_type) throw UsageError("--type: unknown sample type \"" + v + "\" (int16, uint16, int32, float32)");
-  });
+  p.option("--type", "T", "sample type of raw grids: int16, uint16, int32, float32",
+           [&o](const std::string& v) {
+             o.sample_type = terrain::sample_type_from_name(v);
+             if (!o.sample_type)
+               throw UsageError("--type: unknown sample type \"" + v + "\" (int16, uint16, int32, float32)");
+           });
   p.option("--endian", "E", "byte order of raw grids: little or big", [&o](const std::string& v) {
-    if (v == "little" || v == "le") o.big_endian = false;
-    else if (v == "big" || v == "be") o.big_endian = true;
-    else throw UsageError("--endian must be little or big");
+    if (v == "little" || v == "le")
+      o.big_endian = false;
+    else if (v == "big" || v == "be")
+      o.big_endian = true;
+    else
+      throw UsageError("--endian must be little or big");
   });
   p.option("--nodata", "V", "stored value that marks a void (\"nan\" for a NaN)", [&o](const std::string& v) {
     o.nodata = (v == "nan" || v == "NaN") ? std::nan("") : parse_double("--nodata", v);
   });
-  p.flag("--terrain-rgb", "decode an 8-bit RGB(A) image as Mapbox Terrain-RGB (automatic for RGB PNGs)", &o.terrain_rgb);
+  p.flag("--terrain-rgb", "decode an 8-bit RGB(A) image as Mapbox Terrain-RGB (automatic for RGB PNGs)",
+         &o.terrain_rgb);
 }
 
 std::string shortest(double v) {

@@ -37,11 +37,13 @@ class ArgParser {
  public:
   ArgParser(std::string program, std::string synopsis, std::string description);
 
-  // names: comma-separated spellings, e.g. "-o,--output". Setters run during parse() and may throw UsageError.
+  // names: comma-separated spellings, e.g. "-o,--output". Setters run during parse() and may throw
+  // UsageError.
   void flag(const std::string& names, const std::string& help, bool* target);
   void option(const std::string& names, const std::string& metavar, const std::string& help,
               std::function<void(const std::string&)> set);
-  void positional(const std::string& name, const std::string& help, std::string* target, bool required = true);
+  void positional(const std::string& name, const std::string& help, std::string* target,
+                  bool required = true);
   // Adds -q/--quiet, -v/--verbose and (if with_json) --json.
   void add_common(CommonFlags& flags, bool with_json = true);
   // Text printed after the option list in --help (the exit-code table is always appended).
@@ -77,7 +79,8 @@ double parse_double(const std::string& option, const std::string& text);
 // Adds --vscale --voffset --spacing --width --height --type --endian --nodata --terrain-rgb.
 void add_read_options(ArgParser& parser, terrain::ReadOptions& options);
 
-// Shortest decimal text that reads back as exactly `v` (locale independent), e.g. "0.1" not "0.10000000000000001".
+// Shortest decimal text that reads back as exactly `v` (locale independent), e.g. "0.1" not
+// "0.10000000000000001".
 std::string shortest(double v);
 
 // Runs a tool body, turning exceptions into "<program>: error: <message>" on stderr and the documented

@@ -27,8 +27,7 @@ class JsonWriter {
   JsonWriter& value(std::string_view v);
   JsonWriter& value(const char* v) { return value(std::string_view(v)); }
   JsonWriter& null();
-  template <typename T>
-  JsonWriter& field(std::string_view k, const T& v) {
+  template <typename T> JsonWriter& field(std::string_view k, const T& v) {
     key(k);
     return value(v);
   }

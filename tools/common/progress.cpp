@@ -9,7 +9,10 @@
 namespace cli {
 
 Progress::Progress(std::string label, int64_t total, bool enabled)
-    : label_(std::move(label)), total_(std::max<int64_t>(total, 1)), enabled_(enabled), tty_(isatty(STDERR_FILENO) != 0) {}
+    : label_(std::move(label)),
+      total_(std::max<int64_t>(total, 1)),
+      enabled_(enabled),
+      tty_(isatty(STDERR_FILENO) != 0) {}
 
 Progress::~Progress() {
   if (!finished_) finish();

@@ -2,14 +2,14 @@
 // JPEG-LS codes unsigned samples of P bits, so samples are shifted by the image minimum (a 4-byte
 // prefix counted in the size) and P is the bit width of the image's range, as a careful user would
 // set it (the default thresholds scale with MAXVAL = 2^P - 1).
-#include "peers.h"
-
 #include <charls/charls.h>
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
+
+#include "peers.h"
 
 namespace peers {
 namespace {
@@ -31,7 +31,8 @@ class CharlsPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> metres = quick ? std::vector<double>{1, 2, 5} : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    const std::vector<double> metres =
+        quick ? std::vector<double>{1, 2, 5} : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out{{"near=0 lossless", 0, 0, 0}};
     for (double m : metres) {
       const int near = std::max(1, int(std::lround(m / unit_m)));
@@ -64,25 +65,21 @@ class CharlsPeer final : public Peer {
     const charls_frame_info frame{uint32_t(img.width), uint32_t(img.height), bits, 1};
     size_t capacity = 0, written = 0;
     charls_jpegls_errc err = charls_jpegls_encoder_set_frame_info(encoder, &frame);
-    if (err == kSuccess)
-      err = charls_jpegls_encoder_set_near_lossless(encoder, int32_t(setting.param));
-    if (err == kSuccess)
-      err = charls_jpegls_encoder_get_estimated_destination_size(encoder, &capacity);
+    if (err == kSuccess) err = charls_jpegls_encoder_set_near_lossless(encoder, int32_t(setting.param));
+    if (err == kSuccess) err = charls_jpegls_encoder_get_estimated_destination_size(encoder, &capacity);
     if (err == kSuccess) {
       out.resize(kOffsetBytes + capacity);
       std::memcpy(out.data(), &zmin, kOffsetBytes);
       err = charls_jpegls_encoder_set_destination_buffer(encoder, out.data() + kOffsetBytes, capacity);
     }
-    if (err == kSuccess)
-      err = charls_jpegls_encoder_encode_from_buffer(encoder, raw_.data(), raw_.size(), 0);
+    if (err == kSuccess) err = charls_jpegls_encoder_encode_from_buffer(encoder, raw_.data(), raw_.size(), 0);
     if (err == kSuccess) err = charls_jpegls_encoder_get_bytes_written(encoder, &written);
     charls_jpegls_encoder_destroy(encoder);
     if (err != kSuccess) fail("encoding failed", err);
     out.resize(kOffsetBytes + written);
   }
 
-  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
-              int32_t* dst) override {
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&, int32_t* dst) override {
     if (size < kOffsetBytes) throw PeerError("charls: stream too short");
     int32_t zmin;
     std::memcpy(&zmin, data, kOffsetBytes);
@@ -90,12 +87,12 @@ class CharlsPeer final : public Peer {
     if (!decoder) throw PeerError("charls: cannot create decoder");
     charls_frame_info frame{};
     size_t needed = 0;
-    charls_jpegls_errc err = charls_jpegls_decoder_set_source_buffer(decoder, data + kOffsetBytes, size - kOffsetBytes);
+    charls_jpegls_errc err =
+        charls_jpegls_decoder_set_source_buffer(decoder, data + kOffsetBytes, size - kOffsetBytes);
     if (err == kSuccess) err = charls_jpegls_decoder_read_header(decoder);
     if (err == kSuccess) err = charls_jpegls_decoder_get_frame_info(decoder, &frame);
-    if (err == kSuccess &&
-        (int64_t(frame.width) != shape.width || int64_t(frame.height) != shape.height ||
-         frame.component_count != 1 || frame.bits_per_sample > 16)) {
+    if (err == kSuccess && (int64_t(frame.width) != shape.width || int64_t(frame.height) != shape.height ||
+                            frame.component_count != 1 || frame.bits_per_sample > 16)) {
       charls_jpegls_decoder_destroy(decoder);
       throw PeerError("charls: decoded frame has the wrong shape");
     }

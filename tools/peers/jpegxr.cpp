@@ -1,13 +1,14 @@
 // JPEG XR peer through jxrlib's glue layer (the HD Photo container around the codestream), coded
 // in memory through a WMPStream whose callbacks read and write a byte vector. JPEG XR's 16-bit
 // grey format is unsigned, so samples are shifted by the image minimum (stored as a 4-byte trailer
-// counted in the size: the container's offsets are absolute, so it must start the stream). QP index 1 is lossless; larger indices quantise more coarsely.
-#include "peers.h"
-
+// counted in the size: the container's offsets are absolute, so it must start the stream). QP index 1 is
+// lossless; larger indices quantise more coarsely.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+
+#include "peers.h"
 
 extern "C" {
 #include <JXRGlue.h>
@@ -22,7 +23,7 @@ namespace {
 // Growable in-memory WMPStream. The glue closes the streams it is given; Close only detaches, the
 // C++ object owns the storage.
 struct VectorStream {
-  WMPStream ws;  // first member, so a WMPStream* is a VectorStream*
+  WMPStream ws;                   // first member, so a WMPStream* is a VectorStream*
   Bytes* bytes = nullptr;         // write target
   const uint8_t* data = nullptr;  // read source
   size_t size = 0;                // logical size (high-water mark when writing)
@@ -95,8 +96,9 @@ class JpegXrPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    std::vector<int> qps = quick ? std::vector<int>{1, 24, 40, 56}
-                                 : std::vector<int>{1, 2, 4, 8, 12, 16, 24, 32, 40, 48, 56, 64, 72, 80, 88, 96, 112, 128};
+    std::vector<int> qps =
+        quick ? std::vector<int>{1, 24, 40, 56}
+              : std::vector<int>{1, 2, 4, 8, 12, 16, 24, 32, 40, 48, 56, 64, 72, 80, 88, 96, 112, 128};
     // Above QP 16 the quantiser step doubles every 16 QP indices: shift the lossy QPs so that the
     // steps in metres stay about the same for finer sample units.
     const int shift = 16 * int(std::lround(std::log2(1.0 / unit_m)));
@@ -139,7 +141,8 @@ class JpegXrPeer final : public Peer {
     if (err < 0) fail("cannot create encoder", err);
     const char* stage = "initialize";
     if ((err = encoder->Initialize(encoder, &stream.ws, &scp, sizeof scp)) >= 0 &&
-        (stage = "set pixel format", err = encoder->SetPixelFormat(encoder, GUID_PKPixelFormat16bppGray)) >= 0 &&
+        (stage = "set pixel format", err = encoder->SetPixelFormat(encoder, GUID_PKPixelFormat16bppGray)) >=
+            0 &&
         (stage = "set size", err = encoder->SetSize(encoder, I32(img.width), I32(img.height))) >= 0 &&
         (stage = "set resolution", err = encoder->SetResolution(encoder, 96.f, 96.f)) >= 0) {
       stage = "encode";
@@ -153,8 +156,7 @@ class JpegXrPeer final : public Peer {
     std::memcpy(out.data() + stream.size, &offset, kOffsetBytes);
   }
 
-  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
-              int32_t* dst) override {
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&, int32_t* dst) override {
     if (size < kOffsetBytes) throw PeerError("jpegxr: stream too short");
     int32_t offset;
     std::memcpy(&offset, data + size - kOffsetBytes, kOffsetBytes);

@@ -1,14 +1,14 @@
 // LERC peer through Esri's C API: int16 samples coded with a max-error bound (maxZErr); for integer
 // data a bound below 0.5 is lossless. Voids are coded as their fill value like for every other peer
 // (no validity mask), so all peers code the same grid.
-#include "peers.h"
-
 #include <Lerc_c_api.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
+
+#include "peers.h"
 
 namespace peers {
 namespace {
@@ -24,8 +24,8 @@ class LercPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> metres = quick ? std::vector<double>{0, 1, 2, 5}
-                                             : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    const std::vector<double> metres =
+        quick ? std::vector<double>{0, 1, 2, 5} : std::vector<double>{0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out;
     for (double m : metres) {
       // Whole sample units, so the declared bound is exactly the parameter.
@@ -50,8 +50,7 @@ class LercPeer final : public Peer {
     out.resize(written);
   }
 
-  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
-              int32_t* dst) override {
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&, int32_t* dst) override {
     decoded_.resize(size_t(shape.sample_count()));
     const lerc_status status = lerc_decode(data, unsigned(size), 0, nullptr, 1, int(shape.width),
                                            int(shape.height), 1, kLercShort, decoded_.data());

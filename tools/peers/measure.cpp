@@ -1,12 +1,12 @@
 // Measurement shared by all peers: timing loop, error statistics and rate interpolation. Keeping it
 // outside the peers guarantees every codec is timed and judged the same way.
-#include "peers.h"
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <ctime>
 #include <limits>
+
+#include "peers.h"
 
 namespace peers {
 
@@ -52,7 +52,6 @@ double process_cpu_seconds() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
-
 Result measure(Peer& peer, const Image16& img, const Setting& setting, double min_total_seconds,
                int max_reps) {
   Result r;
@@ -62,9 +61,9 @@ Result measure(Peer& peer, const Image16& img, const Setting& setting, double mi
   r.bytes = stream.size();
   r.bits_per_sample = 8.0 * double(r.bytes) / double(img.sample_count());
   r.decoded.assign(size_t(img.sample_count()), 0);
-  r.decode_seconds = best_time(
-      [&] { peer.decode(stream.data(), stream.size(), img, setting, r.decoded.data()); },
-      min_total_seconds, max_reps, &r.decode_reps, &r.decode_cpu_seconds);
+  r.decode_seconds =
+      best_time([&] { peer.decode(stream.data(), stream.size(), img, setting, r.decoded.data()); },
+                min_total_seconds, max_reps, &r.decode_reps, &r.decode_cpu_seconds);
   r.error = error_stats(img, r.decoded);
   return r;
 }

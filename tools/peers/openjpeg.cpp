@@ -1,13 +1,13 @@
 // JPEG 2000 peer through OpenJPEG: raw J2K codestream in memory (user stream callbacks), one
 // component of 16-bit signed samples, one quality layer. Lossy: 9/7 irreversible wavelet with PCRD
 // rate control at a target rate; lossless: 5/3 reversible wavelet without rate control.
-#include "peers.h"
-
 #include <openjpeg.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+
+#include "peers.h"
 
 namespace peers {
 namespace {
@@ -17,9 +17,9 @@ constexpr int kLossless53 = 1;
 
 // Sequential in-memory stream for OpenJPEG: writes grow `bytes`, reads come from `data`.
 struct MemoryStream {
-  Bytes* bytes = nullptr;        // encode target
-  const uint8_t* data = nullptr; // decode source
-  size_t size = 0;               // logical stream size (high-water mark when writing)
+  Bytes* bytes = nullptr;         // encode target
+  const uint8_t* data = nullptr;  // decode source
+  size_t size = 0;                // logical stream size (high-water mark when writing)
   size_t pos = 0;
 };
 
@@ -96,8 +96,8 @@ class OpenJpegPeer final : public Peer {
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
     std::vector<double> rates = quick ? std::vector<double>{0.5, 1.0, 2.0, 3.5, 5.0, 7.0}
-                                      : std::vector<double>{0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5,
-                                                            2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0};
+                                      : std::vector<double>{0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0,
+                                                            2.5, 3.0, 4.0,  5.0, 6.0,  7.0, 8.0};
     // Finer-than-metre units need higher rates to reach the same errors in metres.
     if (!quick && unit_m < 0.75) rates.insert(rates.end(), {9.0, 10.0});
     std::vector<Setting> out;
@@ -160,8 +160,7 @@ class OpenJpegPeer final : public Peer {
     out.resize(mem.size);
   }
 
-  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
-              int32_t* dst) override {
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&, int32_t* dst) override {
     OpjSession session;
     session.codec = opj_create_decompress(OPJ_CODEC_J2K);
     session.quiet();

@@ -1,15 +1,16 @@
 // Our codec (libcodec) as one more peer, through its public API only: lossy at a quantiser step
 // (step 1 = lossless) and the max-error mode, one thread; twice: with 64x64 tiles (libcodec's
-// default; the pyramid uses 32 for region decoding) and with 256x256 tiles (whole-image use, as the single-tile peers
-// are run: fewer tile starts and index entries, which matter at low rates on smooth terrain).
-#include "peers.h"
-
+// default; the pyramid uses 32 for region decoding) and with 256x256 tiles (whole-image use, as the
+// single-tile peers are run: fewer tile starts and index entries, which matter at low rates on smooth
+// terrain).
 #include <codec/codec.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
+
+#include "peers.h"
 
 namespace peers {
 namespace {
@@ -21,20 +22,22 @@ class OursPeer final : public Peer {
  public:
   explicit OursPeer(uint32_t tile_size) : tile_size_(tile_size) {}
   std::string name() const override {
-    return tile_size_ == codec::EncodeOptions{}.tile_size ? "libcodec" : "libcodec-t" + std::to_string(tile_size_);
+    return tile_size_ == codec::EncodeOptions{}.tile_size ? "libcodec"
+                                                          : "libcodec-t" + std::to_string(tile_size_);
   }
   std::string configuration() const override {
-    return name() + ": libcodec format v" + std::to_string(codec::kFormatVersion) + ": int32 input, tile_size " +
-           std::to_string(tile_size_) +
+    return name() + ": libcodec format v" + std::to_string(codec::kFormatVersion) +
+           ": int32 input, tile_size " + std::to_string(tile_size_) +
            ", one thread; step sweep (step 1 = lossless) with "
            "bound_max_error off, and max-error sweep (bound_max_error on, max_error = E)";
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> step_metres = quick ? std::vector<double>{2, 4, 8}
-                                                  : std::vector<double>{1.25, 1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64, 90, 128, 181, 256};
-    const std::vector<double> error_metres = quick ? std::vector<double>{1, 2, 5}
-                                                   : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
+    const std::vector<double> step_metres =
+        quick ? std::vector<double>{2, 4, 8}
+              : std::vector<double>{1.25, 1.5, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64, 90, 128, 181, 256};
+    const std::vector<double> error_metres =
+        quick ? std::vector<double>{1, 2, 5} : std::vector<double>{1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20};
     std::vector<Setting> out{{"step=1 lossless", 1, kStep, 0}};
     for (double m : step_metres) {
       const double s = std::max(1.0, m / unit_m);
@@ -68,18 +71,19 @@ class OursPeer final : public Peer {
     size_t written = 0;
     const codec::Status status = codec::encode(samples_.data(), img.width, img.width, img.height, options,
                                                out.data(), out.size(), &written, scratch_);
-    if (status != codec::Status::Ok) throw PeerError(std::string("ours: encode: ") + codec::status_name(status));
+    if (status != codec::Status::Ok)
+      throw PeerError(std::string("ours: encode: ") + codec::status_name(status));
     out.resize(written);
   }
 
-  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
-              int32_t* dst) override {
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&, int32_t* dst) override {
     codec::HeaderInfo header;
     codec::Status status = codec::read_header(data, size, &header);
     if (status == codec::Status::Ok && (header.width != shape.width || header.height != shape.height))
       throw PeerError("ours: decoded image has the wrong shape");
     if (status == codec::Status::Ok) status = codec::decode(data, size, dst, shape.width, scratch_);
-    if (status != codec::Status::Ok) throw PeerError(std::string("ours: decode: ") + codec::status_name(status));
+    if (status != codec::Status::Ok)
+      throw PeerError(std::string("ours: decode: ") + codec::status_name(status));
   }
 
  private:

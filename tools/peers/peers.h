@@ -10,8 +10,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cstddef>
-#include <limits>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -29,17 +29,17 @@ struct Image16 {
   int64_t width = 0;
   int64_t height = 0;
   std::vector<int16_t> samples;  // width*height
-  std::vector<uint8_t> valid;    // width*height, 1 = data; empty = all valid. Errors count valid samples only.
-  double unit_m = 1.0;           // metres per sample unit (1 for SRTM, 0.2 for Puget Sound halved)
+  std::vector<uint8_t> valid;  // width*height, 1 = data; empty = all valid. Errors count valid samples only.
+  double unit_m = 1.0;         // metres per sample unit (1 for SRTM, 0.2 for Puget Sound halved)
   int64_t sample_count() const { return width * height; }
 };
 
 // One point of a peer's parameter sweep. `param` means what the peer says (rate, QP, NEAR, tolerance...).
 struct Setting {
-  std::string label;             // e.g. "9/7 1.50bps", "near=2"
+  std::string label;  // e.g. "9/7 1.50bps", "near=2"
   double param = 0;
-  int mode = 0;                  // peer-specific variant (e.g. lossless vs lossy family)
-  double max_error_bound = -1;   // declared max |decoded - input| in sample units; < 0 = no guarantee
+  int mode = 0;                 // peer-specific variant (e.g. lossless vs lossy family)
+  double max_error_bound = -1;  // declared max |decoded - input| in sample units; < 0 = no guarantee
 };
 
 using Bytes = std::vector<uint8_t>;
@@ -71,8 +71,8 @@ std::vector<std::unique_ptr<Peer>> all_peers();
 struct ErrorStats {
   double rms = 0;
   double max_abs = 0;
-  double p999_abs = 0;   // 99.9th percentile of |error|
-  double psnr_db = 0;    // 20 log10((zmax - zmin) / rms); +inf when lossless
+  double p999_abs = 0;  // 99.9th percentile of |error|
+  double psnr_db = 0;   // 20 log10((zmax - zmin) / rms); +inf when lossless
 };
 ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded);
 // The same over n doubles (any unit; valid may be null = all valid). PSNR uses the reference's range.
@@ -81,8 +81,8 @@ ErrorStats error_stats(const double* reference, const double* decoded, const uin
 struct Result {
   size_t bytes = 0;
   double bits_per_sample = 0;
-  double encode_seconds = 0;   // best wall-clock time of encode_reps
-  double decode_seconds = 0;   // best wall-clock time of decode_reps
+  double encode_seconds = 0;  // best wall-clock time of encode_reps
+  double decode_seconds = 0;  // best wall-clock time of decode_reps
   // Best process CPU time (all threads) of the same repetitions: on a machine shared with other
   // work, wall-clock time includes waiting for a core and CPU time does not.
   double encode_cpu_seconds = 0, decode_cpu_seconds = 0;

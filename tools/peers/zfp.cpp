@@ -2,13 +2,13 @@
 // tolerance) and in reversible (lossless) mode. Decoded floats are rounded to the nearest integer,
 // so the declared bound is floor(tolerance + 0.5). zfp rounds the tolerance down to a power of two,
 // so the sweep uses powers of two. Serial execution.
-#include "peers.h"
-
 #include <zfp.h>
 
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+
+#include "peers.h"
 
 namespace peers {
 namespace {
@@ -28,8 +28,10 @@ struct ZfpSession {
   }
   void configure(const Setting& setting) {
     zfp = zfp_stream_open(nullptr);
-    if (setting.mode == kReversible) zfp_stream_set_reversible(zfp);
-    else zfp_stream_set_accuracy(zfp, setting.param);
+    if (setting.mode == kReversible)
+      zfp_stream_set_reversible(zfp);
+    else
+      zfp_stream_set_accuracy(zfp, setting.param);
     zfp_stream_set_execution(zfp, zfp_exec_serial);
   }
 };
@@ -44,7 +46,8 @@ class ZfpPeer final : public Peer {
   }
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
-    const std::vector<double> metres = quick ? std::vector<double>{1, 2, 4} : std::vector<double>{0.5, 1, 2, 4, 8, 16, 32, 64};
+    const std::vector<double> metres =
+        quick ? std::vector<double>{1, 2, 4} : std::vector<double>{0.5, 1, 2, 4, 8, 16, 32, 64};
     std::vector<Setting> out;
     for (double m : metres) {
       const double t = std::exp2(std::round(std::log2(m / unit_m)));  // zfp uses powers of two anyway

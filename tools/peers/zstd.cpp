@@ -1,10 +1,10 @@
 // zstd peer: the raw little-endian int16 samples through one reused compression context, as the
 // general-purpose lossless baseline.
-#include "peers.h"
-
 #include <zstd.h>
 
 #include <cstring>
+
+#include "peers.h"
 
 namespace peers {
 namespace {
@@ -36,18 +36,19 @@ class ZstdPeer final : public Peer {
     const size_t raw_bytes = img.samples.size() * sizeof(int16_t);
     const size_t capacity = ZSTD_compressBound(raw_bytes);
     if (out.size() < capacity) out.resize(capacity);
-    const size_t written = ZSTD_compressCCtx(cctx_, out.data(), out.size(), img.samples.data(), raw_bytes,
-                                              int(setting.param));
+    const size_t written =
+        ZSTD_compressCCtx(cctx_, out.data(), out.size(), img.samples.data(), raw_bytes, int(setting.param));
     if (ZSTD_isError(written)) throw PeerError(std::string("zstd: ") + ZSTD_getErrorName(written));
     out.resize(written);
   }
 
-  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&,
-              int32_t* dst) override {
+  void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting&, int32_t* dst) override {
     samples_.resize(size_t(shape.sample_count()));
-    const size_t got = ZSTD_decompressDCtx(dctx_, samples_.data(), samples_.size() * sizeof(int16_t), data, size);
+    const size_t got =
+        ZSTD_decompressDCtx(dctx_, samples_.data(), samples_.size() * sizeof(int16_t), data, size);
     if (ZSTD_isError(got)) throw PeerError(std::string("zstd: ") + ZSTD_getErrorName(got));
-    if (got != samples_.size() * sizeof(int16_t)) throw PeerError("zstd: decoded size does not match the image");
+    if (got != samples_.size() * sizeof(int16_t))
+      throw PeerError("zstd: decoded size does not match the image");
     for (size_t i = 0; i < samples_.size(); ++i) dst[i] = samples_[i];
   }
 

@@ -15,8 +15,8 @@
 // For data whose coefficients are spread over many steps the sample-domain rms error is
 //   rms ~= S * sqrt(1/12 + 1/64) ~= 0.315 * S           (predicted_rms(S))
 // (the 1/64 comes from the dead zone: the quantiser rounds |c|/step + 3/8 down and reconstructs at
-// (|q| + 1/16) * step, i.e. 1/16 step below the bin centre). Smooth data, where many coefficients fall in the dead
-// zone, gets a lower rms. S = 1 is exactly lossless. Bands whose S / g_b is below 1 use step 1.
+// (|q| + 1/16) * step, i.e. 1/16 step below the bin centre). Smooth data, where many coefficients fall in the
+// dead zone, gets a lower rms. S = 1 is exactly lossless. Bands whose S / g_b is below 1 use step 1.
 //
 // Max-error mode guarantees |decoded - input| <= E at every sample: each tile is coded either by the
 // transform at step S plus a sparse correction layer, or by spatial quantisation with step 2E+1 coded
@@ -49,12 +49,12 @@ enum class Status {
 const char* status_name(Status status);
 
 struct EncodeOptions {
-  double step = 1.0;            // absolute quantiser step in sample units (>= 1; 1 = lossless);
-                                // in max-error mode a step of 0 or 1 (the default) picks
-                                // 2 * max_error, the measured best for the transform tiles
-  bool bound_max_error = false; // guarantee |error| <= max_error at every sample
-  uint32_t max_error = 0;       // E for max-error mode (0 = lossless); at most kMaxAbsSample
-  uint32_t tile_size = 64;      // tile side in samples: multiple of 16 in [16, 4096]
+  double step = 1.0;             // absolute quantiser step in sample units (>= 1; 1 = lossless);
+                                 // in max-error mode a step of 0 or 1 (the default) picks
+                                 // 2 * max_error, the measured best for the transform tiles
+  bool bound_max_error = false;  // guarantee |error| <= max_error at every sample
+  uint32_t max_error = 0;        // E for max-error mode (0 = lossless); at most kMaxAbsSample
+  uint32_t tile_size = 64;       // tile side in samples: multiple of 16 in [16, 4096]
 };
 
 // Step giving about `target_rms` sample-domain rms error (inverse of predicted_rms); never below 1.
@@ -68,18 +68,18 @@ struct HeaderInfo {
   int64_t width = 0, height = 0;
   uint32_t tile_size = 0;
   int64_t tiles_x = 0, tiles_y = 0;
-  double step = 1.0;            // as recorded (1/256 resolution)
+  double step = 1.0;  // as recorded (1/256 resolution)
   bool bound_max_error = false;
   uint32_t max_error = 0;
-  size_t index_offset = 0;      // byte offset of the tile index (it follows the payloads)
-  size_t data_offset = 0;       // byte offset of the first tile payload (end of the header)
+  size_t index_offset = 0;  // byte offset of the tile index (it follows the payloads)
+  size_t data_offset = 0;   // byte offset of the first tile payload (end of the header)
   int64_t tile_count() const { return tiles_x * tiles_y; }
 };
 
 struct TileEntry {
-  uint64_t offset = 0;   // from the start of the stream
-  uint32_t size = 0;     // bytes
-  uint32_t crc = 0;      // CRC32C of the tile's bytes
+  uint64_t offset = 0;  // from the start of the stream
+  uint32_t size = 0;    // bytes
+  uint32_t crc = 0;     // CRC32C of the tile's bytes
 };
 
 struct Rect {
@@ -144,7 +144,7 @@ uint32_t crc32c_portable(const void* data, size_t size, uint32_t crc = 0);
 
 // Whole-image and one-shot region decodes (open + decode_region).
 Status decode(const uint8_t* data, size_t size, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch);
-Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst,
-                     ptrdiff_t dst_stride, Scratch& scratch);
+Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst, ptrdiff_t dst_stride,
+                     Scratch& scratch);
 
 }  // namespace codec

@@ -27,15 +27,15 @@ enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage };
 const char* file_format_name(FileFormat f);
 
 enum class IoErrorCode {
-  NotFound = 2,        // file missing or unreadable (values equal the tools' exit codes)
-  Truncated,           // fewer bytes than the dimensions need
-  Oversized,           // more bytes than the dimensions need
-  DimensionMismatch,   // size cannot be derived / does not match the header or sidecar
-  UnknownType,         // unsupported sample type, format or byte order
-  NonFinite,           // NaN or Inf in float input
-  MissingField,        // sidecar/header lacks a required field, or a field is malformed
-  WriteFailed,         // could not write output (= 9)
-  CorruptData,         // bad checksum, bad bitstream, unknown version (= 10)
+  NotFound = 2,       // file missing or unreadable (values equal the tools' exit codes)
+  Truncated,          // fewer bytes than the dimensions need
+  Oversized,          // more bytes than the dimensions need
+  DimensionMismatch,  // size cannot be derived / does not match the header or sidecar
+  UnknownType,        // unsupported sample type, format or byte order
+  NonFinite,          // NaN or Inf in float input
+  MissingField,       // sidecar/header lacks a required field, or a field is malformed
+  WriteFailed,        // could not write output (= 9)
+  CorruptData,        // bad checksum, bad bitstream, unknown version (= 10)
 };
 
 class IoError : public std::runtime_error {
@@ -53,23 +53,23 @@ struct GridInfo {
   int64_t height = 0;
   SampleType sample_type = SampleType::Int16;
   FileFormat format = FileFormat::Raw;
-  double spacing_x = 1.0;            // horizontal sample spacing, in horizontal_units
+  double spacing_x = 1.0;  // horizontal sample spacing, in horizontal_units
   double spacing_y = 1.0;
   std::string horizontal_units = "m";  // "m" or "arc-second"
-  double vertical_scale = 1.0;       // metres = value * vertical_scale + vertical_offset
+  double vertical_scale = 1.0;         // metres = value * vertical_scale + vertical_offset
   double vertical_offset = 0.0;
-  std::optional<double> nodata;      // native value marking a void, if any
+  std::optional<double> nodata;  // native value marking a void, if any
   // Georeference of the north-west sample centre, when the input has one (e.g. .hgt file name).
-  std::optional<double> origin_x;    // longitude or easting of column 0
-  std::optional<double> origin_y;    // latitude or northing of row 0
+  std::optional<double> origin_x;  // longitude or easting of column 0
+  std::optional<double> origin_y;  // latitude or northing of row 0
   bool integer_valued() const { return sample_type != SampleType::Float32; }
 };
 
 // A whole grid in memory. Row-major, row 0 is the northern edge.
 struct Heightmap {
   GridInfo info;
-  std::vector<double> values;   // width*height native values (voids hold 0)
-  std::vector<uint8_t> valid;   // width*height, 1 = data, 0 = void; empty means all valid
+  std::vector<double> values;  // width*height native values (voids hold 0)
+  std::vector<uint8_t> valid;  // width*height, 1 = data, 0 = void; empty means all valid
 
   int64_t width() const { return info.width; }
   int64_t height() const { return info.height; }
@@ -87,7 +87,7 @@ struct ReadOptions {
   std::optional<double> spacing_x, spacing_y;
   std::optional<double> vertical_scale, vertical_offset;
   std::optional<double> nodata;
-  bool terrain_rgb = false;   // decode an RGB(A) 8-bit image as Mapbox Terrain-RGB
+  bool terrain_rgb = false;  // decode an RGB(A) 8-bit image as Mapbox Terrain-RGB
 };
 
 // Streams a grid in bands of rows; memory is O(width * rows requested). Opened through open_band_reader.

@@ -10,11 +10,11 @@
 namespace terrain {
 
 struct PtcCoderOptions {
-  double step = 1.0;           // absolute quantiser step in level units, the same for every level
-  uint32_t max_error = 0;      // with bound_max_error: |residual error| <= max_error at every sample
+  double step = 1.0;       // absolute quantiser step in level units, the same for every level
+  uint32_t max_error = 0;  // with bound_max_error: |residual error| <= max_error at every sample
   bool bound_max_error = false;
-  uint32_t tile_size = 64;     // libcodec tile side; also the band height unless band_rows says otherwise
-  int64_t band_rows = 0;       // 0: 4 tile rows per band
+  uint32_t tile_size = 64;  // libcodec tile side; also the band height unless band_rows says otherwise
+  int64_t band_rows = 0;    // 0: 4 tile rows per band
 };
 
 class PtcResidualCoder final : public ResidualCoder {

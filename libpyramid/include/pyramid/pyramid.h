@@ -131,24 +131,24 @@ void downsample(const DownsampleFilter& filter, const int32_t* fine, GridSize fi
 
 // How the optimal filter was chosen; also printed to the build log.
 struct FilterFitReport {
-  bool fallback = false;        // true: the default filter was used
-  std::string reason;           // why (fallback) or "least squares fit"
-  int windows = 0;              // sample windows used
-  int64_t equations = 0;        // rows of the design matrix
-  int64_t active_equations = 0; // rows that see non-flat terrain
-  int rank = 0;                 // numerical rank of the 20-column reduced design matrix
-  double condition = 0;         // sigma_max / sigma_min of that matrix (inf when rank deficient)
-  double rms_optimal = 0;       // rms of T - U(D(T)) on the sample (real-valued U and D)
-  double rms_default = 0;       // same for the default filter
-  double rms_impulse = 0;       // same for plain subsampling
-  std::string summary() const;  // one line for logs
+  bool fallback = false;         // true: the default filter was used
+  std::string reason;            // why (fallback) or "least squares fit"
+  int windows = 0;               // sample windows used
+  int64_t equations = 0;         // rows of the design matrix
+  int64_t active_equations = 0;  // rows that see non-flat terrain
+  int rank = 0;                  // numerical rank of the 20-column reduced design matrix
+  double condition = 0;          // sigma_max / sigma_min of that matrix (inf when rank deficient)
+  double rms_optimal = 0;        // rms of T - U(D(T)) on the sample (real-valued U and D)
+  double rms_default = 0;        // same for the default filter
+  double rms_impulse = 0;        // same for plain subsampling
+  std::string summary() const;   // one line for logs
 };
 
 struct FilterFitOptions {
-  int64_t window = 128;       // side of the square sample windows
-  int max_windows = 16;       // spread evenly over the grid (4 x 4 for large grids)
-  double max_condition = 1e8; // above: fall back
-  double max_abs_tap = 4.0;   // any orbit weight larger in magnitude: fall back
+  int64_t window = 128;                 // side of the square sample windows
+  int max_windows = 16;                 // spread evenly over the grid (4 x 4 for large grids)
+  double max_condition = 1e8;           // above: fall back
+  double max_abs_tap = 4.0;             // any orbit weight larger in magnitude: fall back
   int64_t min_active_equations = 2000;  // fewer equations that see non-flat terrain: fall back
 };
 
@@ -184,7 +184,8 @@ class ResidualCoder {
   // encode/decode may be called concurrently from several threads (one band each).
   // Codes one band of integer residuals (w x h, row-major) and writes into `reconstructed` the exact
   // values decode() will produce from the returned bytes.
-  virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed) = 0;
+  virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h,
+                                      int32_t* reconstructed) = 0;
   // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).
   virtual bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) = 0;
 };
@@ -208,21 +209,21 @@ class UniformQuantizerCoder final : public ResidualCoder {
 // Builder
 
 struct BuildOptions {
-  int level_count = 0;               // 0: automatic (see pyramid_level_sizes)
-  int64_t min_coarsest_side = 128;   // automatic level count stops before the longer side drops below
-  double value_scale = 1.0;          // level value = round(native * value_scale); integer inputs must
-                                     // give integers (else the build fails); float inputs are rounded
-  double value_offset = 0.0;         // an integer subtracted after scaling: level value =
-                                     // round(native * value_scale) - value_offset; keeps inputs far
-                                     // from zero (1e6 m, int32 millimetres) inside the coder's range
-  bool use_fixed_filter = false;     // true: use `fixed_filter` instead of fitting D
+  int level_count = 0;              // 0: automatic (see pyramid_level_sizes)
+  int64_t min_coarsest_side = 128;  // automatic level count stops before the longer side drops below
+  double value_scale = 1.0;         // level value = round(native * value_scale); integer inputs must
+                                    // give integers (else the build fails); float inputs are rounded
+  double value_offset = 0.0;        // an integer subtracted after scaling: level value =
+                                    // round(native * value_scale) - value_offset; keeps inputs far
+                                    // from zero (1e6 m, int32 millimetres) inside the coder's range
+  bool use_fixed_filter = false;    // true: use `fixed_filter` instead of fitting D
   DownsampleFilter fixed_filter = DownsampleFilter::default_filter();
   FilterFitOptions fit;
-  int threads = 2;                   // results are bit-identical for every thread count
-  std::string temp_dir = ".";        // temp files (<temp_dir>/<name>.pyr.tmp.*), removed afterwards
+  int threads = 2;             // results are bit-identical for every thread count
+  std::string temp_dir = ".";  // temp files (<temp_dir>/<name>.pyr.tmp.*), removed afterwards
   std::string temp_name = "pyramid";
-  int64_t fill_band_rows = 64;       // nodata push-pull works on bands of this many input rows
-  int64_t fit_rows = 512;            // D is fitted on windows within the top fit_rows input rows
+  int64_t fill_band_rows = 64;  // nodata push-pull works on bands of this many input rows
+  int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
   // true: the sink sees begin(), then level 0's bands, level 1's, ... (coded bands are held in temp
   // files until the input ends). false: begin() first (has_voids = true: a mask band precedes every
   // finest band), then bands as produced, levels interleaved (each level top to bottom).
@@ -231,33 +232,33 @@ struct BuildOptions {
 
 // Everything a decoder needs besides the per-band bytes.
 struct PyramidHeader {
-  std::vector<GridSize> levels;      // coarsest first
-  DownsampleFilter filter;           // the D used (informative: decoding needs only U)
-  int64_t band_rows = 0;             // coder band height at the finest level (halved per coarser level)
-  bool has_voids = false;            // finest level carries a validity mask
+  std::vector<GridSize> levels;  // coarsest first
+  DownsampleFilter filter;       // the D used (informative: decoding needs only U)
+  int64_t band_rows = 0;         // coder band height at the finest level (halved per coarser level)
+  bool has_voids = false;        // finest level carries a validity mask
   double value_scale = 1.0;
-  GridInfo input;                    // the input's description
+  GridInfo input;  // the input's description
 };
 
 struct LevelStats {
   GridSize size;
-  double residual_rms = 0;           // of R_l = T_l - U(T^_{l-1}) (T_0 - 0 for the coarsest)
+  double residual_rms = 0;  // of R_l = T_l - U(T^_{l-1}) (T_0 - 0 for the coarsest)
   int64_t residual_max_abs = 0;
-  double error_rms = 0;              // of T_l - T^_l (valid samples at the finest level)
+  double error_rms = 0;  // of T_l - T^_l (valid samples at the finest level)
   int64_t error_max_abs = 0;
-  uint64_t bytes = 0;                // coded residual bytes
+  uint64_t bytes = 0;  // coded residual bytes
 };
 
 struct BuildResult {
   PyramidHeader header;
   FilterFitReport filter_report;
-  std::vector<LevelStats> levels;    // coarsest first
+  std::vector<LevelStats> levels;  // coarsest first
   int64_t void_count = 0;
   uint64_t mask_bytes = 0;
   // Wall time: seconds_pass_input = fitting D; seconds_pass_residual = the rest of the streaming build
   // (read, D cascade, closed loop); seconds_pass_filter = replaying coded bands in level order.
   double seconds_pass_input = 0, seconds_pass_residual = 0, seconds_pass_filter = 0;
-  std::vector<std::string> log;      // human-readable build log (filter choice, fallbacks)
+  std::vector<std::string> log;  // human-readable build log (filter choice, fallbacks)
 };
 
 // Receives the output: begin(), then the bands of each level top to bottom (with the finest level,
@@ -274,7 +275,10 @@ class PyramidSink {
     (void)y0, (void)rows, (void)bytes;
   }
   // The decoder-exact reconstruction T^_level of rows y0.. (only called when wants_reconstruction()).
-  virtual bool wants_reconstruction(int level) const { (void)level; return false; }
+  virtual bool wants_reconstruction(int level) const {
+    (void)level;
+    return false;
+  }
   virtual void reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) {
     (void)level, (void)y0, (void)rows, (void)width, (void)data;
   }
@@ -284,7 +288,8 @@ class PyramidSink {
 // bands (ordered output). Level l lags the input by about 8 * 2^l of its rows, so memory is
 // O(width * 2^levels), independent of the input height. Throws IoError for I/O problems
 // (naming the file) and std::invalid_argument for unusable input or options.
-BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder, PyramidSink& sink);
+BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder,
+                          PyramidSink& sink);
 
 // The same builder fed from memory (the grid is streamed from `map` through a BandReader).
 BuildResult build_pyramid(const Heightmap& map, const BuildOptions& options, ResidualCoder& coder,
@@ -296,7 +301,8 @@ std::vector<int32_t> to_level_grid(const Heightmap& map, const BuildOptions& opt
                                    std::vector<uint8_t>* valid = nullptr);
 
 // A BandReader over an in-memory grid, handing out at most max_rows_per_call rows per call.
-std::unique_ptr<BandReader> make_memory_band_reader(const Heightmap& map, int64_t max_rows_per_call = 1 << 30);
+std::unique_ptr<BandReader> make_memory_band_reader(const Heightmap& map,
+                                                    int64_t max_rows_per_call = 1 << 30);
 
 // Run-length validity mask rows: for each row, alternating run lengths (varint) starting with a
 // valid run (possibly 0) until the row is covered.
@@ -311,9 +317,9 @@ class MemoryPyramid final : public PyramidSink {
     std::vector<uint8_t> bytes;
   };
   PyramidHeader header;
-  std::vector<std::vector<Band>> bands;       // [level][band]
-  std::vector<Band> mask;                     // finest level
-  std::vector<std::vector<int32_t>> recon;    // [level] when keep_reconstruction
+  std::vector<std::vector<Band>> bands;     // [level][band]
+  std::vector<Band> mask;                   // finest level
+  std::vector<std::vector<int32_t>> recon;  // [level] when keep_reconstruction
   bool keep_reconstruction = true;
 
   void begin(const PyramidHeader& h) override;

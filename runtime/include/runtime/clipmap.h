@@ -35,7 +35,6 @@
 #include <vector>
 
 #include "pyramid/heightmap.h"
-
 #include "pyramid/pyramid.h"
 
 namespace terrain::runtime {
@@ -78,8 +77,8 @@ class HeightSource {
   // holds units of level - 1 as this source gives them; where it covers the window U needs, only
   // the residual is decoded (split, when not null, receives the time of U and of the residual).
   // Either way the output equals what fill() writes.
-  virtual void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
-                          int64_t out_stride, FillSplit* split);
+  virtual void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out,
+                          int32_t* units_out, int64_t out_stride, FillSplit* split);
 };
 
 // A compressed pyramid file through the region decoder. Voids (NaN) come out as 0 m.
@@ -158,9 +157,9 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
 // §9, Table 2): e_l = PL(T^_l) - T_m at every finest-level sample (PL: the renderer's
 // triangulation), projected as e_l * s / g_l pixels, s = the screen-space size of a grid cell.
 struct LevelScreenError {
-  int level = 0;                  // source level (0 coarsest)
-  double spacing_m = 0;           // g_l
-  double rms_m = 0, max_m = 0;    // |e_l| in metres
+  int level = 0;                // source level (0 coarsest)
+  double spacing_m = 0;         // g_l
+  double rms_m = 0, max_m = 0;  // |e_l| in metres
   double rms_px = 0, p999_px = 0, max_px = 0;
 };
 // s (pixels per grid cell at the average ring depth 0.4 n g_l, L&H 2004 §4):
@@ -207,11 +206,11 @@ struct ZRange {
 };
 
 struct ClipmapOptions {
-  int n = 255;                    // samples per level side, 2^k - 1, 15..1023
-  int levels = 0;                 // 0: as many as the source has
-  int64_t budget = 0;             // samples refilled per update; 0: n * n
+  int n = 255;         // samples per level side, 2^k - 1, 15..1023
+  int levels = 0;      // 0: as many as the source has
+  int64_t budget = 0;  // samples refilled per update; 0: n * n
   bool deactivate_by_height = true;
-  double height_factor = 0.4;     // level l off when viewer height above terrain > factor * n * spacing(l)
+  double height_factor = 0.4;  // level l off when viewer height above terrain > factor * n * spacing(l)
 };
 // How many levels a clipmap with these options has over a source of source_levels levels (the
 // `levels = 0: all` rule, for callers that size things before constructing one); the Clipmap
@@ -229,15 +228,15 @@ struct ClipmapUpdateStats {
   double seconds_fill = 0;
   double seconds_upsample = 0;
   double seconds_residual = 0;
-  double seconds_coarse = 0;      // zc: the coarser level's surface at each new vertex
-  double seconds_normals = 0;     // normal map texels of the new samples and their neighbours
-  double seconds_bounds = 0;      // per-tile z ranges
-  int64_t samples_filled = 0;     // samples taken from the source this update
-  int levels_updated = 0;         // levels whose clip region moved
-  int levels_behind = 0;          // enabled levels whose clip region still differs from the desired one
-  int enabled_levels = 0;         // levels not switched off by height (0 .. L)
-  int active_levels = 0;          // levels with a non-empty active region
-  double viewer_height = 0;       // viewer height above the terrain used for switching levels, metres
+  double seconds_coarse = 0;   // zc: the coarser level's surface at each new vertex
+  double seconds_normals = 0;  // normal map texels of the new samples and their neighbours
+  double seconds_bounds = 0;   // per-tile z ranges
+  int64_t samples_filled = 0;  // samples taken from the source this update
+  int levels_updated = 0;      // levels whose clip region moved
+  int levels_behind = 0;       // enabled levels whose clip region still differs from the desired one
+  int enabled_levels = 0;      // levels not switched off by height (0 .. L)
+  int active_levels = 0;       // levels with a non-empty active region
+  double viewer_height = 0;    // viewer height above the terrain used for switching levels, metres
   // The same split per clipmap level (index = level; levels beyond level_count() stay zero).
   struct Level {
     double seconds_fill = 0, seconds_upsample = 0, seconds_residual = 0;
@@ -264,7 +263,7 @@ class Clipmap {
   int n() const { return n_; }
   int level_count() const { return int(levels_.size()); }
   int source_level(int level) const { return first_source_level_ + level; }
-  double spacing(int level) const;               // metres between samples of `level`
+  double spacing(int level) const;  // metres between samples of `level`
   int64_t budget() const { return budget_; }
   void set_budget(int64_t samples) { budget_ = samples > 0 ? samples : int64_t(n_) * n_; }
 
@@ -282,8 +281,8 @@ class Clipmap {
   // Toroidal storage: sample (x, y) of the clip region lives at index wrap(y) * n + wrap(x).
   int64_t wrap(int64_t v) const { return ((v % n_) + n_) % n_; }
   size_t index(int64_t x, int64_t y) const { return size_t(wrap(y) * n_ + wrap(x)); }
-  const float* heights(int level) const { return lv(level).z.data(); }         // n*n toroidal
-  const float* coarse_heights(int level) const { return lv(level).zc.data(); } // n*n toroidal
+  const float* heights(int level) const { return lv(level).z.data(); }          // n*n toroidal
+  const float* coarse_heights(int level) const { return lv(level).zc.data(); }  // n*n toroidal
   // Normal map: 2n x 2n texels of (dz/dx, dz/dy), toroidal like the heights: texel (X, Y), at level
   // position (X / 2, Y / 2), lives at normal_index(X, Y); sample (x, y) owns texels 2x..2x+1, 2y..2y+1.
   const float* normal_map(int level) const { return lv(level).normal.data(); }  // 2 * 4n^2 floats

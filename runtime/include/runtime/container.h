@@ -11,8 +11,6 @@
 // dimension chain are validated on open, so bad input gives FormatError, never a crash.
 #pragma once
 
-#include "codec/codec.h"
-
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -21,6 +19,8 @@
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include "codec/codec.h"
 
 namespace terrain::runtime {
 
@@ -106,26 +106,26 @@ struct Quantisation {
   double step_units = 1;   // quantisation step in the integer quantum (native units)
   double step_metres = 1;  // the same step in metres
   ErrorMode mode = ErrorMode::Lossless;
-  double target = 0;       // the rms target / max error / step requested, as given to the builder
+  double target = 0;  // the rms target / max error / step requested, as given to the builder
 };
 
 // Everything in a container except the blobs, the mask samples and the JSON metadata.
 struct ContainerInfo {
-  uint64_t width = 0;   // finest level
+  uint64_t width = 0;  // finest level
   uint64_t height = 0;
   std::vector<LevelInfo> levels;  // 0 = coarsest .. size()-1 = finest; w_{l-1} = ceil(w_l / 2)
   double spacing_x = 1;
   double spacing_y = 1;
   std::string horizontal_units = "m";
   std::string vertical_units = "m";
-  double vertical_scale = 1;   // metres = value * vertical_scale + vertical_offset
+  double vertical_scale = 1;  // metres = value * vertical_scale + vertical_offset
   double vertical_offset = 0;
   std::optional<Georeference> georeference;
-  uint32_t filter_size = 0;        // the D filter is filter_size x filter_size (0: none stored)
-  std::vector<double> filter;      // row-major coefficients
+  uint32_t filter_size = 0;    // the D filter is filter_size x filter_size (0: none stored)
+  std::vector<double> filter;  // row-major coefficients
   FilterProvenance filter_provenance = FilterProvenance::Optimal;
   Quantisation quantisation;
-  uint64_t void_count = 0;         // filled in by the reader: samples marked nodata
+  uint64_t void_count = 0;  // filled in by the reader: samples marked nodata
 };
 
 // Throws std::invalid_argument naming the problem if info is not a consistent description of a

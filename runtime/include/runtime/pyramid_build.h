@@ -18,21 +18,21 @@ enum class ErrorTarget { Lossless, Step, Rms, MaxError };
 
 struct BuildFileOptions {
   ErrorTarget target = ErrorTarget::Lossless;
-  double target_metres = 0;      // the step, rms or max error asked for, in metres
-  double quantum_metres = 0;     // level unit for float input (0: 0.01 m); integer input uses its own unit
-  int levels = 0;                // 0: automatic
-  uint32_t tile_size = 32;       // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
-  int threads = 0;               // 0: all cores
-  std::string temp_dir;          // spill files; empty: the output's directory
-  int64_t calibration_rows = 1024;   // rms/max-error calibration window (rows x columns of the input)
+  double target_metres = 0;         // the step, rms or max error asked for, in metres
+  double quantum_metres = 0;        // level unit for float input (0: 0.01 m); integer input uses its own unit
+  int levels = 0;                   // 0: automatic
+  uint32_t tile_size = 32;          // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
+  int threads = 0;                  // 0: all cores
+  std::string temp_dir;             // spill files; empty: the output's directory
+  int64_t calibration_rows = 1024;  // rms/max-error calibration window (rows x columns of the input)
   int64_t calibration_cols = 2048;
 };
 
 struct BuildFileResult {
   BuildResult build;
-  double step_units = 1;          // quantiser step chosen, in level units
+  double step_units = 1;  // quantiser step chosen, in level units
   double metres_per_unit = 1;
-  uint32_t max_error_units = 0;   // max-error mode: the bound in level units
+  uint32_t max_error_units = 0;  // max-error mode: the bound in level units
   std::vector<std::string> calibration_log;
   uint64_t file_bytes = 0;
   double seconds_calibrate = 0, seconds_build = 0;

@@ -28,10 +28,10 @@
 namespace terrain::runtime {
 
 struct RegionStats {
-  uint64_t samples_reconstructed = 0;     // samples computed as U + residual, all levels
-  uint64_t residual_tiles_decoded = 0;    // libcodec tiles entropy-decoded (cache misses)
-  uint64_t residual_samples_decoded = 0;  // their samples, all levels
-  uint64_t cache_hits = 0;                // residual tiles served from the cache
+  uint64_t samples_reconstructed = 0;               // samples computed as U + residual, all levels
+  uint64_t residual_tiles_decoded = 0;              // libcodec tiles entropy-decoded (cache misses)
+  uint64_t residual_samples_decoded = 0;            // their samples, all levels
+  uint64_t cache_hits = 0;                          // residual tiles served from the cache
   std::vector<uint64_t> residual_samples_by_level;  // residual_samples_decoded split by level
 };
 
@@ -52,8 +52,9 @@ class RegionDecoder {
   // coarser.rect must contain upsample_required_window(rect, level size) and hold exactly what
   // decode_units(level - 1, ...) gives there; then the result equals decode_units(level, rect).
   // When seconds_upsample / seconds_residual are given, the time of each half is added to them.
-  void decode_refined(int level, const Rect& rect, const CoarseWindow& coarser, int32_t* out, int64_t out_stride,
-                      double* seconds_upsample = nullptr, double* seconds_residual = nullptr) const;
+  void decode_refined(int level, const Rect& rect, const CoarseWindow& coarser, int32_t* out,
+                      int64_t out_stride, double* seconds_upsample = nullptr,
+                      double* seconds_residual = nullptr) const;
   // The same in metres; voids of the finest level (when the input had nodata) come out as NaN.
   void decode_metres(int level, const Rect& rect, float* out, int64_t out_stride) const;
   // Metres per level unit and offset: metres = units * scale + offset.
@@ -66,11 +67,12 @@ class RegionDecoder {
   void clear_cache();
 
  private:
-  struct Band;  // a band's libcodec stream, opened (header + tile index parsed) on first use
+  struct Band;             // a band's libcodec stream, opened (header + tile index parsed) on first use
   using Tile = int32_t[];  // a decoded tile's samples, row-major (allocated uninitialised: decode writes all)
   const Band& band(int level, size_t b) const;
   void add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
-  std::shared_ptr<const Tile> residual_tile(int level, size_t b, const Band& band, int64_t tx, int64_t ty) const;
+  std::shared_ptr<const Tile> residual_tile(int level, size_t b, const Band& band, int64_t tx,
+                                            int64_t ty) const;
   void count_decoded(int level, uint64_t tiles, uint64_t samples) const;
 
   std::shared_ptr<const PyramidFile> file_;

@@ -41,24 +41,24 @@ struct Camera {
 };
 
 struct RenderOptions {
-  bool transitions = true;            // geometry and normal morph near each ring's outer edge
-  bool culling = true;                // per-block view-frustum culling against the z bounds
-  bool stitch = true;                 // zero-area triangles along each ring's outer edge
-  bool snap_perimeter = true;         // with transitions off, still put the ring's outer vertices on
-                                      // the coarser level; false leaves cracks (tests show they are caught)
-  bool flat_colour = false;           // every terrain pixel gets `terrain_rgb` (crack tests)
+  bool transitions = true;     // geometry and normal morph near each ring's outer edge
+  bool culling = true;         // per-block view-frustum culling against the z bounds
+  bool stitch = true;          // zero-area triangles along each ring's outer edge
+  bool snap_perimeter = true;  // with transitions off, still put the ring's outer vertices on
+                               // the coarser level; false leaves cracks (tests show they are caught)
+  bool flat_colour = false;    // every terrain pixel gets `terrain_rgb` (crack tests)
   float terrain_rgb[3] = {1, 1, 1};
   float background_rgb[3] = {0.55f, 0.70f, 0.90f};
-  float light_dir[3] = {-0.4f, -0.3f, 0.87f};   // towards the light, world frame
-  float z_lo = 0, z_hi = 0;           // height colour ramp range, metres; z_hi <= z_lo: level 0's range
+  float light_dir[3] = {-0.4f, -0.3f, 0.87f};  // towards the light, world frame
+  float z_lo = 0, z_hi = 0;  // height colour ramp range, metres; z_hi <= z_lo: level 0's range
 };
 
 struct RenderStats {
-  int64_t triangles = 0;              // submitted, zero-area stitching triangles included
+  int64_t triangles = 0;  // submitted, zero-area stitching triangles included
   int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;
   int levels_drawn = 0;
-  double seconds_upload = 0;          // texture uploads of the last upload()
-  double seconds_render = 0;          // draw + glFinish
+  double seconds_upload = 0;  // texture uploads of the last upload()
+  double seconds_render = 0;  // draw + glFinish
   int64_t samples_uploaded = 0;
 };
 
@@ -90,7 +90,7 @@ class HeadlessGL {
   ~HeadlessGL();
   HeadlessGL(const HeadlessGL&) = delete;
   HeadlessGL& operator=(const HeadlessGL&) = delete;
-  std::string renderer_name() const;   // GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
+  std::string renderer_name() const;  // GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
   std::string platform() const { return platform_; }
 
  private:

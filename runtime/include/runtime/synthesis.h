@@ -29,11 +29,11 @@ class PyramidFile;
 // fitted by least squares on `levels_used` (stored levels, coarsest = 0).
 struct ResidualFit {
   std::vector<int> levels_used;
-  double intercept = 0;      // log2(m^2)
-  double slope = 0;          // per level (finer = +1), after clamping
-  double slope_fitted = 0;   // before clamping (equal to slope when no fit was possible)
-  bool clamped = false;      // slope was outside [kMinSlope, kMaxSlope]
-  std::string note;          // one line for logs ("fit on levels 3..6", "fallback: ...")
+  double intercept = 0;     // log2(m^2)
+  double slope = 0;         // per level (finer = +1), after clamping
+  double slope_fitted = 0;  // before clamping (equal to slope when no fit was possible)
+  bool clamped = false;     // slope was outside [kMinSlope, kMaxSlope]
+  std::string note;         // one line for logs ("fit on levels 3..6", "fallback: ...")
   // Variance ratio per finer level is 2^slope. For fractional Brownian terrain with Hurst exponent
   // H it is 2^(-2H); the clamp keeps H in [0.25, 1.5] so that one odd level cannot make the
   // extrapolated detail explode (slope > -0.5) or vanish at once (slope < -3).
@@ -57,12 +57,12 @@ std::vector<double> stored_residual_variance_m2(const PyramidFile& file);
 // The synthesising height source
 
 struct SynthesisOptions {
-  int levels = 0;                   // K: levels added beyond the base's finest, 1..kMaxLevels
-  std::vector<double> std_m;        // noise standard deviation of each added level (K values, metres, >= 0)
-  uint64_t seed = 1;                // the noise table and its per-level index transforms
-  double quantum_m = 1.0 / 1024;    // heights are integers of this step while upsampling (U is exact
-                                    // integer arithmetic); also the rounding of the noise
-  int table_log2 = 8;               // noise table side 2^table_log2 (5..10)
+  int levels = 0;                 // K: levels added beyond the base's finest, 1..kMaxLevels
+  std::vector<double> std_m;      // noise standard deviation of each added level (K values, metres, >= 0)
+  uint64_t seed = 1;              // the noise table and its per-level index transforms
+  double quantum_m = 1.0 / 1024;  // heights are integers of this step while upsampling (U is exact
+                                  // integer arithmetic); also the rounding of the noise
+  int table_log2 = 8;             // noise table side 2^table_log2 (5..10)
   static constexpr int kMaxLevels = 16;
 };
 
@@ -83,7 +83,7 @@ class SynthesisSource final : public HeightSource {
 
   // Synthesised levels in integer quanta (metres = units * quantum_m()); `rect` must lie inside
   // level `level` >= base_levels() - 1 (the base's finest comes out rounded to the quantum).
-  void fill_units(int level, const Rect& rect, int32_t* out, int64_t out_stride);
+  void fill_quanta(int level, const Rect& rect, int32_t* out, int64_t out_stride);
   // The noise added at sample (x, y) of synthesised level `level` (base_levels() ..
   // level_count() - 1; any x, y), in quanta.
   int32_t noise_units(int level, int64_t x, int64_t y) const;
@@ -100,7 +100,7 @@ class SynthesisSource final : public HeightSource {
   SynthesisOptions options_;
   int base_levels_;
   double spacing_m_;
-  std::vector<GridSize> sizes_;               // synthesised levels, k = level - P
+  std::vector<GridSize> sizes_;  // synthesised levels, k = level - P
   int table_mask_;
   // Per synthesised level: the table scaled to quanta, and per axis the magnification (16.16 fixed
   // point, a few per cent above 1: breaks the table's periodicity between levels) and offset.
@@ -117,8 +117,8 @@ std::vector<double> gaussian_noise_table(uint64_t seed, int table_log2);
 
 // SynthesisOptions for K levels below a pyramid file: std_m extrapolated from the file's stored
 // residual variances, times detail_scale (0: zero detail, U alone).
-SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint64_t seed, double detail_scale = 1.0,
-                                       ResidualFit* fit = nullptr);
+SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint64_t seed,
+                                       double detail_scale = 1.0, ResidualFit* fit = nullptr);
 
 // Noise standard deviations for a pure generator: std0_m at the first added level, then a factor
 // 2^-hurst per finer level (fractional Brownian detail with Hurst exponent `hurst`).
