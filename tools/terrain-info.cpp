@@ -1,17 +1,122 @@
 // terrain-info: describe a heightmap file (format, size, type, min/max in metres, voids, spacing,
-// georeference), streaming it band by band so any size fits in memory.
+// georeference), streaming it band by band so any size fits in memory; or a pyramid file (.pyr) from
+// its header and index alone.
 #include <algorithm>
 #include <cinttypes>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
+#include <string>
 #include <vector>
 
 #include "cli.h"
 #include "json_writer.h"
 #include "progress.h"
 #include "pyramid/heightmap.h"
+#include "runtime/container.h"
 
 namespace {
+
+using terrain::runtime::Container;
+using terrain::runtime::ContainerInfo;
+using terrain::runtime::ErrorMode;
+using terrain::runtime::error_mode_name;
+
+// A .pyr: what its header and index say (nothing is decoded); with verify, every level's checksum.
+int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bool verify) {
+  const Container c = Container::open(path);
+  if (verify) c.verify();
+  const ContainerInfo& info = c.info();
+  const double metres_per_unit = std::abs(info.vertical_scale);
+  const uint64_t file_bytes = uint64_t(std::filesystem::file_size(path));
+  const double finest_samples = double(info.width) * double(info.height);
+  const std::string version = "1." + std::to_string(c.minor_version());
+  const auto& q = info.quantisation;
+  if (common.json) {
+    cli::JsonWriter j(std::cout);
+    j.begin_object();
+    j.field("file", path).field("format", "pyramid").field("format_version", version);
+    j.field("width", int64_t(info.width)).field("height", int64_t(info.height));
+    j.field("level_count", int64_t(info.levels.size()));
+    j.field("spacing_x", info.spacing_x).field("spacing_y", info.spacing_y);
+    j.field("horizontal_units", info.horizontal_units).field("vertical_units", info.vertical_units);
+    j.field("vertical_scale", info.vertical_scale).field("vertical_offset", info.vertical_offset);
+    j.key("georeference");
+    if (info.georeference) {
+      j.begin_object();
+      j.field("origin_x", info.georeference->origin_x).field("origin_y", info.georeference->origin_y);
+      j.field("units", info.georeference->units).end_object();
+    } else {
+      j.null();
+    }
+    j.field("error_mode", error_mode_name(q.mode)).field("target", q.target);
+    j.field("step_units", q.step_units).field("step_m", q.step_metres);
+    j.field("void_count", int64_t(info.void_count)).field("filter_size", int64_t(info.filter_size));
+    j.field("file_bytes", int64_t(file_bytes))
+        .field("bits_per_sample", double(file_bytes) * 8 / finest_samples);
+    j.field("checksums_verified", verify);
+    j.key("levels").begin_array();
+    for (uint32_t l = 0; l < c.level_count(); ++l) {
+      const auto& li = info.levels[l];
+      j.begin_object();
+      j.field("level", int64_t(l)).field("width", int64_t(li.width)).field("height", int64_t(li.height));
+      j.field("bytes", int64_t(c.level(l).size));
+      j.field("residual_rms_units", li.stats.rms);
+      j.key("error_rms_m");
+      li.error ? j.value(li.error->rms * metres_per_unit) : j.null();
+      j.key("error_max_m");
+      li.error ? j.value(li.error->max_abs * metres_per_unit) : j.null();
+      j.end_object();
+    }
+    j.end_array();
+    j.field("metadata", std::string(c.metadata_json()));
+    j.end_object();
+    j.finish();
+    return cli::kExitOk;
+  }
+  using cli::shortest;
+  std::printf("file:         %s\n", path.c_str());
+  std::printf("format:       pyramid (.pyr) version %s\n", version.c_str());
+  std::printf("dimensions:   %" PRIu64 " x %" PRIu64 " (finest level), %zu levels\n", info.width, info.height,
+              info.levels.size());
+  std::printf("vertical:     metres = value * %s + %s\n", shortest(info.vertical_scale).c_str(),
+              shortest(info.vertical_offset).c_str());
+  if (q.mode == ErrorMode::Lossless)
+    std::printf("error:        lossless\n");
+  else  // --json has the exact step
+    std::printf("error:        %s target %s m, step %.6g units (%.6g m)\n", error_mode_name(q.mode),
+                shortest(q.target).c_str(), q.step_units, q.step_metres);
+  std::printf("spacing:      %s x %s %s\n", shortest(info.spacing_x).c_str(),
+              shortest(info.spacing_y).c_str(), info.horizontal_units.c_str());
+  if (info.georeference)
+    std::printf("origin:       north-west sample at x %s, y %s %s\n",
+                shortest(info.georeference->origin_x).c_str(), shortest(info.georeference->origin_y).c_str(),
+                info.georeference->units.c_str());
+  else
+    std::printf("origin:       unknown\n");
+  std::printf("voids:        %" PRIu64 " of %.0f samples\n", info.void_count, finest_samples);
+  std::printf("size:         %" PRIu64 " bytes, %.4f bits per finest sample\n", file_bytes,
+              double(file_bytes) * 8 / finest_samples);
+  std::printf("checksums:    %s\n",
+              verify ? "every level verified" : "header and index verified (--verify: levels too)");
+  std::printf("%5s %13s %12s %9s %12s %12s\n", "level", "size", "bytes", "bits/smp", "error_rms_m",
+              "error_max_m");
+  for (uint32_t l = 0; l < c.level_count(); ++l) {
+    const auto& li = info.levels[l];
+    const std::string size = std::to_string(li.width) + "x" + std::to_string(li.height);
+    const size_t bytes = c.level(l).size;
+    std::printf("%5u %13s %12zu %9.4f", l, size.c_str(), bytes,
+                double(bytes) * 8 / double(li.width * li.height));
+    if (li.error)
+      std::printf(" %12.4f %12.4f\n", li.error->rms * metres_per_unit, li.error->max_abs * metres_per_unit);
+    else
+      std::printf(" %12s %12s\n", "-", "-");
+  }
+  if (!c.metadata_json().empty())
+    std::printf("metadata:     %.*s\n", int(c.metadata_json().size()), c.metadata_json().data());
+  return cli::kExitOk;
+}
 
 int run(int argc, char** argv) {
   std::string path;
@@ -23,11 +128,24 @@ int run(int argc, char** argv) {
       "valid samples, nodata count, spacing and units, georeference. Reads the file as a stream\n"
       "of row bands, so memory stays O(width). Formats: SRTM .hgt/.hgt.gz, ESRI .bil/.flt + .hdr,\n"
       "raw grids (.raw/.bin/.r16/.r32 with a <file>.json sidecar or --type/--width/--height),\n"
-      "16-bit PNG/TIFF, float TIFF/EXR, Mapbox Terrain-RGB PNG. See docs/io.md.");
-  parser.positional("FILE", "the heightmap to describe", &path);
+      "16-bit PNG/TIFF, float TIFF/EXR, Mapbox Terrain-RGB PNG. See docs/io.md.\n"
+      "A pyramid file (.pyr, recognised by its magic bytes) is described from its header and index\n"
+      "without decoding: levels, bytes, quantisation, the builder's error figures per level.");
+  bool verify = false;
+  parser.positional("FILE", "the heightmap or pyramid to describe", &path);
+  parser.flag("--verify", "pyramid files: also check every level's checksum (reads the whole file)", &verify);
   cli::add_read_options(parser, options);
   parser.add_common(common);
   if (auto status = parser.parse(argc, argv)) return *status;
+  if (terrain::runtime::is_container_file(path)) {
+    try {
+      return describe_pyramid(path, common, verify);
+    } catch (const terrain::runtime::FormatError& e) {
+      std::cerr << "terrain-info: error: " << e.what() << "\n";
+      return terrain::runtime::exit_code(e.code());
+    }
+  }
+  if (verify) throw cli::UsageError("--verify applies to pyramid files only");
 
   auto reader = terrain::open_band_reader(path, options);
   const terrain::GridInfo& g = reader->info();

@@ -27,6 +27,20 @@ const char* format_error_code_name(FormatErrorCode code) {
   return "unknown";
 }
 
+const char* error_mode_name(ErrorMode mode) {
+  switch (mode) {
+    case ErrorMode::RmsTarget:
+      return "rms";
+    case ErrorMode::MaxError:
+      return "max-error";
+    case ErrorMode::Step:
+      return "step";
+    case ErrorMode::Lossless:
+      return "lossless";
+  }
+  return "unknown";
+}
+
 int exit_code(FormatErrorCode code) {
   switch (code) {
     case FormatErrorCode::NotFound:

@@ -77,6 +77,15 @@ Container::Container(Container&&) noexcept = default;
 Container& Container::operator=(Container&&) noexcept = default;
 Container::~Container() = default;
 
+bool is_container_file(const std::string& path) {
+  uint8_t head[sizeof kMagic] = {};
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  const size_t got = std::fread(head, 1, sizeof head, f);
+  std::fclose(f);
+  return got == sizeof head && std::memcmp(head, kMagic, sizeof kMagic) == 0;
+}
+
 Container Container::open(const std::string& path) {
   Container c;
   c.path_ = path;

@@ -303,3 +303,46 @@ TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the o
   }
   CHECK(rows >= 3);
 }
+
+TEST_CASE("e2e: terrain-info describes a pyramid from its index; --verify checks every level", "[e2e]") {
+  // The per-level error figures terrain-info reads from the file must be exactly those pyramid-build
+  // reported (both print the shortest exact form); a flipped byte in a level is found by --verify
+  // only (exit 10), and --verify on a heightmap is a usage error.
+  iotest::TempDir dir;
+  const Heightmap map = synthesize_terrain(SynthOptions{.seed = 11, .width = 1201, .height = 1201});
+  const std::string in = dir.file("N10E010.hgt"), pyr = dir.file("t.pyr"), report = dir.file("build.json");
+  iotest::write_file(in, iotest::hgt_bytes(map));
+  REQUIRE(iotest::run_tool(dir, {"pyramid-build", {in, "-o", pyr, "--rms", "2", "--json", report, "-q"}})
+              .status == 0);
+  const auto figures = [](const std::string& json, const std::string& key) {
+    std::vector<std::string> found;
+    for (size_t at = json.find(key); at != std::string::npos; at = json.find(key, at + 1))
+      found.push_back(json.substr(at, json.find_first_of(",\n}", at) - at));
+    return found;
+  };
+  const std::vector<uint8_t> build_bytes = iotest::read_file(report);
+  const std::string build(build_bytes.begin(), build_bytes.end());
+  const auto text = iotest::run_tool(dir, {"terrain-info", {pyr}});
+  REQUIRE(text.status == 0);
+  CHECK(text.out.find("pyramid (.pyr) version 1.1") != std::string::npos);
+  CHECK(text.out.find("1201 x 1201 (finest level)") != std::string::npos);
+  const auto json = iotest::run_tool(dir, {"terrain-info", {pyr, "--json", "--verify"}});
+  REQUIRE(json.status == 0);
+  CHECK(json.out.find("\"checksums_verified\": true") != std::string::npos);
+  for (const std::string key : {"\"error_rms_m\"", "\"error_max_m\""}) {
+    INFO(key);
+    const auto expected = figures(build, key);
+    CHECK(expected.size() >= 3);
+    CHECK(figures(json.out, key) == expected);
+  }
+
+  std::vector<uint8_t> bytes = iotest::read_file(pyr);
+  bytes[bytes.size() / 2] ^= 0x10;  // inside the finest level's blob (levels come coarsest first)
+  const std::string bad = dir.file("bad.pyr");
+  iotest::write_file(bad, bytes);
+  CHECK(iotest::run_tool(dir, {"terrain-info", {bad}}).status == 0);  // index intact
+  const auto verified = iotest::run_tool(dir, {"terrain-info", {bad, "--verify"}});
+  CHECK(verified.status == 10);
+  CHECK(verified.err.find(bad) != std::string::npos);
+  CHECK(iotest::run_tool(dir, {"terrain-info", {in, "--verify"}}).status == 1);
+}

@@ -71,6 +71,8 @@ inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32
 
 enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1 };
 enum class ErrorMode : uint32_t { RmsTarget = 0, MaxError = 1, Step = 2, Lossless = 3 };
+// "rms", "max-error", "step" or "lossless" (the pyramid-build option that chose it).
+const char* error_mode_name(ErrorMode mode);
 
 // Statistics of one level's residual image, in quantisation units (used later for synthesis).
 struct LevelStats {
@@ -210,6 +212,10 @@ struct LevelView {
 };
 
 class MappedFile;
+
+// True when `path` starts with the container's magic bytes (reads 8 bytes; false when it cannot be
+// read): lets a tool tell a .pyr from a heightmap by content rather than by name.
+bool is_container_file(const std::string& path);
 
 class Container {
  public:
