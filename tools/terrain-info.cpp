@@ -20,8 +20,8 @@ namespace {
 
 using terrain::runtime::Container;
 using terrain::runtime::ContainerInfo;
-using terrain::runtime::ErrorMode;
 using terrain::runtime::error_mode_name;
+using terrain::runtime::ErrorMode;
 
 // A .pyr: what its header and index say (nothing is decoded); with verify, every level's checksum.
 int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bool verify) {
