@@ -80,7 +80,8 @@ struct LevelStats {
 };
 
 // How far the stored level is from what it encodes, T_l - T^_l in quantisation units, as the builder
-// measured it over the whole level (valid samples only at the finest level).
+// measured it over the whole level (valid samples only at the finest level; float input counts as
+// rounded to its quantum, so add up to half a quantum against the float values).
 struct LevelError {
   double rms = 0;
   double max_abs = 0;
