@@ -25,7 +25,15 @@
 
 #include "runtime/clipmap.h"
 
+// AddressSanitizer builds: GCC defines __SANITIZE_ADDRESS__, Clang answers __has_feature.
 #if defined(__SANITIZE_ADDRESS__)
+#define TERRAIN_RUNTIME_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define TERRAIN_RUNTIME_ASAN 1
+#endif
+#endif
+#if defined(TERRAIN_RUNTIME_ASAN)
 #include <sanitizer/lsan_interface.h>
 #endif
 
@@ -69,12 +77,12 @@ struct RenderStats {
 class GlLeakCheckPause {
  public:
   GlLeakCheckPause() {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(TERRAIN_RUNTIME_ASAN)
     __lsan_disable();
 #endif
   }
   ~GlLeakCheckPause() {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(TERRAIN_RUNTIME_ASAN)
     __lsan_enable();
 #endif
   }
