@@ -305,22 +305,22 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
                            slots + lp_count, steps, tile, hp_nonzero);
 }
 
-void crop(const int32_t* tile, int pw, int w, int h, int32_t* dst) {
-  for (int y = 0; y < h; ++y)
-    std::memcpy(dst + size_t(y) * w, tile + size_t(y) * pw, size_t(w) * sizeof(int32_t));
-}
-
 // The encoder picks fraction_bits so that the scaled samples stay within +-2^22 (quantizer.h).
 void scale_up(int32_t* v, size_t n, int bits) {
   if (bits == 0) return;
   for (size_t i = 0; i < n; ++i) v[i] = int32_t(uint32_t(v[i]) << bits);
 }
 
-// Rounds to the nearest integer sample, halves up.
-void scale_down(int32_t* v, size_t n, int bits) {
-  if (bits == 0) return;
-  const int64_t half = int64_t(1) << (bits - 1);
-  for (size_t i = 0; i < n; ++i) v[i] = int32_t((int64_t(v[i]) + half) >> bits);
+// n inverse-transformed values back to samples, rounded to the nearest (halves up): the decoder's
+// output and the encoder's reconstruction both come through here, so they cannot differ. The add
+// wraps: garbage from a corrupt stream must not be undefined behaviour.
+void scale_down_row(const int32_t* from, int32_t* to, int n, int bits) {
+  if (bits == 0) {
+    std::memcpy(to, from, size_t(n) * sizeof(int32_t));
+    return;
+  }
+  const uint32_t half = uint32_t(1) << (bits - 1);
+  for (int x = 0; x < n; ++x) to[x] = int32_t(uint32_t(from[x]) + half) >> bits;
 }
 
 inline int64_t floor_div(int64_t a, int64_t b) {
@@ -348,8 +348,8 @@ size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, cons
   dequantize_tile(tile, pw, ph, params.steps);
   inverse_lapped(tile, pw, ph, params.fraction_bits > 0);
   int32_t* recon = work.reconstruction.data();
-  crop(tile, pw, w, h, recon);
-  scale_down(recon, size_t(w) * h, params.fraction_bits);
+  for (int y = 0; y < h; ++y)
+    scale_down_row(tile + size_t(y) * pw, recon + size_t(y) * w, w, params.fraction_bits);
   if (params.bound_max_error) {
     const int64_t e = params.max_error;
     int32_t* corrections = work.sequence.data();
@@ -451,8 +451,6 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   if (bits.overrun()) return TileResult::Corrupt;
   inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
   // Straight from the padded tile into the caller's window: no intermediate copy.
-  const int shift = spatial ? 0 : params.fraction_bits;
-  const int32_t half = shift > 0 ? int32_t(1) << (shift - 1) : 0;
   const int64_t bin = 2 * int64_t(params.max_error) + 1;
   const int n = window.x1 - window.x0;
   for (int y = window.y0; y < window.y1; ++y) {
@@ -462,10 +460,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
       for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);
       continue;
     }
-    if (shift == 0) std::memcpy(to, from, size_t(n) * sizeof(int32_t));
-    // Wrapping add: garbage from a corrupt stream must not be undefined behaviour.
-    else
-      for (int x = 0; x < n; ++x) to[x] = int32_t(uint32_t(from[x]) + uint32_t(half)) >> shift;
+    scale_down_row(from, to, n, params.fraction_bits);
     if (corrected) {
       const int32_t* c = corrections + size_t(y) * w + window.x0;
       for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(to[x]) + c[x]);
