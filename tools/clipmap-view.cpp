@@ -346,11 +346,8 @@ int run(int argc, char** argv) {
     std::vector<LevelScreenError> errors = estimate_screen_space_error(source, first_level, s_ref);
     // The estimate takes the file's finest level for the truth; the finest level's own error against
     // the input, which version 1.1 files record, turns it into a bound.
-    const std::optional<LevelError>& finest_error = info.levels.back().error;
-    const double metres_per_unit = std::abs(info.vertical_scale);
-    if (finest_error)
-      add_finest_error_bound(errors, finest_error->rms * metres_per_unit,
-                             finest_error->max_abs * metres_per_unit, s_ref);
+    const std::optional<LevelError> finest_error = level_error_metres(info, info.levels.size() - 1);
+    if (finest_error) add_finest_error_bound(errors, finest_error->rms, finest_error->max_abs, s_ref);
     const ClipmapSizeChoice choice =
         clipmap_size_for_screen_error(errors, s_ref, width, height, fov, *max_screen_error);
     n = choice.n;
@@ -363,7 +360,7 @@ int run(int argc, char** argv) {
       if (finest_error)
         std::fprintf(stderr,
                      "clipmap-view: the bound includes the finest level's compression error (max %.3f m)\n",
-                     finest_error->max_abs * metres_per_unit);
+                     finest_error->max_abs);
       else
         std::fprintf(stderr,
                      "clipmap-view: warning: %s (format 1.0) does not record its compression error; the "

@@ -28,7 +28,6 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
   const Container c = Container::open(path);
   if (verify) c.verify();
   const ContainerInfo& info = c.info();
-  const double metres_per_unit = std::abs(info.vertical_scale);
   const uint64_t file_bytes = uint64_t(std::filesystem::file_size(path));
   const double finest_samples = double(info.width) * double(info.height);
   const std::string version = "1." + std::to_string(c.minor_version());
@@ -63,10 +62,11 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
       j.field("level", int64_t(l)).field("width", int64_t(li.width)).field("height", int64_t(li.height));
       j.field("bytes", int64_t(c.level(l).size));
       j.field("residual_rms_units", li.stats.rms);
+      const auto error = terrain::runtime::level_error_metres(info, l);
       j.key("error_rms_m");
-      li.error ? j.value(li.error->rms * metres_per_unit) : j.null();
+      error ? j.value(error->rms) : j.null();
       j.key("error_max_m");
-      li.error ? j.value(li.error->max_abs * metres_per_unit) : j.null();
+      error ? j.value(error->max_abs) : j.null();
       j.end_object();
     }
     j.end_array();
@@ -108,8 +108,8 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
     const size_t bytes = c.level(l).size;
     std::printf("%5u %13s %12zu %9.4f", l, size.c_str(), bytes,
                 double(bytes) * 8 / double(li.width * li.height));
-    if (li.error)
-      std::printf(" %12.4f %12.4f\n", li.error->rms * metres_per_unit, li.error->max_abs * metres_per_unit);
+    if (const auto error = terrain::runtime::level_error_metres(info, l))
+      std::printf(" %12.4f %12.4f\n", error->rms, error->max_abs);
     else
       std::printf(" %12s %12s\n", "-", "-");
   }

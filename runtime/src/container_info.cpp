@@ -41,6 +41,13 @@ const char* error_mode_name(ErrorMode mode) {
   return "unknown";
 }
 
+std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t level) {
+  const std::optional<LevelError>& e = info.levels.at(level).error;
+  if (!e) return std::nullopt;
+  const double metres_per_unit = std::abs(info.vertical_scale);
+  return LevelError{e->rms * metres_per_unit, e->max_abs * metres_per_unit};
+}
+
 int exit_code(FormatErrorCode code) {
   switch (code) {
     case FormatErrorCode::NotFound:

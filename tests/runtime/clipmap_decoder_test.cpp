@@ -119,11 +119,10 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   REQUIRE(e.size() == 3);
   CHECK(e[2].rms_m > 0.0);
   {  // the file records the finest level's error as the builder measured it: the same figures
-    const LevelInfo& finest_info = lossy_file->info().levels.back();
-    REQUIRE(finest_info.error.has_value());
-    const double metres_per_unit = std::abs(lossy_file->info().vertical_scale);
-    CHECK(finest_info.error->max_abs * metres_per_unit == Approx(e[2].max_m));
-    CHECK(finest_info.error->rms * metres_per_unit == Approx(e[2].rms_m).epsilon(1e-4));
+    const std::optional<LevelError> finest_error = level_error_metres(lossy_file->info(), 2);
+    REQUIRE(finest_error.has_value());
+    CHECK(finest_error->max_abs == Approx(e[2].max_m));
+    CHECK(finest_error->rms == Approx(e[2].rms_m).epsilon(1e-4));
   }
   {  // at the finest level PL(T^_m) is T^_m itself: the error is the plain sample difference
     const GridSize s = original.level_size(finest);
@@ -196,13 +195,11 @@ TEST_CASE("clipmap: the screen-space error estimate from the pyramid alone, and 
   RegionDecoderSource lossy(std::make_shared<const RegionDecoder>(lossy_file), 30.0);
   const auto lossy_truth = screen_space_error(lossy, original, 0, s_px);
   auto bound = estimate_screen_space_error(lossy, 0, s_px);
-  const LevelError finest_error = lossy_file->info().levels.back().error.value();
-  const double metres_per_unit = std::abs(lossy_file->info().vertical_scale);
+  const LevelError finest_error = level_error_metres(lossy_file->info(), 2).value();
   REQUIRE(finest_error.max_abs > 0.0);
   CHECK(bound[2].max_px == 0.0);  // alone, the estimate sees no error at the finest level
   CHECK(lossy_truth[2].p999_px > 0.0);
-  add_finest_error_bound(bound, finest_error.rms * metres_per_unit, finest_error.max_abs * metres_per_unit,
-                         s_px);
+  add_finest_error_bound(bound, finest_error.rms, finest_error.max_abs, s_px);
   for (size_t l = 0; l < 3; ++l) {
     INFO("level " << l << ": bound " << bound[l].p999_px << " px, true " << lossy_truth[l].p999_px << " px");
     CHECK(bound[l].rms_px >= lossy_truth[l].rms_px);

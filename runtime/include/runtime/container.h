@@ -131,6 +131,10 @@ struct ContainerInfo {
   uint64_t void_count = 0;  // filled in by the reader: samples marked nodata
 };
 
+// Level `level`'s recorded error in metres (the figures times |vertical_scale|); empty for a level
+// without them (version 1.0 files). Throws std::out_of_range for a level outside info.levels.
+std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t level);
+
 // Throws std::invalid_argument naming the problem if info is not a consistent description of a
 // pyramid (dimension chain, finite spacing, units lengths, filter size), ignoring reader-only fields.
 void validate_info(const ContainerInfo& info);
