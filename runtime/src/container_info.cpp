@@ -83,10 +83,12 @@ void validate_info(const ContainerInfo& info) {
   require(finest.width == info.width && finest.height == info.height,
           "finest level is " + std::to_string(finest.width) + "x" + std::to_string(finest.height) +
               ", grid is " + std::to_string(info.width) + "x" + std::to_string(info.height));
-  for (const LevelInfo& li : info.levels)
-    require(!li.error || (std::isfinite(li.error->rms) && std::isfinite(li.error->max_abs) &&
-                          li.error->rms >= 0 && li.error->max_abs >= 0),
-            "level error figures must be finite and non-negative");
+  for (size_t l = 0; l < info.levels.size(); ++l) {
+    const std::optional<LevelError>& e = info.levels[l].error;
+    require(!e || (std::isfinite(e->rms) && std::isfinite(e->max_abs) && e->rms >= 0 && e->max_abs >= 0),
+            "level " + std::to_string(l) + " error figures must be finite and non-negative (rms " +
+                (e ? std::to_string(e->rms) + ", max " + std::to_string(e->max_abs) : std::string()) + ")");
+  }
   for (size_t l = info.levels.size() - 1; l > 0; --l) {
     const LevelInfo& fine = info.levels[l];
     const LevelInfo& coarse = info.levels[l - 1];

@@ -3,7 +3,6 @@
 // size, non-overlap, the level dimension chain), so that after open() no accessor can read out
 // of bounds whatever the file contained.
 #include <algorithm>
-#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <stdexcept>
@@ -217,11 +216,7 @@ Container Container::open(const std::string& path) {
     if (minor >= 1) {
       const double error_rms = get_f64(r + level::kErrorRms), error_max = get_f64(r + level::kErrorMax);
       if (flags & level::kFlagHasError) {
-        parse.require(
-            std::isfinite(error_rms) && std::isfinite(error_max) && error_rms >= 0 && error_max >= 0,
-            name + " error figures are invalid (rms " + std::to_string(error_rms) + ", max " +
-                std::to_string(error_max) + ")");
-        li.error = LevelError{error_rms, error_max};
+        li.error = LevelError{error_rms, error_max};  // validate_info below checks the figures
       } else {
         parse.require(error_rms == 0 && error_max == 0, name + " has error figures but its flag is not set");
       }
