@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "codec/codec.h"
-#include "crc32c.h"
+#include "codec/crc32c.h"
 
 namespace {
 

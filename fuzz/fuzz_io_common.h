@@ -12,7 +12,7 @@
 #include <filesystem>
 #include <string>
 
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace fuzz_io {
 

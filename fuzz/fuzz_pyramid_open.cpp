@@ -12,9 +12,9 @@
 #include <cstring>
 #include <vector>
 
+#include "container/container.h"
+#include "container/pyramid_file.h"
 #include "fuzz_io_common.h"
-#include "runtime/container.h"
-#include "runtime/pyramid_file.h"
 #include "runtime/region_decoder.h"
 
 namespace {

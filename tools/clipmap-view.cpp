@@ -14,12 +14,12 @@
 
 #include "cli.h"
 #include "codec/codec.h"
+#include "container/container.h"
 #include "json_writer.h"
 #include "pyramid/pyramid.h"
+#include "render/renderer.h"
 #include "runtime/clipmap.h"
-#include "runtime/container.h"
 #include "runtime/region_decoder.h"
-#include "runtime/renderer.h"
 #include "runtime/synthesis.h"
 
 using namespace terrain;

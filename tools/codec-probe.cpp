@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "codec/codec.h"
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace {
 

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "cli.h"
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace {
 

@@ -4,10 +4,10 @@
 #include <iostream>
 #include <sstream>
 
+#include "build/pyramid_build.h"
 #include "cli.h"
 #include "json_writer.h"
 #include "progress.h"
-#include "runtime/pyramid_build.h"
 
 namespace {
 

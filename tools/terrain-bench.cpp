@@ -7,10 +7,10 @@
 // as one level) on the same grid converted to int16 sample units (the file's own integers for SRTM;
 // the native quantum minus a mid-range offset for 16-bit data such as Puget Sound's 0.1 m units),
 // one thread, codec time only. Writes a CSV and, with --markdown, the generated BENCHMARKS.md.
+#include <build/pyramid_build.h>
+#include <container/pyramid_file.h>
 #include <peers.h>
-#include <pyramid/heightmap.h>
-#include <runtime/pyramid_build.h>
-#include <runtime/pyramid_file.h>
+#include <readers/heightmap.h>
 #include <runtime/region_decoder.h>
 #include <unistd.h>
 

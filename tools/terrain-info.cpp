@@ -11,10 +11,10 @@
 #include <vector>
 
 #include "cli.h"
+#include "container/container.h"
 #include "json_writer.h"
 #include "progress.h"
-#include "pyramid/heightmap.h"
-#include "runtime/container.h"
+#include "readers/heightmap.h"
 
 namespace {
 

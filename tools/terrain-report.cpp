@@ -8,11 +8,11 @@
 #include <fstream>
 #include <iostream>
 
+#include "build/pyramid_build.h"
 #include "cli.h"
 #include "json_writer.h"
-#include "pyramid/image8.h"
 #include "pyramid/pyramid.h"
-#include "runtime/pyramid_build.h"
+#include "readers/image8.h"
 #include "runtime/region_decoder.h"
 
 namespace {

@@ -5,8 +5,8 @@
 #include <iostream>
 
 #include "cli.h"
-#include "pyramid/heightmap.h"
-#include "pyramid/synth.h"
+#include "readers/heightmap.h"
+#include "readers/terrain_generator.h"
 #include "runtime/synthesis.h"
 
 namespace {

@@ -1,7 +1,7 @@
 // CRC-32C (Castagnoli): table-driven "slicing by 8" in portable C++, plus the SSE4.2 crc32
 // instruction when the CPU has it. Both give identical results; the table path is the reference.
 // The one implementation for the project: libcodec checks tiles with it, the container its regions.
-#include "crc32c.h"
+#include "codec/crc32c.h"
 
 #include <array>
 #include <cstring>

@@ -1,7 +1,7 @@
 // The lifting steps themselves are in lapped_kernels.h.
-#include "lapped_transform.h"
+#include "codec/internal/lapped_transform.h"
 
-#include "lapped_kernels.h"
+#include "codec/internal/lapped_kernels.h"
 
 namespace codec::detail {
 namespace {

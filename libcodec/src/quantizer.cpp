@@ -3,13 +3,13 @@
 // The impulse sits in an interior macroblock of a 64x64 tile so that the overlap filters act on all
 // sides. The norms are those of the lossy transform (the only one quantised with steps above 1). Integer
 // lifting is linear up to rounding, which a 2^14 amplitude makes negligible.
-#include "quantizer.h"
+#include "codec/internal/quantizer.h"
 
 #include <array>
 #include <cmath>
 #include <vector>
 
-#include "lapped_transform.h"
+#include "codec/internal/lapped_transform.h"
 
 namespace codec::detail {
 namespace {

@@ -2,7 +2,7 @@
 // the Rice parameter krp adapt after every codeword with the constants of MS-RDPRFX (see
 // shared/research/codecs.md section 3). The unary part of every Rice code is capped at kUnaryCap ones;
 // reaching the cap announces a fixed-width escape, so no input can produce an unbounded code.
-#include "rlgr.h"
+#include "codec/internal/rlgr.h"
 
 #include <algorithm>
 #include <cmath>

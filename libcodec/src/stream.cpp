@@ -7,9 +7,9 @@
 #include <cstring>
 
 #include "codec/codec.h"
-#include "crc32c.h"
-#include "quantizer.h"
-#include "tile_coder.h"
+#include "codec/crc32c.h"
+#include "codec/internal/quantizer.h"
+#include "codec/internal/tile_coder.h"
 
 namespace codec {
 
@@ -38,8 +38,6 @@ Scratch::Scratch() : impl_(std::make_unique<Impl>()) {}
 Scratch::~Scratch() = default;
 
 namespace {
-
-using detail::crc32c;
 
 constexpr uint8_t kMagic[4] = {'T', 'P', 'T', 'C'};
 constexpr size_t kHeaderSize = 56;

@@ -4,23 +4,17 @@
 // for_hp_blocks). Grouping by position puts coefficients of similar variance next to each other, so
 // RLGR's backward adaptation settles quickly and the high frequencies become long zero runs. Each band
 // group has its own RLGR state, reset per tile (DC and LP start states chosen by a flag bit each).
-#include "tile_coder.h"
+#include "codec/internal/tile_coder.h"
 
 #include <algorithm>
 #include <cassert>
 #include <cstring>
 
-#include "bitio.h"
-#include "lapped_transform.h"
-#include "rlgr.h"
+#include "codec/internal/bitio.h"
+#include "codec/internal/lapped_transform.h"
+#include "codec/internal/rlgr.h"
 
 namespace codec::detail {
-#ifdef CODEC_BAND_CAPTURE
-// Experiments only (tools/experiments/rlgr_lanes_avx512.cpp builds the sources with this defined; the
-// library never does): when set, every LP/HP band group a decode reads is appended, as levels in
-// coding order.
-std::vector<std::vector<int32_t>>* g_band_capture = nullptr;
-#endif
 namespace {
 
 struct Position {
@@ -246,14 +240,6 @@ bool decode_band_group(BitReader& in, size_t count, RlgrState state, const uint3
                        const BandSteps& steps, int32_t* tile, bool& any_nonzero) {
   // dequantize() for |q| < kRlgrMaxMagnitude: (16 |q| + 1) * step < 2^34 * kMaxBandStep = 2^64.
   static_assert(uint64_t(kRlgrMaxMagnitude) * 16 <= (uint64_t(1) << 34) && kMaxBandStep <= (1u << 30));
-#ifdef CODEC_BAND_CAPTURE
-  if (g_band_capture) {
-    BitReader copy = in;
-    RlgrState copy_state = state;
-    std::vector<int32_t> levels(count);
-    if (rlgr_decode(copy, levels.data(), count, copy_state)) g_band_capture->push_back(std::move(levels));
-  }
-#endif
   bool nonzero = false;  // a local, not any_nonzero: the stores through tile may alias a reference
   const bool ok = rlgr_decode_nonzero(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
     nonzero = true;

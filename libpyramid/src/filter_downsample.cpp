@@ -1,5 +1,5 @@
 // D: the 11x11 downsampling filter, its symmetric parametrisation and the streaming row engine.
-#include "filter_downsample.h"
+#include "pyramid/internal/filter_downsample.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "pyramid_parallel.h"
+#include "pyramid/internal/pyramid_parallel.h"
 
 namespace terrain {
 

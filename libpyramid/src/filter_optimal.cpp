@@ -10,7 +10,7 @@
 #include <limits>
 #include <sstream>
 
-#include "filter_downsample.h"
+#include "pyramid/internal/filter_downsample.h"
 #include "pyramid/pyramid.h"
 
 namespace terrain {

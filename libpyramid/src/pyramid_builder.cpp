@@ -24,12 +24,12 @@
 #include <stdexcept>
 #include <thread>
 
-#include "filter_downsample.h"
+#include "pyramid/internal/filter_downsample.h"
+#include "pyramid/internal/pyramid_fill.h"
+#include "pyramid/internal/pyramid_parallel.h"
+#include "pyramid/internal/pyramid_spill.h"
+#include "pyramid/internal/pyramid_varint.h"
 #include "pyramid/pyramid.h"
-#include "pyramid_fill.h"
-#include "pyramid_parallel.h"
-#include "pyramid_spill.h"
-#include "pyramid_varint.h"
 
 namespace terrain {
 namespace {

@@ -5,8 +5,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "pyramid/internal/pyramid_varint.h"
 #include "pyramid/pyramid.h"
-#include "pyramid_varint.h"
 
 namespace terrain {
 

@@ -1,5 +1,5 @@
 // Push-pull nodata fill over tiles of a band (see pyramid_fill.h).
-#include "pyramid_fill.h"
+#include "pyramid/internal/pyramid_fill.h"
 
 #include <algorithm>
 

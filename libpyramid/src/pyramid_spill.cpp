@@ -1,10 +1,10 @@
 // Spill files of the out-of-core builder.
-#include "pyramid_spill.h"
+#include "pyramid/internal/pyramid_spill.h"
 
 #include <cerrno>
 #include <cstring>
 
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace terrain::detail {
 

@@ -8,7 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "toroidal_rows.h"
+#include "runtime/internal/toroidal_rows.h"
 
 namespace terrain::runtime {
 

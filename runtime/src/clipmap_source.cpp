@@ -6,8 +6,8 @@
 #include <stdexcept>
 
 #include "runtime/clipmap.h"
+#include "runtime/internal/toroidal_rows.h"
 #include "runtime/region_decoder.h"
-#include "toroidal_rows.h"
 
 namespace terrain::runtime {
 

@@ -6,8 +6,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "pyramid/level_units.h"
 #include "runtime/clipmap.h"
-#include "runtime/pyramid_build.h"
 
 namespace terrain::runtime {
 

@@ -8,7 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "runtime/pyramid_file.h"
+#include "container/pyramid_file.h"
 
 namespace terrain::runtime {
 namespace {

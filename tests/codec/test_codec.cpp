@@ -9,12 +9,12 @@
 #include <vector>
 
 #include "codec/codec.h"
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 #include "shared_data.h"
 // Internal headers, for the SIMD == scalar checks of the inverse transform.
-#include "../../libcodec/src/lapped_kernels.h"
-#include "../../libcodec/src/lapped_transform.h"
-#include "../../libcodec/src/rlgr.h"
+#include "codec/internal/lapped_kernels.h"
+#include "codec/internal/lapped_transform.h"
+#include "codec/internal/rlgr.h"
 
 namespace {
 

@@ -6,7 +6,7 @@
 #include <cstring>
 
 #include "io_test_util.h"
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 #include "shared_data.h"
 
 namespace {

@@ -8,7 +8,7 @@
 #include <limits>
 
 #include "io_test_util.h"
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace {
 

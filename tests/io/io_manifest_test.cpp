@@ -10,7 +10,7 @@
 #include <optional>
 #include <sstream>
 
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 #include "shared_data.h"
 
 namespace {

@@ -3,8 +3,8 @@
 #include <cmath>
 
 #include "io_test_util.h"
-#include "pyramid/heightmap.h"
-#include "pyramid/synth.h"
+#include "readers/heightmap.h"
+#include "readers/terrain_generator.h"
 
 namespace {
 

@@ -15,7 +15,7 @@
 #include <thread>
 #include <vector>
 
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace iotest {
 

@@ -5,10 +5,10 @@
 #include <cmath>
 #include <random>
 
+#include "build/pyramid_build.h"
 #include "io/io_test_util.h"
-#include "pyramid/synth.h"
+#include "readers/terrain_generator.h"
 #include "runtime/clipmap.h"
-#include "runtime/pyramid_build.h"
 #include "runtime/region_decoder.h"
 
 using namespace terrain;

@@ -4,7 +4,7 @@
 #include <random>
 #include <vector>
 
-#include "runtime/container.h"
+#include "container/container.h"
 
 using terrain::runtime::crc32c;
 using terrain::runtime::crc32c_portable;

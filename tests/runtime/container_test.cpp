@@ -1,5 +1,5 @@
 // Pyramid container: writer/reader round trips, atomic writing, and rejection of damaged files.
-#include "runtime/container.h"
+#include "container/container.h"
 
 #include <unistd.h>
 

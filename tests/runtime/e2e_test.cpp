@@ -5,9 +5,9 @@
 #include <random>
 #include <sstream>
 
+#include "build/pyramid_build.h"
 #include "io/io_test_util.h"
-#include "pyramid/synth.h"
-#include "runtime/pyramid_build.h"
+#include "readers/terrain_generator.h"
 #include "runtime/region_decoder.h"
 #include "shared_data.h"
 

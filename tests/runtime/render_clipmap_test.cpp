@@ -4,9 +4,9 @@
 #include <cmath>
 #include <memory>
 
+#include "render/renderer.h"
 #include "render_test_util.h"
 #include "runtime/clipmap.h"
-#include "runtime/renderer.h"
 
 using namespace terrain;
 using namespace terrain::runtime;

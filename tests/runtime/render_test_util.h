@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "runtime/renderer.h"
+#include "render/renderer.h"
 
 namespace rendertest {
 

@@ -8,13 +8,13 @@
 #include <cmath>
 #include <random>
 
+#include "build/pyramid_build.h"
 #include "io/io_test_util.h"
-#include "pyramid/synth.h"
+#include "readers/terrain_generator.h"
+#include "render/renderer.h"
 #include "render_test_util.h"
 #include "runtime/clipmap.h"
-#include "runtime/pyramid_build.h"
 #include "runtime/region_decoder.h"
-#include "runtime/renderer.h"
 
 using namespace terrain;
 using namespace terrain::runtime;

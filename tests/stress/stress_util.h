@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
+#include "build/pyramid_build.h"
 #include "io/io_test_util.h"
-#include "pyramid/heightmap.h"
-#include "runtime/pyramid_build.h"
+#include "readers/heightmap.h"
 #include "runtime/region_decoder.h"
 
 namespace stress {

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace cli {
 

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "pyramid/heightmap.h"
+#include "readers/heightmap.h"
 
 namespace terrain {
 

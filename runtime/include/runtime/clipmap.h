@@ -34,8 +34,8 @@
 #include <string>
 #include <vector>
 
-#include "pyramid/heightmap.h"
 #include "pyramid/pyramid.h"
+#include "readers/heightmap.h"
 
 namespace terrain::runtime {
 

@@ -23,7 +23,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "runtime/pyramid_file.h"
+#include "container/pyramid_file.h"
 
 namespace terrain::runtime {
 

@@ -1,0 +1,54 @@
+// From a heightmap file to a compressed pyramid file: error target -> quantiser step, the streamed
+// build through libcodec into the container. The library form of `pyramid-build`, so benchmarks
+// and tests run exactly what the tool runs.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "container/container.h"
+#include "pyramid/level_units.h"
+#include "pyramid/pyramid.h"
+#include "readers/heightmap.h"
+
+namespace terrain::runtime {
+
+enum class ErrorTarget { Lossless, Step, Rms, MaxError };
+
+struct BuildFileOptions {
+  ErrorTarget target = ErrorTarget::Lossless;
+  double target_metres = 0;         // the step, rms or max error asked for, in metres
+  double quantum_metres = 0;        // level unit for float input (0: 0.01 m); integer input uses its own unit
+  int levels = 0;                   // 0: automatic
+  uint32_t tile_size = 32;          // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
+  int threads = 0;                  // 0: all cores
+  std::string temp_dir;             // spill files; empty: the output's directory
+  int64_t calibration_rows = 1024;  // rms/max-error calibration window (rows x columns of the input)
+  int64_t calibration_cols = 2048;
+};
+
+struct BuildFileResult {
+  BuildResult build;
+  double step_units = 1;  // quantiser step chosen, in level units
+  double metres_per_unit = 1;
+  uint32_t max_error_units = 0;  // max-error mode: the bound in level units
+  std::vector<std::string> calibration_log;
+  uint64_t file_bytes = 0;
+  double seconds_calibrate = 0, seconds_build = 0;
+  int64_t finest_samples = 0;
+};
+
+// Progress: phase name and fraction done in [0, 1]; called from the building thread.
+using BuildProgress = std::function<void(const std::string& phase, double fraction)>;
+
+// Builds `output` from `input`. Throws IoError for input problems (naming the file), FormatError for
+// output problems, std::invalid_argument for options the input cannot honour (e.g. a step below the
+// input's quantum, lossless on float input without a quantum). Nothing is left at `output` on failure.
+BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
+                                   const std::string& output, const BuildFileOptions& options,
+                                   const std::string& metadata_json_extra = "{}",
+                                   const BuildProgress& progress = nullptr);
+
+}  // namespace terrain::runtime

@@ -1,0 +1,64 @@
+// PtcResidualCoder: adapts libcodec's caller-buffer API to the pyramid's ResidualCoder interface.
+#include "build/ptc_coder.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <stdexcept>
+#include <string>
+
+#include "codec/codec.h"
+
+namespace terrain {
+namespace {
+
+codec::EncodeOptions to_codec(const PtcCoderOptions& o) {
+  codec::EncodeOptions c;
+  c.step = o.step;
+  c.bound_max_error = o.bound_max_error;
+  c.max_error = o.max_error;
+  c.tile_size = o.tile_size;
+  return c;
+}
+
+// One scratch per thread: the builder calls encode() from several threads at once.
+codec::Scratch& thread_scratch() {
+  thread_local codec::Scratch scratch;
+  return scratch;
+}
+
+}  // namespace
+
+PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
+    : options_(options),
+      band_rows_(options.band_rows > 0 ? options.band_rows : 4 * int64_t(options.tile_size)) {
+  if (codec::encode_bound(16, 16, to_codec(options_)) == 0)
+    throw std::invalid_argument("residual coder: invalid options (step " + std::to_string(options_.step) +
+                                ", tile size " + std::to_string(options_.tile_size) + ")");
+}
+
+std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
+                                              int32_t* reconstructed) {
+  const codec::EncodeOptions copts = to_codec(options_);
+  std::vector<uint8_t> out(codec::encode_bound(w, h, copts));
+  size_t written = 0;
+  const codec::Status s = codec::encode(residual, w, w, h, copts, out.data(), out.size(), &written,
+                                        thread_scratch(), reconstructed, w);
+  if (s != codec::Status::Ok) {
+    int64_t largest = 0;
+    for (int64_t i = 0; i < w * h; ++i) largest = std::max<int64_t>(largest, std::abs(int64_t(residual[i])));
+    throw std::runtime_error(std::string("residual coder: libcodec encode failed (") + std::to_string(w) +
+                             "x" + std::to_string(h) + " band, largest |residual| " +
+                             std::to_string(largest) + "): " + codec::status_name(s));
+  }
+  out.resize(written);
+  return out;
+}
+
+bool PtcResidualCoder::decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) {
+  codec::Decoder d;
+  if (d.open(data, n) != codec::Status::Ok) return false;
+  if (d.header().width != w || d.header().height != h) return false;
+  return d.decode_region(codec::Rect{0, 0, w, h}, out, w, thread_scratch()) == codec::Status::Ok;
+}
+
+}  // namespace terrain

@@ -1,0 +1,299 @@
+// build_pyramid_file: chooses the quantiser step for the user's error target on a calibration
+// window, then streams the whole input once through the pyramid builder into the container.
+#include "build/pyramid_build.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include "build/ptc_coder.h"
+#include "codec/codec.h"
+#include "container/pyramid_file.h"
+
+namespace terrain::runtime {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::string json_escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    if (c == '"' || c == '\\')
+      out += '\\', out += c;
+    else if (static_cast<unsigned char>(c) < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", c);
+      out += buf;
+    } else
+      out += c;
+  }
+  return out;
+}
+
+std::string directory_of(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
+// Forwards a BandReader and reports the fraction of rows read.
+class ProgressReader final : public BandReader {
+ public:
+  ProgressReader(BandReader& inner, const BuildProgress& progress) : inner_(inner), progress_(progress) {}
+  const GridInfo& info() const override { return inner_.info(); }
+  int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
+    const int64_t n = inner_.read_rows(rows, values, valid);
+    rows_read_ += n;
+    if (progress_)
+      progress_("reading input", double(rows_read_) / double(std::max<int64_t>(1, info().height)));
+    return n;
+  }
+
+ private:
+  BandReader& inner_;
+  const BuildProgress& progress_;
+};
+
+// Forwards the builder's output to the file and reports the fraction of level rows coded.
+class ProgressSink final : public PyramidSink {
+ public:
+  ProgressSink(PyramidFileWriter& inner, const BuildProgress& progress)
+      : inner_(inner), progress_(progress) {}
+  void begin(const PyramidHeader& h) override {
+    total_ = 0;
+    for (const GridSize& s : h.levels) total_ += s.height;
+    inner_.begin(h);
+  }
+  void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
+    inner_.band(level, y0, rows, std::move(bytes));
+    done_ += rows;
+    if (progress_) progress_("coding levels", double(done_) / double(std::max<int64_t>(1, total_)));
+  }
+  void mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
+    inner_.mask_band(y0, rows, std::move(bytes));
+  }
+
+ private:
+  PyramidFileWriter& inner_;
+  const BuildProgress& progress_;
+  int64_t total_ = 0, done_ = 0;
+};
+
+// The first calibration_rows rows of the input, cropped to the central calibration_cols columns.
+Heightmap read_calibration_window(const std::string& input, const ReadOptions& ro,
+                                  const BuildFileOptions& o) {
+  auto reader = open_band_reader(input, ro);
+  const GridInfo& g = reader->info();
+  const int64_t cw = std::min(g.width, o.calibration_cols), ch = std::min(g.height, o.calibration_rows);
+  const int64_t x0 = (g.width - cw) / 2;
+  Heightmap map;
+  map.info = g;
+  map.info.width = cw;
+  map.info.height = ch;
+  map.values.resize(size_t(cw * ch));
+  map.valid.resize(size_t(cw * ch));
+  std::vector<double> row(size_t(g.width));
+  std::vector<uint8_t> valid(size_t(g.width));
+  for (int64_t y = 0; y < ch; ++y) {
+    if (reader->read_rows(1, row.data(), valid.data()) != 1)
+      throw IoError(IoErrorCode::Truncated, input + ": ended while reading the calibration window");
+    std::copy_n(row.begin() + x0, cw, map.values.begin() + y * cw);
+    std::copy_n(valid.begin() + x0, cw, map.valid.begin() + y * cw);
+  }
+  return map;
+}
+
+// Integer level-unit offset that centres the window's valid values when they reach beyond half of
+// libcodec's range; 0 otherwise.
+double centring_offset(const Heightmap& window, double value_scale) {
+  double lo = INFINITY, hi = -INFINITY;
+  for (size_t i = 0; i < window.values.size(); ++i)
+    if (window.valid.empty() || window.valid[i]) {
+      const double v = std::nearbyint(window.values[i] * value_scale);
+      lo = std::min(lo, v), hi = std::max(hi, v);
+    }
+  if (!(hi >= lo) || std::max(std::abs(lo), std::abs(hi)) <= double(codec::kMaxAbsSample / 2)) return 0;
+  return std::nearbyint(0.5 * (lo + hi));
+}
+
+struct Trial {
+  double step = 1;
+  double rms = 0;
+  int64_t max_abs = 0;
+  uint64_t bytes = 0;
+};
+
+Trial trial_build(const Heightmap& window, BuildOptions bo, const PtcCoderOptions& co) {
+  PtcResidualCoder coder(co);
+  MemoryPyramid sink;
+  sink.keep_reconstruction = false;
+  const BuildResult r = build_pyramid(window, bo, coder, sink);
+  return Trial{co.step, r.levels.back().error_rms, r.levels.back().error_max_abs, sink.total_bytes()};
+}
+
+}  // namespace
+
+BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
+                                   const std::string& output, const BuildFileOptions& o,
+                                   const std::string& metadata_json_extra, const BuildProgress& progress) {
+  BuildFileResult out;
+  auto reader = open_band_reader(input, read_options);
+  const GridInfo g = reader->info();
+  const LevelUnits units = level_units(g, o.quantum_metres);
+  out.metres_per_unit = units.metres_per_unit;
+  out.finest_samples = g.width * g.height;
+  const double mpu = units.metres_per_unit;
+
+  BuildOptions bo;
+  bo.level_count = o.levels;
+  bo.value_scale = units.value_scale;
+  bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  bo.temp_dir = o.temp_dir.empty() ? directory_of(output) : o.temp_dir;
+  bo.temp_name =
+      output.substr(output.find_last_of('/') == std::string::npos ? 0 : output.find_last_of('/') + 1);
+
+  // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
+  // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
+  // the first rows' mid-range. Ordinary DEMs keep their native units (offset 0).
+  const Heightmap window = read_calibration_window(input, read_options, o);
+  bo.value_offset = centring_offset(window, units.value_scale);
+  const LevelUnits stored =
+      LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
+
+  PtcCoderOptions co;
+  co.tile_size = o.tile_size;
+  ErrorMode mode = ErrorMode::Lossless;
+  const auto t_cal = std::chrono::steady_clock::now();
+  switch (o.target) {
+    case ErrorTarget::Lossless:
+      if (!g.integer_valued() && o.quantum_metres <= 0)
+        throw std::invalid_argument(
+            "lossless needs integer input; float input is quantised to --quantum (give one)");
+      co.step = 1;
+      break;
+    case ErrorTarget::Step:
+      mode = ErrorMode::Step;
+      co.step = o.target_metres / mpu;
+      if (!(co.step >= 1))
+        throw std::invalid_argument("step " + std::to_string(o.target_metres) +
+                                    " m is below the input's unit of " + std::to_string(mpu) + " m");
+      break;
+    case ErrorTarget::Rms: {
+      mode = ErrorMode::RmsTarget;
+      if (!(o.target_metres > 0)) throw std::invalid_argument("rms target must be positive");
+      const double target = o.target_metres / mpu;
+      if (progress) progress("calibrating step", 0);
+      // rms grows about linearly with the step, so multiplicative corrections converge fast; once a
+      // step above and one below the target are known, bisect (in log step) between them. The
+      // result is the largest step whose rms is within 2% above the target or below it: smooth or
+      // flat terrain, whose rms stays 0 up to a large step and then jumps, must not be given a step
+      // that overshoots the target.
+      Trial below{}, above{};  // largest step meeting the target; smallest step missing it
+      bool have_below = false, have_above = false;
+      double step = std::max(1.0, codec::step_for_target_rms(target));
+      for (int i = 0; i < 10; ++i) {
+        co.step = step;
+        const Trial t = trial_build(window, bo, co);
+        out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " +
+                                      std::to_string(t.rms * mpu) + " m, " + std::to_string(t.bytes) +
+                                      " bytes");
+        if (progress) progress("calibrating step", (i + 1) / 10.0);
+        if (t.rms <= 1.02 * target) {
+          if (!have_below || t.step > below.step) below = t, have_below = true;
+        } else if (!have_above || t.step < above.step) {
+          above = t, have_above = true;
+        }
+        if (std::abs(t.rms / target - 1) < 0.02 || (step <= 1 && t.rms <= target)) break;
+        const double previous = step;
+        if (have_below && have_above) {
+          if (above.step / below.step < 1.03) break;
+          step = std::sqrt(below.step * above.step);
+        } else {
+          const double ratio = t.rms > 0 ? target / t.rms : 4.0;
+          step = std::max(1.0, step * std::clamp(ratio, 0.5, 4.0));
+        }
+        if (step == previous) break;
+      }
+      const Trial best = have_below ? below : above;
+      co.step = best.step;
+      break;
+    }
+    case ErrorTarget::MaxError: {
+      mode = ErrorMode::MaxError;
+      // Float input loses up to half a quantum when it is rounded to level units.
+      const double budget =
+          g.integer_valued() && o.quantum_metres <= 0 ? o.target_metres : o.target_metres - 0.5 * mpu;
+      const double e_units = std::floor(budget / mpu + 1e-9);
+      if (!(e_units >= 0))
+        throw std::invalid_argument("max error " + std::to_string(o.target_metres) +
+                                    " m is below the input's unit");
+      out.max_error_units = uint32_t(std::min<double>(e_units, codec::kMaxAbsSample));
+      co.bound_max_error = true;
+      co.max_error = out.max_error_units;
+      co.step = std::max(1.0, 2.0 * out.max_error_units);
+      if (out.max_error_units > 0) {
+        // The transform step that gives the fewest bytes under the bound depends on the terrain.
+        if (progress) progress("calibrating step", 0);
+        Trial best{};
+        for (double f : {1.0, 1.5, 2.0, 3.0, 4.0}) {
+          co.step = std::max(1.0, f * out.max_error_units);
+          const Trial t = trial_build(window, bo, co);
+          out.calibration_log.push_back("step " + std::to_string(t.step) + " units: max " +
+                                        std::to_string(t.max_abs) + " units, " + std::to_string(t.bytes) +
+                                        " bytes");
+          if (best.bytes == 0 || t.bytes < best.bytes) best = t;
+        }
+        co.step = best.step;
+      }
+      break;
+    }
+  }
+  out.seconds_calibrate = seconds_since(t_cal);
+  out.step_units = co.step;
+
+  const auto t_build = std::chrono::steady_clock::now();
+  PtcResidualCoder coder(co);
+  PyramidFileWriter writer(output);
+  ProgressReader preader(*reader, progress);
+  ProgressSink psink(writer, progress);
+  out.build = build_pyramid(preader, bo, coder, psink);
+  out.seconds_build = seconds_since(t_build);
+
+  ContainerInfo info;
+  info.spacing_x = g.spacing_x;
+  info.spacing_y = g.spacing_y;
+  info.horizontal_units = g.horizontal_units;
+  info.vertical_units = "m";
+  info.vertical_scale = mpu;
+  info.vertical_offset = stored.offset_metres;
+  if (g.origin_x && g.origin_y)
+    info.georeference = Georeference{*g.origin_x, *g.origin_y,
+                                     g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
+  info.quantisation.step_units = co.step;
+  info.quantisation.step_metres = co.step * mpu;
+  info.quantisation.mode = mode;
+  info.quantisation.target = o.target == ErrorTarget::Lossless ? 0 : o.target_metres;
+
+  // No timings or other run-dependent values in the file: the same input and options must give a
+  // byte-identical file whatever the thread count or machine load (build times go to --json).
+  std::ostringstream meta;
+  meta.precision(10);
+  meta << "{\"tool\":\"pyramid-build\",\"version\":\"0.1.0\",\"source\":\"" << json_escape(input) << "\""
+       << ",\"source_format\":\"" << file_format_name(g.format) << "\",\"source_type\":\""
+       << sample_type_name(g.sample_type) << "\",\"step_units\":" << co.step
+       << ",\"max_error_units\":" << out.max_error_units << ",\"tile_size\":" << co.tile_size
+       << ",\"band_rows\":" << coder.band_rows() << ",\"filter\":\""
+       << json_escape(out.build.filter_report.summary()) << "\""
+       << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
+  writer.finish(out.build, info, meta.str());
+  out.file_bytes = uint64_t(std::filesystem::file_size(output));
+  return out;
+}
+
+}  // namespace terrain::runtime

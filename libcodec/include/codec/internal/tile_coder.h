@@ -1,0 +1,72 @@
+// Coding of one tile: padding to whole macroblocks, transform, quantisation, band ordering, RLGR, and
+// the max-error layer. A tile payload is one mode byte followed by one bitstream (docs/codec.md).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "codec/internal/quantizer.h"
+
+namespace codec::detail {
+
+enum class TileMode : uint8_t {
+  Transform = 0,         // lapped transform at the stream's band steps (+ corrections if bounded)
+  SpatialQuantized = 1,  // max-error mode only: samples quantised with step 2E+1, coded losslessly
+};
+
+struct TileParams {
+  BandSteps steps;        // for transform-mode tiles
+  int fraction_bits = 0;  // extra sample precision of transform-mode tiles (0 = lossless)
+  bool bound_max_error = false;
+  uint32_t max_error = 0;
+};
+
+// Where the LP and HP values of a padded_width x padded_height tile land, in coding order: tile
+// offset in the low kSlotOffsetBits, band above. Lets the decoder write each non-zero value straight
+// to its place instead of scattering whole bands.
+inline constexpr int kSlotOffsetBits = 24;  // padded tiles hold at most 4096 x 4096 samples
+struct BandLayout {
+  int padded_width = 0, padded_height = 0;
+  std::vector<uint32_t> slots;
+};
+
+// Working buffers for one tile, owned by the caller's Scratch and grown as needed.
+struct TileWork {
+  // A stream has at most four padded tile shapes (interior, right edge, bottom edge, corner).
+  std::array<BandLayout, 4> layouts;
+  size_t next_layout = 0;
+  std::vector<int32_t> coefficients;    // padded tile
+  std::vector<int32_t> sequence;        // one band's values in coding order
+  std::vector<int32_t> reconstruction;  // width x height
+  std::vector<uint8_t> alternative;     // second candidate payload in max-error mode
+  // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
+  // window and needs none.
+  void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
+};
+
+inline int padded_side(int side) { return (side + 15) & ~15; }
+// Largest payload a tile of width x height can produce (any data, any mode).
+size_t tile_payload_bound(int width, int height);
+
+// Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
+// the payload size, or 0 when it does not fit. With want_reconstruction, work.reconstruction then
+// holds the decoder's output (row stride = width).
+size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height, const TileParams& params,
+                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction);
+
+enum class TileResult { Ok, Corrupt };
+// The part of a decoded tile the caller wants: samples [x0, x1) x [y0, y1) of the tile (inside
+// width x height), written to dst (the sample at (x0, y0)) with row stride `stride`.
+struct TileWindow {
+  int x0, y0, x1, y1;
+  int32_t* dst;
+  ptrdiff_t stride;
+};
+// Decodes a width x height payload and writes `window` of it. On Corrupt the window's contents are
+// unspecified.
+TileResult decode_tile(const uint8_t* payload, size_t size, int width, int height, const TileParams& params,
+                       TileWork& work, const TileWindow& window);
+
+}  // namespace codec::detail

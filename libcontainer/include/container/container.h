@@ -1,0 +1,264 @@
+// The single-file pyramid container (".pyr"): the "container" stage of the data flow.
+//
+// A container holds one opaque byte blob per pyramid level (a libcodec stream; this file knows
+// nothing of its contents) plus everything needed to interpret the pyramid: dimensions, spacing,
+// vertical quantum, georeference, the D filter, the quantisation, per-level residual statistics,
+// the nodata mask and a free-form JSON metadata string. docs/format.md gives the byte layout.
+//
+// Writing is streamed (blobs may be gigabytes) into a temporary file that is renamed onto the
+// target only by finish(), so a file at the target path is always complete. Reading maps the file
+// read-only and hands out zero-copy views of the blobs; every offset, size, checksum and the level
+// dimension chain are validated on open, so bad input gives FormatError, never a crash.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "codec/crc32c.h"
+
+namespace terrain::runtime {
+
+// ---------------------------------------------------------------------------------------------
+// Errors
+
+enum class FormatErrorCode {
+  NotFound,            // file missing or unreadable
+  Truncated,           // file shorter than its header says
+  BadMagic,            // not a pyramid container at all
+  UnsupportedVersion,  // a major version this reader does not know
+  ChecksumMismatch,    // a CRC32C does not match the bytes it covers
+  Corrupt,             // checksums match but the contents are inconsistent (offsets, dims, ...)
+  WriteFailed,         // the writer could not create, write, sync or rename its file
+};
+const char* format_error_code_name(FormatErrorCode code);
+// The project-wide tool exit status for a code (2 not found, 3 truncated, 6 unknown format,
+// 9 cannot write, 10 corrupted data).
+int exit_code(FormatErrorCode code);
+
+class FormatError : public std::runtime_error {
+ public:
+  FormatError(FormatErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
+  FormatErrorCode code() const { return code_; }
+
+ private:
+  FormatErrorCode code_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Checksum used throughout the format: CRC-32C (Castagnoli, reflected polynomial 0x82F63B78,
+// initial value and final xor 0xFFFFFFFF). Exposed so tools and tests can check files independently.
+
+// libcodec's implementation (one for the project): pass a previous result as `crc` to continue.
+using codec::crc32c;
+using codec::crc32c_portable;
+
+// ---------------------------------------------------------------------------------------------
+// Contents
+
+// Format version written by this library. A reader accepts any minor version of its major
+// version (minor versions only append fields) and rejects other majors.
+inline constexpr uint16_t kFormatMajor = 1;
+inline constexpr uint16_t kFormatMinor = 1;
+inline constexpr uint32_t kMaxLevels = 64;
+inline constexpr uint32_t kMaxFilterSize = 63;
+inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
+
+enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1 };
+enum class ErrorMode : uint32_t { RmsTarget = 0, MaxError = 1, Step = 2, Lossless = 3 };
+// "rms", "max-error", "step" or "lossless" (the pyramid-build option that chose it).
+const char* error_mode_name(ErrorMode mode);
+
+// Statistics of one level's residual image, in quantisation units (used later for synthesis).
+struct LevelStats {
+  double mean = 0, variance = 0, rms = 0, min = 0, max = 0;
+};
+
+// How far the stored level is from what it encodes, T_l - T^_l in quantisation units, as the builder
+// measured it over the whole level (valid samples only at the finest level; float input counts as
+// rounded to its quantum, so add up to half a quantum against the float values).
+struct LevelError {
+  double rms = 0;
+  double max_abs = 0;
+};
+
+struct LevelInfo {
+  uint64_t width = 0;
+  uint64_t height = 0;
+  LevelStats stats;
+  std::optional<LevelError> error;  // absent in version 1.0 files
+  // Filled in by the reader only.
+  uint64_t blob_offset = 0;
+  uint64_t blob_size = 0;
+  bool has_blob_crc = false;
+  uint32_t blob_crc = 0;
+};
+
+struct Georeference {
+  double origin_x = 0;  // longitude or easting of the north-west sample centre
+  double origin_y = 0;  // latitude or northing of the north-west sample centre
+  std::string units;    // e.g. "degree", "m"
+};
+
+struct Quantisation {
+  double step_units = 1;   // quantisation step in the integer quantum (native units)
+  double step_metres = 1;  // the same step in metres
+  ErrorMode mode = ErrorMode::Lossless;
+  double target = 0;  // the rms target / max error / step requested, as given to the builder
+};
+
+// Everything in a container except the blobs, the mask samples and the JSON metadata.
+struct ContainerInfo {
+  uint64_t width = 0;  // finest level
+  uint64_t height = 0;
+  std::vector<LevelInfo> levels;  // 0 = coarsest .. size()-1 = finest; w_{l-1} = ceil(w_l / 2)
+  double spacing_x = 1;
+  double spacing_y = 1;
+  std::string horizontal_units = "m";
+  std::string vertical_units = "m";
+  double vertical_scale = 1;  // metres = value * vertical_scale + vertical_offset
+  double vertical_offset = 0;
+  std::optional<Georeference> georeference;
+  uint32_t filter_size = 0;    // the D filter is filter_size x filter_size (0: none stored)
+  std::vector<double> filter;  // row-major coefficients
+  FilterProvenance filter_provenance = FilterProvenance::Optimal;
+  Quantisation quantisation;
+  uint64_t void_count = 0;  // filled in by the reader: samples marked nodata
+};
+
+// Level `level`'s recorded error in metres (the figures times |vertical_scale|); empty for a level
+// without them (version 1.0 files). Throws std::out_of_range for a level outside info.levels.
+std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t level);
+
+// Throws std::invalid_argument naming the problem if info is not a consistent description of a
+// pyramid (dimension chain, finite spacing, units lengths, filter size), ignoring reader-only fields.
+void validate_info(const ContainerInfo& info);
+
+// ---------------------------------------------------------------------------------------------
+// Writer
+
+// Not thread-safe: one producer thread drives a writer.
+class ContainerWriter {
+ public:
+  // Creates `path + ".tmp.<pid>"` (with a further ".N" if another writer of this process holds
+  // that name); throws FormatError(WriteFailed) if it cannot.
+  explicit ContainerWriter(std::string path);
+  // Removes the temporary file unless finish() succeeded.
+  ~ContainerWriter();
+  ContainerWriter(const ContainerWriter&) = delete;
+  ContainerWriter& operator=(const ContainerWriter&) = delete;
+
+  // Sets the description; may be called any time before finish(). info.levels gives the level
+  // count and each level's dimensions and stats; reader-only fields are ignored.
+  void set_info(const ContainerInfo& info);
+  // Keep (default) or omit the whole-blob CRC of each level written from now on.
+  void set_level_checksums(bool enabled) { level_checksums_ = enabled; }
+
+  // Writes level `level`'s blob in one piece. Levels may come in any order, each exactly once.
+  void add_level(uint32_t level, const uint8_t* data, size_t size);
+  // Streams a blob in pieces: begin_level, any number of append_level, end_level.
+  void begin_level(uint32_t level);
+  void append_level(const uint8_t* data, size_t size);
+  void end_level();
+
+  // Appends `count` further mask samples in row-major order (non-zero = data, 0 = void). Call it for all
+  // width*height samples or not at all (no call: no voids). Encoded on the fly, O(runs) memory.
+  void append_mask(const uint8_t* valid, size_t count);
+  // Opaque UTF-8 string (tool version, options, source file, timings ...).
+  void set_metadata_json(std::string json);
+
+  // Writes mask, metadata and index, fsyncs, renames onto the target path and fsyncs the directory.
+  // Throws std::invalid_argument if info/levels/mask are incomplete or inconsistent.
+  void finish();
+  const std::string& path() const { return path_; }
+  const std::string& temp_path() const { return temp_path_; }
+
+ private:
+  struct LevelRecord {
+    bool written = false;
+    uint64_t offset = 0, size = 0;
+    uint32_t crc = 0;
+    bool has_crc = false;
+  };
+  void write_bytes(const void* data, size_t size);
+  void pad_to_alignment();
+  void fail(const std::string& what);
+
+  std::string path_, temp_path_;
+  int fd_ = -1;
+  bool finished_ = false, finish_started_ = false;
+  uint64_t position_ = 0;  // bytes written so far (the file is written sequentially)
+  std::optional<ContainerInfo> info_;
+  std::vector<LevelRecord> records_;  // indexed by level
+  bool level_checksums_ = true;
+  std::optional<uint32_t> open_level_;
+  uint64_t open_level_start_ = 0;
+  uint32_t open_level_crc_ = 0;
+  // Mask as alternating run lengths (valid, void, valid, ...), LEB128 varints.
+  std::vector<uint8_t> mask_runs_;
+  uint64_t mask_samples_ = 0, mask_voids_ = 0, current_run_ = 0;
+  bool current_run_valid_ = true;
+  std::string metadata_json_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Reader
+
+// One level's blob, pointing into the read-only mapping (valid while the Container lives).
+struct LevelView {
+  const uint8_t* data = nullptr;  // 8-byte aligned
+  size_t size = 0;
+  uint64_t width = 0, height = 0;
+};
+
+class MappedFile;
+
+// True when `path` starts with the container's magic bytes (reads 8 bytes; false when it cannot be
+// read): lets a tool tell a .pyr from a heightmap by content rather than by name.
+bool is_container_file(const std::string& path);
+
+class Container {
+ public:
+  // Maps and validates the file; throws FormatError whose message names the file and the problem.
+  // The file must not be modified in place while open (the writer only ever renames over it).
+  static Container open(const std::string& path);
+  Container(Container&&) noexcept;
+  Container& operator=(Container&&) noexcept;
+  ~Container();
+
+  // All methods are const and the object is immutable after open: safe for concurrent readers.
+  const ContainerInfo& info() const { return info_; }
+  uint32_t level_count() const { return uint32_t(info_.levels.size()); }
+  // Throws std::out_of_range for a level >= level_count().
+  LevelView level(uint32_t level) const;
+  std::string_view metadata_json() const { return metadata_json_; }
+  // width*height samples (1 = data, 0 = void), or empty when the pyramid has no voids.
+  std::vector<uint8_t> mask() const;
+  // Rows [first_row, first_row + row_count) of the mask into out (row_count * width bytes,
+  // 1 = data, 0 = void; all 1 without voids). Throws std::out_of_range past the last row.
+  void mask_rows(uint64_t first_row, uint64_t row_count, uint8_t* out) const;
+  // Checks every stored per-level CRC (the mask, metadata and index were checked on open);
+  // throws FormatError(ChecksumMismatch) naming the first bad level.
+  void verify() const;
+  // False if level's stored CRC does not match; true if it matches or none is stored.
+  bool level_checksum_ok(uint32_t level) const;
+  const std::string& path() const { return path_; }
+  uint16_t minor_version() const { return minor_version_; }
+
+ private:
+  Container() = default;
+  std::string path_;
+  std::unique_ptr<MappedFile> file_;
+  ContainerInfo info_;
+  std::string_view metadata_json_;
+  const uint8_t* mask_runs_ = nullptr;
+  size_t mask_runs_size_ = 0;
+  uint16_t minor_version_ = 0;
+};
+
+}  // namespace terrain::runtime

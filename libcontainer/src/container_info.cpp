@@ -1,0 +1,130 @@
+// Error code names and the consistency rules of a pyramid description, shared by writer and reader.
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "container/container.h"
+
+namespace terrain::runtime {
+
+const char* format_error_code_name(FormatErrorCode code) {
+  switch (code) {
+    case FormatErrorCode::NotFound:
+      return "not found";
+    case FormatErrorCode::Truncated:
+      return "truncated";
+    case FormatErrorCode::BadMagic:
+      return "not a pyramid container";
+    case FormatErrorCode::UnsupportedVersion:
+      return "unsupported version";
+    case FormatErrorCode::ChecksumMismatch:
+      return "checksum mismatch";
+    case FormatErrorCode::Corrupt:
+      return "corrupt";
+    case FormatErrorCode::WriteFailed:
+      return "write failed";
+  }
+  return "unknown";
+}
+
+const char* error_mode_name(ErrorMode mode) {
+  switch (mode) {
+    case ErrorMode::RmsTarget:
+      return "rms";
+    case ErrorMode::MaxError:
+      return "max-error";
+    case ErrorMode::Step:
+      return "step";
+    case ErrorMode::Lossless:
+      return "lossless";
+  }
+  return "unknown";
+}
+
+std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t level) {
+  const std::optional<LevelError>& e = info.levels.at(level).error;
+  if (!e) return std::nullopt;
+  const double metres_per_unit = std::abs(info.vertical_scale);
+  return LevelError{e->rms * metres_per_unit, e->max_abs * metres_per_unit};
+}
+
+int exit_code(FormatErrorCode code) {
+  switch (code) {
+    case FormatErrorCode::NotFound:
+      return 2;
+    case FormatErrorCode::Truncated:
+      return 3;
+    case FormatErrorCode::BadMagic:
+      return 6;
+    case FormatErrorCode::WriteFailed:
+      return 9;
+    case FormatErrorCode::UnsupportedVersion:
+    case FormatErrorCode::ChecksumMismatch:
+    case FormatErrorCode::Corrupt:
+      return 10;
+  }
+  return 70;
+}
+
+namespace {
+void require(bool ok, const std::string& what) {
+  if (!ok) throw std::invalid_argument("invalid pyramid description: " + what);
+}
+}  // namespace
+
+void validate_info(const ContainerInfo& info) {
+  // 2^31 per side keeps width*height (and any per-sample index) far from 64-bit overflow.
+  constexpr uint64_t kMaxSide = uint64_t(1) << 31;
+  require(info.width >= 1 && info.height >= 1, "finest level must be at least 1x1");
+  require(info.width <= kMaxSide && info.height <= kMaxSide, "finest level exceeds 2^31 samples per side");
+  require(!info.levels.empty(), "no levels");
+  require(info.levels.size() <= kMaxLevels, "more than " + std::to_string(kMaxLevels) + " levels");
+  const LevelInfo& finest = info.levels.back();
+  require(finest.width == info.width && finest.height == info.height,
+          "finest level is " + std::to_string(finest.width) + "x" + std::to_string(finest.height) +
+              ", grid is " + std::to_string(info.width) + "x" + std::to_string(info.height));
+  for (size_t l = 0; l < info.levels.size(); ++l) {
+    const std::optional<LevelError>& e = info.levels[l].error;
+    require(!e || (std::isfinite(e->rms) && std::isfinite(e->max_abs) && e->rms >= 0 && e->max_abs >= 0),
+            "level " + std::to_string(l) + " error figures must be finite and non-negative (rms " +
+                (e ? std::to_string(e->rms) + ", max " + std::to_string(e->max_abs) : std::string()) + ")");
+  }
+  for (size_t l = info.levels.size() - 1; l > 0; --l) {
+    const LevelInfo& fine = info.levels[l];
+    const LevelInfo& coarse = info.levels[l - 1];
+    require(coarse.width == (fine.width + 1) / 2 && coarse.height == (fine.height + 1) / 2,
+            "level " + std::to_string(l - 1) + " is " + std::to_string(coarse.width) + "x" +
+                std::to_string(coarse.height) + ", expected ceil-half of level " + std::to_string(l) + " (" +
+                std::to_string(fine.width) + "x" + std::to_string(fine.height) + ")");
+  }
+  require(std::isfinite(info.spacing_x) && std::isfinite(info.spacing_y) && info.spacing_x > 0 &&
+              info.spacing_y > 0,
+          "spacing must be finite and positive");
+  require(
+      std::isfinite(info.vertical_scale) && std::isfinite(info.vertical_offset) && info.vertical_scale != 0,
+      "vertical scale must be finite and non-zero, offset finite");
+  require(info.horizontal_units.size() <= kMaxUnitsLength && info.vertical_units.size() <= kMaxUnitsLength,
+          "units strings are limited to " + std::to_string(kMaxUnitsLength) + " bytes");
+  require(info.horizontal_units.find('\0') == std::string::npos &&
+              info.vertical_units.find('\0') == std::string::npos,
+          "units strings must not contain NUL");
+  if (info.georeference) {
+    const Georeference& g = *info.georeference;
+    require(std::isfinite(g.origin_x) && std::isfinite(g.origin_y), "georeference origin must be finite");
+    require(g.units.size() <= kMaxUnitsLength && g.units.find('\0') == std::string::npos,
+            "georeference units must be at most " + std::to_string(kMaxUnitsLength) + " bytes, no NUL");
+  }
+  require(info.filter_size <= kMaxFilterSize, "filter larger than " + std::to_string(kMaxFilterSize));
+  require(info.filter.size() == size_t(info.filter_size) * info.filter_size,
+          "filter has " + std::to_string(info.filter.size()) + " coefficients, size " +
+              std::to_string(info.filter_size) + " needs its square");
+  require(info.filter_provenance == FilterProvenance::Optimal ||
+              info.filter_provenance == FilterProvenance::Fallback,
+          "unknown filter provenance");
+  const Quantisation& q = info.quantisation;
+  require(uint32_t(q.mode) <= uint32_t(ErrorMode::Lossless), "unknown error mode");
+  require(std::isfinite(q.step_units) && std::isfinite(q.step_metres) && std::isfinite(q.target),
+          "quantisation values must be finite");
+}
+
+}  // namespace terrain::runtime

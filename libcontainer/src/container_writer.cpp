@@ -1,0 +1,285 @@
+// Streaming container writer: blobs go to a temporary file in arrival order, the mask, metadata
+// and index follow, and the superblock (reserved as zeros at the start) is written last, so an
+// interrupted write never carries a valid magic + checksum. finish() renames onto the target.
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <stdexcept>
+
+#include "container/container.h"
+#include "container/internal/container_format.h"
+#include "container/internal/container_mask.h"
+
+namespace terrain::runtime {
+
+using namespace layout;
+
+namespace {
+
+std::string directory_of(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  if (slash == std::string::npos) return ".";
+  if (slash == 0) return "/";
+  return path.substr(0, slash);
+}
+
+}  // namespace
+
+ContainerWriter::ContainerWriter(std::string path) : path_(std::move(path)) {
+  const std::string base = path_ + ".tmp." + std::to_string(::getpid());
+  // O_EXCL so two writers in one process aimed at the same target cannot share a temp file.
+  for (int attempt = 0; attempt < 100 && fd_ < 0; ++attempt) {
+    temp_path_ = attempt == 0 ? base : base + "." + std::to_string(attempt);
+    fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd_ < 0 && errno != EEXIST) break;
+  }
+  if (fd_ < 0) fail("cannot create");
+  const uint8_t zeros[sb::kSizeV1] = {};  // superblock placeholder, overwritten by finish()
+  try {
+    write_bytes(zeros, sizeof zeros);
+  } catch (...) {
+    ::close(fd_);  // a throwing constructor gets no destructor
+    ::unlink(temp_path_.c_str());
+    throw;
+  }
+}
+
+ContainerWriter::~ContainerWriter() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!finished_) ::unlink(temp_path_.c_str());
+}
+
+void ContainerWriter::fail(const std::string& what) {
+  const int err = errno;  // before any allocation below can disturb it
+  throw FormatError(FormatErrorCode::WriteFailed, temp_path_ + ": " + what + ": " + std::strerror(err));
+}
+
+void ContainerWriter::write_bytes(const void* data, size_t size) {
+  if (fd_ < 0) throw std::logic_error("ContainerWriter used after finish()");
+  const uint8_t* p = static_cast<const uint8_t*>(data);
+  while (size > 0) {
+    const ssize_t n = ::write(fd_, p, size);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      fail("cannot write");
+    }
+    p += n;
+    size -= size_t(n);
+    position_ += uint64_t(n);
+  }
+}
+
+void ContainerWriter::pad_to_alignment() {
+  const uint8_t zeros[kAlignment] = {};
+  write_bytes(zeros, size_t(align_up(position_) - position_));
+}
+
+void ContainerWriter::set_info(const ContainerInfo& info) {
+  validate_info(info);
+  info_ = info;
+}
+
+void ContainerWriter::add_level(uint32_t level, const uint8_t* data, size_t size) {
+  begin_level(level);
+  append_level(data, size);
+  end_level();
+}
+
+void ContainerWriter::begin_level(uint32_t level) {
+  if (open_level_)
+    throw std::logic_error("begin_level: level " + std::to_string(*open_level_) + " is still open");
+  if (level >= kMaxLevels)
+    throw std::invalid_argument("begin_level: level index " + std::to_string(level) + " too large");
+  if (records_.size() <= level) records_.resize(level + 1);
+  if (records_[level].written)
+    throw std::invalid_argument("level " + std::to_string(level) + " written twice");
+  pad_to_alignment();
+  open_level_ = level;
+  open_level_start_ = position_;
+  open_level_crc_ = 0;
+}
+
+void ContainerWriter::append_level(const uint8_t* data, size_t size) {
+  if (!open_level_) throw std::logic_error("append_level without begin_level");
+  if (size == 0) return;
+  if (level_checksums_) open_level_crc_ = crc32c(data, size, open_level_crc_);
+  write_bytes(data, size);
+}
+
+void ContainerWriter::end_level() {
+  if (!open_level_) throw std::logic_error("end_level without begin_level");
+  LevelRecord& r = records_[*open_level_];
+  r.written = true;
+  r.offset = open_level_start_;
+  r.size = position_ - open_level_start_;
+  r.has_crc = level_checksums_;
+  r.crc = level_checksums_ ? open_level_crc_ : 0;
+  open_level_.reset();
+}
+
+void ContainerWriter::append_mask(const uint8_t* valid, size_t count) {
+  // Scans whole runs at a time (memchr for the end of a data run, 8 bytes at a time through a
+  // void run): masks of large grids are mostly long runs.
+  size_t i = 0;
+  while (i < count) {
+    size_t stop;
+    if (current_run_valid_) {
+      const void* zero = std::memchr(valid + i, 0, count - i);
+      stop = zero ? size_t(static_cast<const uint8_t*>(zero) - valid) : count;
+    } else {
+      stop = i;
+      uint64_t word = 0;
+      while (stop + 8 <= count && (std::memcpy(&word, valid + stop, 8), word == 0)) stop += 8;
+      while (stop < count && valid[stop] == 0) ++stop;
+      mask_voids_ += stop - i;
+    }
+    current_run_ += stop - i;
+    i = stop;
+    if (i < count) {  // the run ends inside this call: the next sample starts the other kind
+      mask_runs::put_varint(mask_runs_, current_run_);
+      current_run_valid_ = !current_run_valid_;
+      current_run_ = 0;
+    }
+  }
+  mask_samples_ += count;
+}
+
+void ContainerWriter::set_metadata_json(std::string json) { metadata_json_ = std::move(json); }
+
+void ContainerWriter::finish() {
+  if (finished_ || finish_started_)
+    throw std::logic_error("finish() called again after it finished or failed");
+  if (open_level_) throw std::logic_error("finish: level " + std::to_string(*open_level_) + " is still open");
+  if (!info_) throw std::invalid_argument("finish: set_info() was never called");
+  const ContainerInfo& info = *info_;
+  const size_t level_count = info.levels.size();
+  if (records_.size() > level_count) {
+    throw std::invalid_argument("finish: level " + std::to_string(records_.size() - 1) +
+                                " written but info has " + std::to_string(level_count) + " levels");
+  }
+  for (size_t l = 0; l < level_count; ++l) {
+    if (l >= records_.size() || !records_[l].written) {
+      throw std::invalid_argument("finish: level " + std::to_string(l) + " was never written");
+    }
+  }
+  const uint64_t samples = info.width * info.height;
+  if (mask_samples_ != 0 && mask_samples_ != samples) {
+    throw std::invalid_argument("finish: mask has " + std::to_string(mask_samples_) + " samples, grid has " +
+                                std::to_string(samples));
+  }
+
+  // Mask region (only when there are voids), then metadata, then the index. From here on a
+  // failure leaves the writer unusable: the destructor removes the temporary file.
+  finish_started_ = true;
+  const bool has_mask = mask_voids_ > 0;
+  if (has_mask) mask_runs::put_varint(mask_runs_, current_run_);
+  pad_to_alignment();
+  const uint64_t mask_offset = position_;
+  const uint64_t mask_size = has_mask ? mask_runs_.size() : 0;
+  const uint32_t mask_crc = has_mask ? crc32c(mask_runs_.data(), mask_runs_.size()) : 0;
+  if (has_mask) write_bytes(mask_runs_.data(), mask_runs_.size());
+  pad_to_alignment();
+  const uint64_t metadata_offset = position_;
+  write_bytes(metadata_json_.data(), metadata_json_.size());
+  pad_to_alignment();
+
+  const size_t filter_count = info.filter.size();
+  const size_t index_size = info::kSizeV1 + level_count * level::kSizeV1_1 + filter_count * 8;
+  std::vector<uint8_t> index(index_size, 0);
+  uint8_t* p = index.data();
+  put_u32(p + info::kInfoSize, info::kSizeV1);
+  put_u32(p + info::kLevelCount, uint32_t(level_count));
+  put_u32(p + info::kLevelRecordSize, level::kSizeV1_1);
+  put_u32(p + info::kFilterSize, info.filter_size);
+  put_u64(p + info::kWidth, info.width);
+  put_u64(p + info::kHeight, info.height);
+  put_f64(p + info::kSpacingX, info.spacing_x);
+  put_f64(p + info::kSpacingY, info.spacing_y);
+  put_string(p + info::kHorizontalUnits, info.horizontal_units, info::kUnitsField);
+  put_string(p + info::kVerticalUnits, info.vertical_units, info::kUnitsField);
+  put_f64(p + info::kVerticalScale, info.vertical_scale);
+  put_f64(p + info::kVerticalOffset, info.vertical_offset);
+  put_u32(p + info::kHasGeoreference, info.georeference ? 1 : 0);
+  put_u32(p + info::kFilterProvenance, uint32_t(info.filter_provenance));
+  if (info.georeference) {
+    put_f64(p + info::kOriginX, info.georeference->origin_x);
+    put_f64(p + info::kOriginY, info.georeference->origin_y);
+    put_string(p + info::kGeoreferenceUnits, info.georeference->units, info::kUnitsField);
+  }
+  put_f64(p + info::kStepUnits, info.quantisation.step_units);
+  put_f64(p + info::kStepMetres, info.quantisation.step_metres);
+  put_u32(p + info::kErrorMode, uint32_t(info.quantisation.mode));
+  put_u32(p + info::kMaskEncoding, has_mask ? kMaskRunsLeb128 : kMaskNone);
+  put_f64(p + info::kTarget, info.quantisation.target);
+  put_u64(p + info::kMaskOffset, has_mask ? mask_offset : 0);
+  put_u64(p + info::kMaskSize, mask_size);
+  put_u64(p + info::kVoidCount, mask_voids_);
+  put_u32(p + info::kMaskCrc, mask_crc);
+  put_u32(p + info::kMetadataCrc, crc32c(metadata_json_.data(), metadata_json_.size()));
+  put_u64(p + info::kMetadataOffset, metadata_offset);
+  put_u64(p + info::kMetadataSize, metadata_json_.size());
+  for (size_t l = 0; l < level_count; ++l) {
+    uint8_t* r = p + info::kSizeV1 + l * level::kSizeV1_1;
+    const LevelInfo& li = info.levels[l];
+    put_u64(r + level::kWidth, li.width);
+    put_u64(r + level::kHeight, li.height);
+    put_u64(r + level::kBlobOffset, records_[l].offset);
+    put_u64(r + level::kBlobSize, records_[l].size);
+    put_u32(r + level::kBlobCrc, records_[l].crc);
+    put_u32(r + level::kFlags,
+            (records_[l].has_crc ? level::kFlagHasCrc : 0) | (li.error ? level::kFlagHasError : 0));
+    put_f64(r + level::kMean, li.stats.mean);
+    put_f64(r + level::kVariance, li.stats.variance);
+    put_f64(r + level::kRms, li.stats.rms);
+    put_f64(r + level::kMin, li.stats.min);
+    put_f64(r + level::kMax, li.stats.max);
+    if (li.error) {
+      put_f64(r + level::kErrorRms, li.error->rms);
+      put_f64(r + level::kErrorMax, li.error->max_abs);
+    }
+  }
+  uint8_t* f = p + info::kSizeV1 + level_count * level::kSizeV1_1;
+  for (size_t i = 0; i < filter_count; ++i) put_f64(f + 8 * i, info.filter[i]);
+  const uint64_t index_offset = position_;
+  write_bytes(index.data(), index.size());
+
+  uint8_t super[sb::kSizeV1] = {};
+  std::memcpy(super, kMagic, sizeof kMagic);
+  put_u16(super + sb::kMajor, kFormatMajor);
+  put_u16(super + sb::kMinor, kFormatMinor);
+  put_u32(super + sb::kSize, sb::kSizeV1);
+  put_u64(super + sb::kFileSize, position_);
+  put_u64(super + sb::kIndexOffset, index_offset);
+  put_u64(super + sb::kIndexSize, index.size());
+  put_u32(super + sb::kIndexCrc, crc32c(index.data(), index.size()));
+  put_u32(super + sb::kCrc, crc32c(super, sb::kCrc));
+  for (size_t done = 0; done < sizeof super;) {
+    const ssize_t n = ::pwrite(fd_, super + done, sizeof super - done, off_t(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) fail("cannot write superblock");
+    done += size_t(n);
+  }
+
+  if (::fsync(fd_) != 0) fail("cannot sync");
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) fail("cannot close");
+  if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
+    throw FormatError(FormatErrorCode::WriteFailed,
+                      path_ + ": cannot rename " + temp_path_ + " onto it: " + std::strerror(errno));
+  }
+  finished_ = true;
+  // The rename is durable only once the directory entry is synced; failure here loses nothing
+  // written, so it is not an error (some filesystems refuse fsync on directories).
+  const int dir = ::open(directory_of(path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir >= 0) {
+    ::fsync(dir);
+    ::close(dir);
+  }
+}
+
+}  // namespace terrain::runtime

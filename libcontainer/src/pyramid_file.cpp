@@ -1,0 +1,177 @@
+// Level blobs as band tables: writer side (a PyramidSink over ContainerWriter) and reader side.
+//
+// Level blob layout (little endian):
+//   band streams, back to back, each padded to 8 bytes
+//   band table: band_count x { u64 offset (from blob start), u64 size, u64 y0, u64 rows }
+//   footer:     u64 band_count, u32 magic "BNDT", u32 CRC-32C of the band table
+// The table sits at the end because bands arrive one by one while the blob is being streamed.
+#include "container/pyramid_file.h"
+
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+namespace terrain::runtime {
+namespace {
+
+constexpr uint32_t kBandMagic = 0x54444e42;  // "BNDT"
+constexpr size_t kFooterSize = 16;
+constexpr size_t kBandRecordSize = 32;
+
+void put_u64(uint8_t* p, uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+void put_u32(uint8_t* p, uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+uint64_t get_u64(const uint8_t* p) {
+  uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+uint32_t get_u32(const uint8_t* p) {
+  uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+
+}  // namespace
+
+PyramidFileWriter::PyramidFileWriter(const std::string& path) : writer_(path) {}
+PyramidFileWriter::~PyramidFileWriter() = default;
+
+void PyramidFileWriter::begin(const PyramidHeader& header) { header_ = header; }
+
+void PyramidFileWriter::close_level() {
+  if (open_level_ < 0) return;
+  std::vector<uint8_t> table(bands_.size() * kBandRecordSize + kFooterSize);
+  uint8_t* p = table.data();
+  for (const BandRecord& b : bands_) {
+    put_u64(p, b.offset), put_u64(p + 8, b.size), put_u64(p + 16, b.y0), put_u64(p + 24, b.rows);
+    p += kBandRecordSize;
+  }
+  const size_t table_bytes = bands_.size() * kBandRecordSize;
+  put_u64(p, bands_.size());
+  put_u32(p + 8, kBandMagic);
+  put_u32(p + 12, crc32c(table.data(), table_bytes));
+  writer_.append_level(table.data(), table.size());
+  writer_.end_level();
+  bytes_ += table.size();
+  bands_.clear();
+  open_level_ = -1;
+}
+
+void PyramidFileWriter::band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
+  if (level != open_level_) {
+    close_level();
+    writer_.begin_level(uint32_t(level));
+    open_level_ = level;
+    level_bytes_ = 0;
+  }
+  bands_.push_back({level_bytes_, bytes.size(), uint64_t(y0), uint64_t(rows)});
+  static const uint8_t zeros[8] = {};
+  const size_t pad = (8 - bytes.size() % 8) % 8;
+  writer_.append_level(bytes.data(), bytes.size());
+  if (pad) writer_.append_level(zeros, pad);
+  level_bytes_ += bytes.size() + pad;
+  bytes_ += bytes.size() + pad;
+}
+
+void PyramidFileWriter::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
+  (void)y0;
+  const int64_t w = header_.levels.back().width;
+  mask_scratch_.resize(size_t(w * rows));
+  if (!decode_mask_rows(bytes.data(), bytes.size(), w, rows, mask_scratch_.data()))
+    throw std::logic_error("pyramid writer: builder produced an undecodable mask band");
+  writer_.append_mask(mask_scratch_.data(), mask_scratch_.size());
+}
+
+void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
+                               const std::string& metadata_json) {
+  close_level();
+  const auto& levels = result.header.levels;
+  info.width = uint64_t(levels.back().width);
+  info.height = uint64_t(levels.back().height);
+  info.levels.clear();
+  for (size_t l = 0; l < levels.size(); ++l) {
+    LevelInfo li;
+    li.width = uint64_t(levels[l].width);
+    li.height = uint64_t(levels[l].height);
+    const terrain::LevelStats& s = result.levels[l];
+    // The builder measures residuals about zero: rms and the largest magnitude.
+    li.stats.rms = s.residual_rms;
+    li.stats.variance = s.residual_rms * s.residual_rms;
+    li.stats.min = -double(s.residual_max_abs);
+    li.stats.max = double(s.residual_max_abs);
+    li.error = LevelError{s.error_rms, double(s.error_max_abs)};
+    info.levels.push_back(li);
+  }
+  const DownsampleFilter& f = result.header.filter;
+  info.filter_size = DownsampleFilter::kSize;
+  info.filter.assign(f.taps.begin(), f.taps.end());
+  info.filter_provenance =
+      result.filter_report.fallback ? FilterProvenance::Fallback : FilterProvenance::Optimal;
+  writer_.set_info(info);
+  writer_.set_metadata_json(metadata_json);
+  writer_.finish();
+}
+
+std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
+                                       const std::string& what) {
+  auto corrupt = [&](const std::string& why) {
+    return FormatError(FormatErrorCode::Corrupt, what + ": " + why);
+  };
+  if (size < kFooterSize) throw corrupt("level blob too small for its band table");
+  const uint8_t* footer = blob + size - kFooterSize;
+  const uint64_t count = get_u64(footer);
+  if (get_u32(footer + 8) != kBandMagic) throw corrupt("band table magic missing");
+  if (count == 0 || count > (size - kFooterSize) / kBandRecordSize) throw corrupt("bad band count");
+  const size_t table_bytes = size_t(count) * kBandRecordSize;
+  const uint8_t* table = footer - table_bytes;
+  if (crc32c(table, table_bytes) != get_u32(footer + 12))
+    throw FormatError(FormatErrorCode::ChecksumMismatch, what + ": band table checksum mismatch");
+  const uint64_t data_end = uint64_t(table - blob);
+  std::vector<BandView> out;
+  uint64_t next_row = 0;
+  for (uint64_t i = 0; i < count; ++i) {
+    const uint8_t* r = table + i * kBandRecordSize;
+    const uint64_t off = get_u64(r), sz = get_u64(r + 8), y0 = get_u64(r + 16), rows = get_u64(r + 24);
+    if (off > data_end || sz > data_end - off)
+      throw corrupt("band " + std::to_string(i) + " lies outside the blob");
+    if (y0 != next_row || rows == 0 || rows > uint64_t(level_height) - y0)
+      throw corrupt("band " + std::to_string(i) + " rows do not tile the level");
+    next_row = y0 + rows;
+    out.push_back(BandView{int64_t(y0), int64_t(rows), blob + off, size_t(sz)});
+  }
+  if (next_row != uint64_t(level_height)) throw corrupt("bands do not cover the level");
+  return out;
+}
+
+std::shared_ptr<const PyramidFile> PyramidFile::open(const std::string& path) {
+  std::shared_ptr<PyramidFile> f(new PyramidFile(Container::open(path)));
+  const int n = f->level_count();
+  f->bands_.resize(size_t(n));
+  for (int l = 0; l < n; ++l) {
+    const LevelView v = f->container_.level(uint32_t(l));
+    f->bands_[size_t(l)] =
+        parse_band_table(v.data, v.size, int64_t(v.height), path + ": level " + std::to_string(l));
+  }
+  return f;
+}
+
+GridSize PyramidFile::level_size(int level) const {
+  const LevelInfo& li = info().levels.at(size_t(level));
+  return GridSize{int64_t(li.width), int64_t(li.height)};
+}
+
+size_t PyramidFile::band_of_row(int level, int64_t y) const {
+  const auto& b = bands(level);
+  size_t lo = 0, hi = b.size();
+  while (hi - lo > 1) {
+    const size_t mid = (lo + hi) / 2;
+    (b[mid].y0 <= y ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+}  // namespace terrain::runtime

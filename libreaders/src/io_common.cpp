@@ -1,0 +1,179 @@
+// Plumbing shared by the readers and writers: names, error messages, file sizes, atomic writes.
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <system_error>
+
+#include "readers/internal/io_internal.h"
+
+namespace terrain {
+
+const char* sample_type_name(SampleType t) {
+  switch (t) {
+    case SampleType::Int16:
+      return "int16";
+    case SampleType::UInt16:
+      return "uint16";
+    case SampleType::Int32:
+      return "int32";
+    case SampleType::Float32:
+      return "float32";
+    case SampleType::TerrainRGB:
+      return "terrain-rgb";
+  }
+  return "unknown";
+}
+
+std::optional<SampleType> sample_type_from_name(const std::string& name) {
+  std::string n = io::to_lower(name);
+  if (n == "int16" || n == "i16" || n == "short") return SampleType::Int16;
+  if (n == "uint16" || n == "u16") return SampleType::UInt16;
+  if (n == "int32" || n == "i32") return SampleType::Int32;
+  if (n == "float32" || n == "f32" || n == "float") return SampleType::Float32;
+  return std::nullopt;
+}
+
+const char* file_format_name(FileFormat f) {
+  switch (f) {
+    case FileFormat::Hgt:
+      return "srtm-hgt";
+    case FileFormat::Raw:
+      return "raw";
+    case FileFormat::EsriBil:
+      return "esri-bil";
+    case FileFormat::EsriFlt:
+      return "esri-flt";
+    case FileFormat::Image:
+      return "image";
+    case FileFormat::TerrainRgbImage:
+      return "terrain-rgb-image";
+  }
+  return "unknown";
+}
+
+namespace io {
+
+void fail(IoErrorCode code, const std::string& path, const std::string& problem) {
+  throw IoError(code, path + ": " + problem);
+}
+
+std::string to_lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return char(c >= 'A' && c <= 'Z' ? c + 32 : c); });
+  return s;
+}
+
+bool ends_with_ci(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && to_lower(s.substr(s.size() - suffix.size())) == to_lower(suffix);
+}
+
+bool file_exists(const std::string& path) {
+  std::error_code ec;
+  return std::filesystem::is_regular_file(path, ec);
+}
+
+uint64_t existing_file_size(const std::string& path) {
+  std::error_code ec;
+  auto status = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::exists(status)) fail(IoErrorCode::NotFound, path, "no such file");
+  if (!std::filesystem::is_regular_file(status)) fail(IoErrorCode::NotFound, path, "not a regular file");
+  auto size = std::filesystem::file_size(path, ec);
+  if (ec) fail(IoErrorCode::NotFound, path, "cannot read size: " + ec.message());
+  return size;
+}
+
+int stored_bytes(StoredType t) {
+  switch (t) {
+    case StoredType::UInt8:
+      return 1;
+    case StoredType::Int16:
+    case StoredType::UInt16:
+      return 2;
+    case StoredType::Int32:
+    case StoredType::Float32:
+      return 4;
+  }
+  return 1;
+}
+
+StoredType stored_type_for(SampleType t) {
+  switch (t) {
+    case SampleType::Int16:
+      return StoredType::Int16;
+    case SampleType::UInt16:
+      return StoredType::UInt16;
+    case SampleType::Int32:
+    case SampleType::TerrainRGB:
+      return StoredType::Int32;
+    case SampleType::Float32:
+      return StoredType::Float32;
+  }
+  return StoredType::Int16;
+}
+
+uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
+  const auto& g = layout.info;
+  // 2^31 per side keeps width*height*bytes far below 2^64 and every row index within int64.
+  constexpr int64_t kMaxSide = int64_t(1) << 31;
+  if (g.width <= 0 || g.height <= 0 || g.width > kMaxSide || g.height > kMaxSide)
+    fail(IoErrorCode::DimensionMismatch, path,
+         "invalid dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height));
+  return uint64_t(g.width) * uint64_t(g.height) * uint64_t(stored_bytes(layout.stored));
+}
+
+void apply_common_overrides(GridInfo& info, const ReadOptions& o) {
+  if (o.spacing_x) info.spacing_x = *o.spacing_x;
+  if (o.spacing_y) info.spacing_y = *o.spacing_y;
+  if (o.vertical_scale) info.vertical_scale = *o.vertical_scale;
+  if (o.vertical_offset) info.vertical_offset = *o.vertical_offset;
+  if (o.nodata) info.nodata = *o.nodata;
+}
+
+std::string format_double(double v) {
+  if (std::isnan(v)) return "NaN";
+  if (std::isinf(v)) return v > 0 ? "Infinity" : "-Infinity";
+  char buf[64];
+  auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
+AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
+  static std::atomic<unsigned> counter{0};
+  std::filesystem::path p(target_);
+  // Keep the extension so OpenImageIO chooses the writer from the temporary name too.
+  std::string ext = p.extension().string();
+  std::string stem = p.stem().string();
+  std::string temp_name = "." + stem + ".partial-" + std::to_string(::getpid()) + "-" +
+                          std::to_string(counter.fetch_add(1)) + ext;
+  temp_ = (p.parent_path() / temp_name).string();
+}
+
+AtomicOutput::~AtomicOutput() {
+  if (!committed_) {
+    std::error_code ec;
+    std::filesystem::remove(temp_, ec);
+  }
+}
+
+void AtomicOutput::commit() {
+  std::error_code ec;
+  std::filesystem::rename(temp_, target_, ec);
+  if (ec) fail(IoErrorCode::WriteFailed, target_, "cannot rename " + temp_ + " into place: " + ec.message());
+  committed_ = true;
+}
+
+double value_for_writing(const Heightmap& map, int64_t x, int64_t y, const std::string& path) {
+  if (map.is_valid(x, y)) return map.at(x, y);
+  if (!map.info.nodata)
+    fail(IoErrorCode::WriteFailed, path,
+         "sample at row " + std::to_string(y) + ", column " + std::to_string(x) +
+             " is void but the grid has no nodata value to write for it");
+  return *map.info.nodata;
+}
+
+}  // namespace io
+}  // namespace terrain

@@ -1,0 +1,417 @@
+// Fixed-layout sample streams (raw grids, and the .hgt / .bil / .flt payloads), the raw JSON sidecar,
+// and the raw writer.
+#include <zlib.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "readers/internal/io_internal.h"
+#include "readers/internal/io_json.h"
+
+namespace terrain::io {
+namespace {
+
+std::string row_col(int64_t row, int64_t col) {
+  return "row " + std::to_string(row) + ", column " + std::to_string(col);
+}
+
+// Streams rows of a fixed-layout file with fread (or gzread), keeping one band of bytes.
+class RawStreamReader final : public BandReader {
+ public:
+  RawStreamReader(std::string path, const RawLayout& layout) : path_(std::move(path)), layout_(layout) {
+    row_bytes_ = uint64_t(layout_.info.width) * uint64_t(stored_bytes(layout_.stored));
+    if (layout_.info.nodata) {
+      nodata_as_float_ = float(*layout_.info.nodata);
+      std::memcpy(&nodata_float_bits_, &nodata_as_float_, sizeof nodata_float_bits_);
+    }
+    if (layout_.gzip) {
+      gz_ = gzopen(path_.c_str(), "rb");
+      if (!gz_) fail(IoErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
+      gzbuffer(gz_, 1 << 17);
+      if (layout_.data_offset > 0 && gzseek(gz_, z_off_t(layout_.data_offset), SEEK_SET) < 0)
+        fail(IoErrorCode::Truncated, path_, "gzip stream ends before the data offset");
+    } else {
+      file_ = std::fopen(path_.c_str(), "rb");
+      if (!file_) fail(IoErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
+      if (layout_.data_offset > 0 && fseeko(file_, off_t(layout_.data_offset), SEEK_SET) != 0)
+        fail(IoErrorCode::Truncated, path_, "cannot seek to the data offset");
+    }
+  }
+  ~RawStreamReader() override {
+    if (file_) std::fclose(file_);
+    if (gz_) gzclose(gz_);
+  }
+  RawStreamReader(const RawStreamReader&) = delete;
+  RawStreamReader& operator=(const RawStreamReader&) = delete;
+
+  const GridInfo& info() const override { return layout_.info; }
+
+  int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
+    int64_t n = std::min(rows, layout_.info.height - rows_read_);
+    if (n <= 0) return 0;
+    size_t want = size_t(uint64_t(n) * row_bytes_);
+    if (buffer_.size() < want) buffer_.resize(want);
+    size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_);
+    if (got < want) {
+      if (file_ && std::ferror(file_)) fail(IoErrorCode::NotFound, path_, "read error");
+      fail(IoErrorCode::Truncated, path_,
+           "data ends in row " + std::to_string(rows_read_ + int64_t(got / row_bytes_)) + " of " +
+               std::to_string(layout_.info.height) + " (" + std::to_string(layout_.info.width) + "x" +
+               std::to_string(layout_.info.height) + " " + sample_type_name(layout_.info.sample_type) + ")");
+    }
+    const int64_t w = layout_.info.width;
+    for (int64_t r = 0; r < n; ++r)
+      decode_row(buffer_.data() + size_t(r) * row_bytes_, rows_read_ + r, values + r * w, valid + r * w);
+    rows_read_ += n;
+    if (layout_.gzip && rows_read_ == layout_.info.height) check_gz_end();
+    return n;
+  }
+
+ private:
+  std::string path_;
+  RawLayout layout_;
+  FILE* file_ = nullptr;
+  gzFile gz_ = nullptr;
+  uint64_t row_bytes_ = 0;
+  std::vector<uint8_t> buffer_;
+  float nodata_as_float_ = 0;
+  uint32_t nodata_float_bits_ = 0;
+
+  size_t read_gz(size_t want) {
+    size_t got = 0;
+    while (got < want) {
+      unsigned chunk = unsigned(std::min<size_t>(want - got, size_t(1) << 30));
+      int r = gzread(gz_, buffer_.data() + got, chunk);
+      if (r < 0) {
+        int errnum = 0;
+        const char* msg = gzerror(gz_, &errnum);
+        fail(IoErrorCode::CorruptData, path_,
+             std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
+      }
+      if (r == 0) break;
+      got += size_t(r);
+    }
+    return got;
+  }
+
+  // Reading one byte past the samples makes zlib verify the trailer CRC, and finds extra data.
+  void check_gz_end() {
+    uint8_t extra = 0;
+    int r = gzread(gz_, &extra, 1);
+    if (r < 0) {
+      int errnum = 0;
+      const char* msg = gzerror(gz_, &errnum);
+      fail(IoErrorCode::CorruptData, path_,
+           std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
+    }
+    if (r > 0) fail(IoErrorCode::Oversized, path_, "gzip stream holds more bytes than the dimensions need");
+  }
+
+  template <typename Fn> void decode_with(const uint8_t* src, double* values, uint8_t* valid, Fn fetch) {
+    const int64_t w = layout_.info.width;
+    const bool has_nodata = layout_.info.nodata.has_value();
+    const double nodata = has_nodata ? *layout_.info.nodata : 0.0;
+    const int bytes = stored_bytes(layout_.stored);
+    for (int64_t x = 0; x < w; ++x) {
+      double v = fetch(src + x * bytes);
+      bool is_void = has_nodata && v == nodata;
+      values[x] = is_void ? 0.0 : v;
+      valid[x] = is_void ? 0 : 1;
+    }
+  }
+
+  uint32_t load_u32(const uint8_t* p) const {
+    return layout_.big_endian ? (uint32_t(p[0]) << 24 | uint32_t(p[1]) << 16 | uint32_t(p[2]) << 8 | p[3])
+                              : (uint32_t(p[3]) << 24 | uint32_t(p[2]) << 16 | uint32_t(p[1]) << 8 | p[0]);
+  }
+  uint16_t load_u16(const uint8_t* p) const {
+    return layout_.big_endian ? uint16_t(p[0] << 8 | p[1]) : uint16_t(p[1] << 8 | p[0]);
+  }
+
+  void decode_row(const uint8_t* src, int64_t row, double* values, uint8_t* valid) {
+    switch (layout_.stored) {
+      case StoredType::UInt8:
+        decode_with(src, values, valid, [](const uint8_t* p) { return double(*p); });
+        break;
+      case StoredType::Int16:
+        decode_with(src, values, valid, [this](const uint8_t* p) { return double(int16_t(load_u16(p))); });
+        break;
+      case StoredType::UInt16:
+        decode_with(src, values, valid, [this](const uint8_t* p) { return double(load_u16(p)); });
+        break;
+      case StoredType::Int32:
+        decode_with(src, values, valid, [this](const uint8_t* p) { return double(int32_t(load_u32(p))); });
+        break;
+      case StoredType::Float32:
+        decode_float_row(src, row, values, valid);
+        break;
+    }
+  }
+
+  void decode_float_row(const uint8_t* src, int64_t row, double* values, uint8_t* valid) {
+    const int64_t w = layout_.info.width;
+    const bool has_nodata = layout_.info.nodata.has_value();
+    for (int64_t x = 0; x < w; ++x) {
+      uint32_t bits = load_u32(src + x * 4);
+      float f;
+      std::memcpy(&f, &bits, sizeof f);
+      // A NaN nodata value is matched by bit pattern, since NaN never compares equal.
+      bool is_void = has_nodata && (bits == nodata_float_bits_ || f == nodata_as_float_);
+      if (!is_void && !std::isfinite(f))
+        fail(IoErrorCode::NonFinite, path_,
+             std::string(std::isnan(f) ? "NaN" : "Inf") + " at " + row_col(row, x));
+      values[x] = is_void ? 0.0 : double(f);
+      valid[x] = is_void ? 0 : 1;
+    }
+  }
+};
+
+std::string read_small_text_file(const std::string& path, size_t limit) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(IoErrorCode::NotFound, path, "cannot open");
+  std::string text;
+  text.resize(limit + 1);
+  in.read(text.data(), std::streamsize(limit + 1));
+  text.resize(size_t(in.gcount()));
+  if (text.size() > limit)
+    fail(IoErrorCode::MissingField, path, "sidecar larger than " + std::to_string(limit) + " bytes");
+  return text;
+}
+
+std::optional<std::string> find_sidecar(const std::string& path) {
+  if (file_exists(path + ".json")) return path + ".json";
+  auto dot = path.find_last_of('.');
+  auto slash = path.find_last_of('/');
+  if (dot != std::string::npos && (slash == std::string::npos || dot > slash)) {
+    std::string alt = path.substr(0, dot) + ".json";
+    if (alt != path && file_exists(alt)) return alt;
+  }
+  return std::nullopt;
+}
+
+// Reads a numeric member; MissingField if it is present but not a number.
+std::optional<double> number_member(const JsonObject& obj, const std::string& key,
+                                    const std::string& sidecar) {
+  auto it = obj.find(key);
+  if (it == obj.end() || it->second.kind == JsonScalar::Kind::Null) return std::nullopt;
+  const JsonScalar& v = it->second;
+  if (v.kind == JsonScalar::Kind::Number) return v.number;
+  if (v.kind == JsonScalar::Kind::String) {
+    std::string s = to_lower(v.text);
+    if (s == "nan") return std::nan("");  // JSON has no NaN literal; float nodata may be NaN
+  }
+  fail(IoErrorCode::MissingField, sidecar, "field \"" + key + "\" must be a number");
+}
+
+int64_t dimension_member(const JsonObject& obj, const std::string& key, const std::string& sidecar) {
+  auto v = number_member(obj, key, sidecar);
+  if (!v) fail(IoErrorCode::MissingField, sidecar, "missing required field \"" + key + "\"");
+  if (!(*v >= 1 && *v <= 2147483648.0) || *v != std::floor(*v))
+    fail(IoErrorCode::MissingField, sidecar,
+         "field \"" + key + "\" must be a positive integer, got " + format_double(*v));
+  return int64_t(*v);
+}
+
+}  // namespace
+
+std::unique_ptr<BandReader> open_raw_stream(const std::string& path, const RawLayout& layout) {
+  return std::make_unique<RawStreamReader>(path, layout);
+}
+
+RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) {
+  uint64_t size = existing_file_size(path);
+  RawLayout layout;
+  layout.info.format = FileFormat::Raw;
+  std::optional<int64_t> width = options.width, height = options.height;
+  std::optional<SampleType> type = options.sample_type;
+  std::optional<bool> big_endian = options.big_endian;
+
+  auto sidecar = find_sidecar(path);
+  if (sidecar) {
+    std::string error;
+    auto obj = parse_json_object(read_small_text_file(*sidecar, 1 << 16), error);
+    if (!obj) fail(IoErrorCode::MissingField, *sidecar, "malformed JSON sidecar: " + error);
+    // The sidecar must describe the grid fully; command-line options may still override it.
+    int64_t w = dimension_member(*obj, "width", *sidecar);
+    int64_t h = dimension_member(*obj, "height", *sidecar);
+    if (!width) width = w;
+    if (!height) height = h;
+    auto t = obj->find("type");
+    if (t == obj->end()) fail(IoErrorCode::MissingField, *sidecar, "missing required field \"type\"");
+    if (t->second.kind != JsonScalar::Kind::String)
+      fail(IoErrorCode::MissingField, *sidecar, "field \"type\" must be a string");
+    auto parsed = sample_type_from_name(t->second.text);
+    if (!parsed)
+      fail(IoErrorCode::UnknownType, *sidecar,
+           "unknown sample type \"" + t->second.text + "\" (expected int16, uint16, int32 or float32)");
+    if (!type) type = parsed;
+    auto bo = obj->find("byte_order");
+    if (bo != obj->end() && bo->second.kind != JsonScalar::Kind::Null) {
+      std::string order = bo->second.kind == JsonScalar::Kind::String ? to_lower(bo->second.text) : "";
+      bool big;
+      if (order == "little" || order == "little_endian" || order == "le")
+        big = false;
+      else if (order == "big" || order == "big_endian" || order == "be")
+        big = true;
+      else
+        fail(IoErrorCode::UnknownType, *sidecar, "unknown byte_order (expected \"little\" or \"big\")");
+      if (!big_endian) big_endian = big;
+    }
+    GridInfo& g = layout.info;
+    if (auto v = number_member(*obj, "spacing_x", *sidecar)) g.spacing_x = *v;
+    if (auto v = number_member(*obj, "spacing_y", *sidecar)) g.spacing_y = *v;
+    if (auto v = number_member(*obj, "vertical_scale", *sidecar)) g.vertical_scale = *v;
+    if (auto v = number_member(*obj, "vertical_offset", *sidecar)) g.vertical_offset = *v;
+    if (auto v = number_member(*obj, "nodata", *sidecar)) g.nodata = *v;
+    if (auto v = number_member(*obj, "origin_x", *sidecar)) g.origin_x = *v;
+    if (auto v = number_member(*obj, "origin_y", *sidecar)) g.origin_y = *v;
+    auto units = obj->find("horizontal_units");
+    if (units != obj->end() && units->second.kind == JsonScalar::Kind::String)
+      g.horizontal_units = units->second.text;
+  }
+  if (!type) {
+    if (ends_with_ci(path, ".r16"))
+      type = SampleType::UInt16;
+    else if (ends_with_ci(path, ".r32"))
+      type = SampleType::Float32;
+    else
+      fail(IoErrorCode::DimensionMismatch, path,
+           "raw grid without a sidecar (" + path + ".json): give --type and --width/--height");
+  }
+  layout.info.sample_type = *type;
+  layout.stored = stored_type_for(*type);
+  layout.big_endian = big_endian.value_or(false);
+  const uint64_t bytes = uint64_t(stored_bytes(layout.stored));
+  // Without a sidecar the missing dimension can be derived from the file size (square if both miss).
+  if (!width && !height) {
+    uint64_t samples = size / bytes;
+    auto side = int64_t(std::llround(std::sqrt(double(samples))));
+    if (size % bytes != 0 || side <= 0 || uint64_t(side) * uint64_t(side) != samples)
+      fail(IoErrorCode::DimensionMismatch, path,
+           std::to_string(size) + " bytes is not a square " + sample_type_name(*type) +
+               " grid: give --width/--height");
+    width = height = side;
+  } else if (!height || !width) {
+    int64_t known = width ? *width : *height;
+    if (known <= 0 || size % (uint64_t(known) * bytes) != 0)
+      fail(IoErrorCode::DimensionMismatch, path,
+           std::to_string(size) + " bytes is not a whole number of " + std::to_string(known) +
+               "-sample lines");
+    int64_t other = int64_t(size / (uint64_t(known) * bytes));
+    if (!width)
+      width = other;
+    else
+      height = other;
+  }
+  layout.info.width = *width;
+  layout.info.height = *height;
+  apply_common_overrides(layout.info, options);
+  uint64_t need = layout_bytes(path, layout);
+  if (need != size)
+    fail(IoErrorCode::DimensionMismatch, path,
+         std::to_string(layout.info.width) + "x" + std::to_string(layout.info.height) + " " +
+             sample_type_name(*type) + " needs " + std::to_string(need) + " bytes but the file has " +
+             std::to_string(size) + " (" + (size < need ? "too short" : "too long") + ")");
+  return layout;
+}
+
+void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool big_endian) {
+  const GridInfo& g = map.info;
+  if (g.width <= 0 || g.height <= 0 || map.values.size() != size_t(g.width * g.height))
+    fail(IoErrorCode::WriteFailed, path, "heightmap dimensions do not match its sample count");
+  const StoredType stored = stored_type_for(g.sample_type);
+  const SampleType written_type = g.sample_type == SampleType::TerrainRGB ? SampleType::Int32 : g.sample_type;
+  AtomicOutput out(path);
+  {
+    FILE* f = std::fopen(out.temp_path().c_str(), "wb");
+    if (!f) fail(IoErrorCode::WriteFailed, path, std::string("cannot create: ") + std::strerror(errno));
+    std::unique_ptr<FILE, int (*)(FILE*)> guard(f, std::fclose);
+    const int bytes = stored_bytes(stored);
+    std::vector<uint8_t> row(size_t(g.width) * size_t(bytes));
+    auto put = [&](uint8_t* p, uint32_t u, int n) {
+      for (int i = 0; i < n; ++i) {
+        int shift = big_endian ? 8 * (n - 1 - i) : 8 * i;
+        p[i] = uint8_t(u >> shift);
+      }
+    };
+    for (int64_t y = 0; y < g.height; ++y) {
+      for (int64_t x = 0; x < g.width; ++x) {
+        double v = value_for_writing(map, x, y, path);
+        uint8_t* p = row.data() + x * bytes;
+        bool fits = true;
+        switch (stored) {
+          case StoredType::UInt8:
+          case StoredType::Int16:
+            fits = v == std::floor(v) && v >= -32768 && v <= 32767;
+            put(p, uint32_t(uint16_t(int16_t(fits ? v : 0))), 2);
+            break;
+          case StoredType::UInt16:
+            fits = v == std::floor(v) && v >= 0 && v <= 65535;
+            put(p, uint32_t(fits ? v : 0), 2);
+            break;
+          case StoredType::Int32:
+            fits = v == std::floor(v) && v >= -2147483648.0 && v <= 2147483647.0;
+            put(p, uint32_t(int32_t(fits ? v : 0)), 4);
+            break;
+          case StoredType::Float32: {
+            float fv = float(v);
+            uint32_t bits;
+            std::memcpy(&bits, &fv, sizeof bits);
+            put(p, bits, 4);
+            break;
+          }
+        }
+        if (!fits)
+          fail(IoErrorCode::WriteFailed, path,
+               "value " + format_double(v) + " at " + row_col(y, x) + " does not fit " +
+                   sample_type_name(written_type));
+      }
+      if (std::fwrite(row.data(), 1, row.size(), f) != row.size())
+        fail(IoErrorCode::WriteFailed, path, std::string("write error: ") + std::strerror(errno));
+    }
+    if (std::fclose(guard.release()) != 0) fail(IoErrorCode::WriteFailed, path, "write error on close");
+  }
+
+  std::ostringstream js;
+  js << "{\n  \"width\": " << g.width << ",\n  \"height\": " << g.height << ",\n  \"type\": \""
+     << sample_type_name(written_type) << "\",\n  \"byte_order\": \"" << (big_endian ? "big" : "little")
+     << "\",\n  \"spacing_x\": " << format_double(g.spacing_x)
+     << ",\n  \"spacing_y\": " << format_double(g.spacing_y)
+     << ",\n  \"horizontal_units\": " << json_quote(g.horizontal_units)
+     << ",\n  \"vertical_scale\": " << format_double(g.vertical_scale)
+     << ",\n  \"vertical_offset\": " << format_double(g.vertical_offset) << ",\n  \"nodata\": ";
+  if (!g.nodata)
+    js << "null";
+  else if (std::isnan(*g.nodata))
+    js << "\"NaN\"";
+  else
+    js << format_double(*g.nodata);
+  if (g.origin_x) js << ",\n  \"origin_x\": " << format_double(*g.origin_x);
+  if (g.origin_y) js << ",\n  \"origin_y\": " << format_double(*g.origin_y);
+  js << "\n}\n";
+  std::string text = js.str();
+  AtomicOutput side(path + ".json");
+  {
+    FILE* f = std::fopen(side.temp_path().c_str(), "wb");
+    if (!f)
+      fail(IoErrorCode::WriteFailed, path + ".json", std::string("cannot create: ") + std::strerror(errno));
+    bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+    ok = (std::fclose(f) == 0) && ok;
+    if (!ok) fail(IoErrorCode::WriteFailed, path + ".json", "write error");
+  }
+  // The sidecar goes in first, so a reader never sees new samples described by an old sidecar.
+  side.commit();
+  out.commit();
+}
+
+}  // namespace terrain::io
+
+namespace terrain {
+void write_raw(const std::string& path, const Heightmap& map, bool big_endian) {
+  io::write_raw_with_sidecar(path, map, big_endian);
+}
+}  // namespace terrain

@@ -1,0 +1,616 @@
+// Drawing a geometry clipmap with OpenGL 4.5 core: toroidal height textures read in the vertex
+// shader, footprints from constant vertex/index buffers, transition morph, T-junction stitching, per-block
+// view-frustum culling, z-coloured diffuse shading from the slope (normal) maps.
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/glcorearb.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "render/renderer.h"
+
+namespace terrain::runtime {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+const char* kVertexShader = R"(#version 450 core
+layout(location = 0) in ivec2 a_local;  // footprint vertex (constant vertex buffer), local grid units
+uniform ivec2 u_origin;      // where the footprint's (0, 0) goes, level grid
+uniform ivec2 u_extent;      // local coordinates are clamped to this: a cropped piece's extra
+                             // quads collapse onto its edge (zero area, never rasterised)
+uniform int u_transpose;     // 1: swap the footprint's axes (fix-ups, trims, stitches along x or y)
+uniform int u_level;
+uniform int u_n;
+uniform ivec2 u_wrap_base;   // a multiple of n making every vertex coordinate non-negative
+uniform float u_g;           // metres per level unit
+uniform vec2 u_viewer;       // viewer, level grid units
+uniform ivec4 u_active;      // active region x0 y0 x1 y1
+uniform float u_w;           // transition width
+uniform int u_transitions;  // 2: morph, 1: only the perimeter snaps to the coarser level, 0: nothing
+uniform mat4 u_mvp;
+uniform sampler2DArray u_z;
+uniform sampler2DArray u_zc;
+out vec2 v_grid;
+out float v_alpha;
+out float v_height;
+invariant gl_Position;
+
+void main() {
+  ivec2 p = u_transpose != 0 ? a_local.yx : a_local;
+  ivec2 g = u_origin + min(p, u_extent);
+  ivec3 t = ivec3((g + u_wrap_base) % u_n, u_level);
+  float zf = texelFetch(u_z, t, 0).r;
+  float zc = texelFetch(u_zc, t, 0).r;
+  // Distance to the active region's edge: alpha must be exactly 1 on the perimeter (watertight
+  // against the coarser level) and exactly 0 on the finer level's perimeter.
+  vec2 d = vec2(min(g - u_active.xy, u_active.zw - g));
+  vec2 a;
+  if (u_transitions == 2) {
+    // L&H 2004 §6.2: a ramp that tracks the continuous viewer position (no popping), joined by a
+    // ramp from the edge itself for regions cropped off-centre.
+    vec2 half_extent = vec2(u_active.zw - u_active.xy) * 0.5;
+    a = clamp((abs(vec2(g) - u_viewer) - (half_extent - u_w - 1.0)) / u_w, 0.0, 1.0);
+    a = max(a, clamp((u_w - d) / u_w, 0.0, 1.0));
+  } else if (u_transitions == 1) {
+    a = vec2(d.x == 0.0 ? 1.0 : 0.0, d.y == 0.0 ? 1.0 : 0.0);
+  } else {
+    a = vec2(0.0);
+  }
+  float alpha = max(a.x, a.y);
+  float z = (1.0 - alpha) * zf + alpha * zc;
+  v_grid = vec2(g);
+  v_alpha = alpha;
+  v_height = z;
+  gl_Position = u_mvp * vec4(vec2(g) * u_g, z, 1.0);
+}
+)";
+
+const char* kFragmentShader = R"(#version 450 core
+in vec2 v_grid;
+in float v_alpha;
+in float v_height;
+uniform sampler2DArray u_normal;  // 2n x 2n: dz/dx, dz/dy; linear filtering, repeat = toroidal wrap
+uniform int u_level;
+uniform int u_coarse_layer;
+uniform float u_coarse_scale;    // 0.5: the coarser level's grid, 1: level 0 (no coarser level)
+uniform int u_n;
+uniform vec3 u_light;
+uniform int u_flat;
+uniform vec3 u_flat_rgb;
+uniform vec2 u_zrange;
+out vec4 o_colour;
+
+vec3 ramp(float t) {
+  const vec3 c0 = vec3(0.20, 0.45, 0.20), c1 = vec3(0.55, 0.60, 0.30), c2 = vec3(0.50, 0.40, 0.30),
+             c3 = vec3(0.95, 0.95, 0.97);
+  if (t < 0.33) return mix(c0, c1, t / 0.33);
+  if (t < 0.75) return mix(c1, c2, (t - 0.33) / 0.42);
+  return mix(c2, c3, (t - 0.75) / 0.25);
+}
+
+void main() {
+  if (u_flat != 0) {
+    o_colour = vec4(u_flat_rgb, 1.0);
+    return;
+  }
+  // Texel T of the normal map sits at level position T / 2: position p is texture coordinate (2 p + 0.5) / 2n.
+  float n2 = 2.0 * float(u_n);
+  vec2 sf = texture(u_normal, vec3((2.0 * v_grid + 0.5) / n2, float(u_level))).rg;
+  vec2 s = sf;
+  if (v_alpha > 0.0) {  // only the transition band needs the coarser level's normal
+    vec2 sc = texture(u_normal, vec3((2.0 * u_coarse_scale * v_grid + 0.5) / n2, float(u_coarse_layer))).rg;
+    s = mix(sf, sc, v_alpha);
+  }
+  vec3 normal = normalize(vec3(-s, 1.0));
+  float diffuse = max(dot(normal, normalize(u_light)), 0.0);
+  float t = clamp((v_height - u_zrange.x) / max(u_zrange.y - u_zrange.x, 1e-3), 0.0, 1.0);
+  o_colour = vec4(ramp(t) * (0.25 + 0.75 * diffuse), 1.0);
+}
+)";
+
+GLuint compile(GLenum kind, const char* src) {
+  GLuint s = glCreateShader(kind);
+  glShaderSource(s, 1, &src, nullptr);
+  glCompileShader(s);
+  GLint ok = 0;
+  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char log[4096];
+    glGetShaderInfoLog(s, sizeof log, nullptr, log);
+    throw std::runtime_error(std::string("clipmap renderer: shader compile failed: ") + log);
+  }
+  return s;
+}
+
+void check_gl(const char* step) {
+  const GLenum e = glGetError();
+  if (e != GL_NO_ERROR) {
+    char code[16];
+    std::snprintf(code, sizeof code, "0x%04X", unsigned(e));
+    throw std::runtime_error(std::string("clipmap renderer: OpenGL error ") + code + " in " + step);
+  }
+}
+
+using Mat4 = std::array<double, 16>;  // column-major, like GL
+
+Mat4 multiply(const Mat4& a, const Mat4& b) {
+  Mat4 r{};
+  for (int c = 0; c < 4; ++c)
+    for (int row = 0; row < 4; ++row) {
+      double s = 0;
+      for (int k = 0; k < 4; ++k) s += a[size_t(k * 4 + row)] * b[size_t(c * 4 + k)];
+      r[size_t(c * 4 + row)] = s;
+    }
+  return r;
+}
+
+Mat4 view_projection(const Camera& cam, double aspect, double near_m, double far_m) {
+  const double cp = std::cos(cam.pitch), sp = std::sin(cam.pitch), cy = std::cos(cam.yaw),
+               sy = std::sin(cam.yaw);
+  const double f[3] = {cp * cy, cp * sy, sp};
+  // right = f x up(0,0,1), normalised; up' = right x f
+  double r[3] = {f[1], -f[0], 0};
+  const double rl = std::hypot(r[0], r[1]);
+  if (rl < 1e-9)
+    r[0] = 1, r[1] = 0;  // looking straight up or down: any right vector will do
+  else
+    r[0] /= rl, r[1] /= rl;
+  const double u[3] = {r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]};
+  const double* e = cam.position;
+  Mat4 view{r[0],
+            u[0],
+            -f[0],
+            0,
+            r[1],
+            u[1],
+            -f[1],
+            0,
+            r[2],
+            u[2],
+            -f[2],
+            0,
+            -(r[0] * e[0] + r[1] * e[1] + r[2] * e[2]),
+            -(u[0] * e[0] + u[1] * e[1] + u[2] * e[2]),
+            (f[0] * e[0] + f[1] * e[1] + f[2] * e[2]),
+            1};
+  const double t = 1.0 / std::tan(cam.fov_y_deg * M_PI / 360.0);
+  Mat4 proj{t / aspect,
+            0,
+            0,
+            0,
+            0,
+            t,
+            0,
+            0,
+            0,
+            0,
+            (far_m + near_m) / (near_m - far_m),
+            -1,
+            0,
+            0,
+            2 * far_m * near_m / (near_m - far_m),
+            0};
+  return multiply(proj, view);
+}
+
+// The frustum's planes (a, b, c, d), inside where a x + b y + c z + d >= 0 (Gribb & Hartmann).
+std::array<std::array<double, 4>, 6> frustum_planes(const Mat4& m) {
+  std::array<std::array<double, 4>, 6> p{};
+  for (int i = 0; i < 3; ++i)
+    for (int s = 0; s < 2; ++s)
+      for (int k = 0; k < 4; ++k) {
+        const double row_w = m[size_t(k * 4 + 3)], row_i = m[size_t(k * 4 + i)];
+        p[size_t(2 * i + s)][size_t(k)] = s == 0 ? row_w + row_i : row_w - row_i;
+      }
+  return p;
+}
+
+bool box_outside(const std::array<std::array<double, 4>, 6>& planes, const double lo[3], const double hi[3]) {
+  for (const auto& p : planes) {
+    // The box corner furthest along the plane normal; if even that one is outside, all are.
+    const double x = p[0] >= 0 ? hi[0] : lo[0], y = p[1] >= 0 ? hi[1] : lo[1], z = p[2] >= 0 ? hi[2] : lo[2];
+    if (p[0] * x + p[1] * y + p[2] * z + p[3] < 0) return true;
+  }
+  return false;
+}
+
+bool contains(const Rect& outer, const Rect& inner) {
+  return inner.x0 >= outer.x0 && inner.y0 >= outer.y0 && inner.x0 + inner.width <= outer.x0 + outer.width &&
+         inner.y0 + inner.height <= outer.y0 + outer.height;
+}
+
+// Whether `dirty` (the clipmap's last update) holds every sample a level gained since the textures
+// showed clip region `before`: the exposed columns (whole height) and rows, as the refill writes them.
+// False when an update that moved the level was never uploaded: its samples are only in the clipmap.
+bool dirty_covers_move(const Rect& before, const Rect& now, const std::vector<Rect>& dirty) {
+  const int64_t n = now.width, dx = now.x0 - before.x0, dy = now.y0 - before.y0;
+  std::vector<Rect> gained;
+  if (std::abs(dx) >= n || std::abs(dy) >= n) {
+    gained.push_back(now);
+  } else {
+    if (dx != 0) gained.push_back(Rect{dx > 0 ? before.x0 + n : now.x0, now.y0, std::abs(dx), n});
+    if (dy != 0)
+      gained.push_back(
+          Rect{std::max(now.x0, before.x0), dy > 0 ? before.y0 + n : now.y0, n - std::abs(dx), std::abs(dy)});
+  }
+  for (const Rect& g : gained)
+    if (std::none_of(dirty.begin(), dirty.end(), [&](const Rect& d) { return contains(d, g); })) return false;
+  return true;
+}
+
+}  // namespace
+
+struct ClipmapRenderer::Gl {
+  GLuint program = 0, vao = 0, fbo = 0, colour = 0, depth = 0;
+  GLuint tex_z = 0, tex_zc = 0, tex_normal = 0, vbo = 0, ibo = 0;
+  // The constant footprints (L&H 2004 §6.1, A&H 2005 §2.3.2) in one vertex and one index buffer.
+  struct Footprint {
+    GLint base_vertex = 0;
+    size_t first_index = 0;
+    int row_indices = 0;  // indices per local row of quads (row-major: the first k rows are a prefix)
+    int rows = 0;         // local rows of quads
+    int cols = 0;         // local columns of quads
+  };
+  Footprint block, fixup, trim, stitch;
+  // Per level: the clip region the textures hold (valid once uploaded), so that an update whose
+  // dirty rectangles never reached upload() is noticed and the level sent whole.
+  std::vector<Rect> uploaded_clip;
+  std::vector<bool> uploaded;
+  GLint u_origin = -1, u_extent = -1, u_transpose = -1, u_level = -1, u_n = -1, u_wrap_base = -1, u_g = -1,
+        u_viewer = -1, u_active = -1, u_w = -1, u_transitions = -1, u_mvp = -1, u_coarse_layer = -1,
+        u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1;
+};
+
+ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
+    : gl_(std::make_unique<Gl>()), n_(n), levels_(levels), width_(width), height_(height) {
+  if (width < 1 || height < 1 || width > 16384 || height > 16384)
+    throw std::invalid_argument("clipmap renderer: frame size must be 1..16384 pixels a side");
+  Gl& g = *gl_;
+  g.uploaded_clip.assign(size_t(levels), Rect{});
+  g.uploaded.assign(size_t(levels), false);
+  const GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader),
+               fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
+  g.program = glCreateProgram();
+  glAttachShader(g.program, vs);
+  glAttachShader(g.program, fs);
+  glLinkProgram(g.program);
+  glDeleteShader(vs);
+  glDeleteShader(fs);
+  GLint ok = 0;
+  glGetProgramiv(g.program, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char log[4096];
+    glGetProgramInfoLog(g.program, sizeof log, nullptr, log);
+    throw std::runtime_error(std::string("clipmap renderer: program link failed: ") + log);
+  }
+  auto loc = [&](const char* name) { return glGetUniformLocation(g.program, name); };
+  g.u_origin = loc("u_origin"), g.u_extent = loc("u_extent"), g.u_transpose = loc("u_transpose");
+  g.u_level = loc("u_level"), g.u_n = loc("u_n"), g.u_wrap_base = loc("u_wrap_base"), g.u_g = loc("u_g");
+  g.u_viewer = loc("u_viewer"), g.u_active = loc("u_active"), g.u_w = loc("u_w"),
+  g.u_transitions = loc("u_transitions");
+  g.u_mvp = loc("u_mvp"), g.u_coarse_layer = loc("u_coarse_layer"), g.u_coarse_scale = loc("u_coarse_scale");
+  g.u_light = loc("u_light"), g.u_flat = loc("u_flat"), g.u_flat_rgb = loc("u_flat_rgb"),
+  g.u_zrange = loc("u_zrange");
+  glUseProgram(g.program);
+  glUniform1i(loc("u_z"), 0);
+  glUniform1i(loc("u_zc"), 1);
+  glUniform1i(loc("u_normal"), 2);
+
+  // Footprints, local coordinates as short2: m x m block (m = (n+1)/4), the 3 x m fix-up (2 quads
+  // wide), the 2 x n trim (1 quad wide, up to a ring side long) and the line of zero-area stitching
+  // triangles (v_2k, v_2k+1, v_2k+2) that closes the T-junctions on a ring's outer edge. Every quad
+  // is split along its (0,0)-(1,1) diagonal, the one the clipmap's zc assumes; transposing keeps it.
+  std::vector<int16_t> vertices;
+  std::vector<uint16_t> indices;
+  auto grid = [&](int cols, int rows, Gl::Footprint& f) {  // cols x rows quads
+    f.base_vertex = GLint(vertices.size() / 2);
+    f.first_index = indices.size();
+    f.row_indices = 6 * cols;
+    f.rows = rows;
+    f.cols = cols;
+    for (int y = 0; y <= rows; ++y)
+      for (int x = 0; x <= cols; ++x) vertices.push_back(int16_t(x)), vertices.push_back(int16_t(y));
+    const int w = cols + 1;
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x) {
+        const int v = y * w + x;
+        for (int k : {v, v + 1, v + w + 1, v, v + w + 1, v + w}) indices.push_back(uint16_t(k));
+      }
+  };
+  const int m = (n + 1) / 4;
+  grid(m - 1, m - 1, g.block);
+  grid(2, m - 1, g.fixup);
+  grid(1, n - 1, g.trim);
+  g.stitch.base_vertex = GLint(vertices.size() / 2);
+  g.stitch.first_index = indices.size();
+  g.stitch.row_indices = 3;
+  g.stitch.rows = (n - 1) / 2;
+  g.stitch.cols = 0;
+  for (int i = 0; i < n; ++i) vertices.push_back(int16_t(i)), vertices.push_back(0);
+  for (int t = 0; t < (n - 1) / 2; ++t)
+    for (int k = 0; k < 3; ++k) indices.push_back(uint16_t(2 * t + k));
+  glCreateBuffers(1, &g.vbo);
+  glNamedBufferStorage(g.vbo, GLsizeiptr(vertices.size() * sizeof(int16_t)), vertices.data(), 0);
+  glCreateBuffers(1, &g.ibo);
+  glNamedBufferStorage(g.ibo, GLsizeiptr(indices.size() * sizeof(uint16_t)), indices.data(), 0);
+  glCreateVertexArrays(1, &g.vao);
+  glEnableVertexArrayAttrib(g.vao, 0);
+  glVertexArrayAttribIFormat(g.vao, 0, 2, GL_SHORT, 0);
+  glVertexArrayAttribBinding(g.vao, 0, 0);
+  glVertexArrayVertexBuffer(g.vao, 0, g.vbo, 0, 2 * sizeof(int16_t));
+  glVertexArrayElementBuffer(g.vao, g.ibo);
+
+  auto make_array = [&](GLuint& tex, GLenum format, bool linear, int side) {
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &tex);
+    glTextureStorage3D(tex, 1, format, side, side, levels);
+    glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, linear ? GL_LINEAR : GL_NEAREST);
+    glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, linear ? GL_LINEAR : GL_NEAREST);
+    glTextureParameteri(tex, GL_TEXTURE_WRAP_S, GL_REPEAT);  // repeat = the toroidal wrap
+    glTextureParameteri(tex, GL_TEXTURE_WRAP_T, GL_REPEAT);
+  };
+  make_array(g.tex_z, GL_R32F, false, n);
+  make_array(g.tex_zc, GL_R32F, false, n);
+  make_array(g.tex_normal, GL_RG32F, true, 2 * n);
+
+  glCreateRenderbuffers(1, &g.colour);
+  glNamedRenderbufferStorage(g.colour, GL_RGBA8, width, height);
+  glCreateRenderbuffers(1, &g.depth);
+  glNamedRenderbufferStorage(g.depth, GL_DEPTH_COMPONENT24, width, height);
+  glCreateFramebuffers(1, &g.fbo);
+  glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, g.colour);
+  glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depth);
+  if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    throw std::runtime_error("clipmap renderer: framebuffer incomplete");
+  check_gl("setup");
+}
+
+ClipmapRenderer::~ClipmapRenderer() {
+  Gl& g = *gl_;
+  const GLuint textures[3] = {g.tex_z, g.tex_zc, g.tex_normal};
+  glDeleteTextures(3, textures);
+  glDeleteBuffers(1, &g.vbo);
+  glDeleteBuffers(1, &g.ibo);
+  glDeleteFramebuffers(1, &g.fbo);
+  glDeleteRenderbuffers(1, &g.colour);
+  glDeleteRenderbuffers(1, &g.depth);
+  glDeleteVertexArrays(1, &g.vao);
+  glDeleteProgram(g.program);
+}
+
+void ClipmapRenderer::upload(const Clipmap& cm, bool everything) {
+  if (cm.n() != n_ || cm.level_count() != levels_)
+    throw std::invalid_argument("clipmap renderer: clipmap size differs from the renderer's");
+  const auto t0 = Clock::now();
+  Gl& g = *gl_;
+  upload_samples_ = 0;
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, n_);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  for (int l = 0; l < levels_; ++l) {
+    if (!cm.has_data(l)) continue;
+    std::vector<Rect> all;
+    const std::vector<Rect>* rects = &cm.dirty_rects(l);
+    const Rect clip = cm.clip_region(l);
+    // Several updates between two uploads (or another clipmap) leave samples the last update's
+    // dirty rectangles do not name: the textures would keep stale heights that the culling bounds,
+    // taken from the clipmap, no longer describe. Such a level is uploaded whole.
+    const bool stale = !g.uploaded[size_t(l)] || !dirty_covers_move(g.uploaded_clip[size_t(l)], clip, *rects);
+    if (everything || stale) {
+      all.push_back(clip);
+      rects = &all;
+    }
+    g.uploaded[size_t(l)] = true;
+    g.uploaded_clip[size_t(l)] = clip;
+    for (const Rect& r : *rects) {
+      // A rectangle of the level maps to up to 2 x 2 pieces of the toroidal texture.
+      const int64_t tx = cm.wrap(r.x0), ty = cm.wrap(r.y0);
+      const int64_t wx[2] = {std::min<int64_t>(r.width, n_ - tx),
+                             r.width - std::min<int64_t>(r.width, n_ - tx)};
+      const int64_t wy[2] = {std::min<int64_t>(r.height, n_ - ty),
+                             r.height - std::min<int64_t>(r.height, n_ - ty)};
+      for (int py = 0; py < 2; ++py)
+        for (int px = 0; px < 2; ++px) {
+          if (wx[px] <= 0 || wy[py] <= 0) continue;
+          const int64_t ox = px == 0 ? tx : 0, oy = py == 0 ? ty : 0;
+          const size_t at = size_t(oy * n_ + ox);
+          glTextureSubImage3D(g.tex_z, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1,
+                              GL_RED, GL_FLOAT, cm.heights(l) + at);
+          glTextureSubImage3D(g.tex_zc, 0, GLint(ox), GLint(oy), l, GLsizei(wx[px]), GLsizei(wy[py]), 1,
+                              GL_RED, GL_FLOAT, cm.coarse_heights(l) + at);
+          upload_samples_ += wx[px] * wy[py];
+          // The normal map's texels of these samples: the same piece at twice the resolution.
+          glPixelStorei(GL_UNPACK_ROW_LENGTH, 2 * n_);
+          glTextureSubImage3D(g.tex_normal, 0, GLint(2 * ox), GLint(2 * oy), l, GLsizei(2 * wx[px]),
+                              GLsizei(2 * wy[py]), 1, GL_RG, GL_FLOAT,
+                              cm.normal_map(l) + 2 * size_t(2 * oy * 2 * n_ + 2 * ox));
+          glPixelStorei(GL_UNPACK_ROW_LENGTH, n_);
+        }
+    }
+  }
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  check_gl("upload");
+  upload_seconds_ = since(t0);
+}
+
+RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const RenderOptions& opt) {
+  if (cm.n() != n_ || cm.level_count() != levels_)
+    throw std::invalid_argument("clipmap renderer: clipmap size differs from the renderer's");
+  const auto t0 = Clock::now();
+  Gl& g = *gl_;
+  RenderStats stats;
+  stats.seconds_upload = upload_seconds_;
+  stats.samples_uploaded = upload_samples_;
+
+  // Near plane from the height above the terrain, far plane beyond the coarsest level.
+  const float ground = cm.terrain_height_at(cam.position[0], cam.position[1]);
+  const double above = std::isnan(ground) ? 100.0 : std::max(cam.position[2] - double(ground), 0.0);
+  const double near_m = cam.near_m > 0 ? cam.near_m : std::clamp(0.2 * above, 0.05, 500.0);
+  const double far_m = cam.far_m > 0 ? cam.far_m : 2.0 * n_ * cm.spacing(0) + 2.0 * above;
+  const Mat4 vp = view_projection(cam, double(width_) / double(height_), near_m, far_m);
+  const auto planes = frustum_planes(vp);
+  float mvp[16];
+  for (int i = 0; i < 16; ++i) mvp[i] = float(vp[size_t(i)]);
+
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glViewport(0, 0, width_, height_);
+  glClearColor(opt.background_rgb[0], opt.background_rgb[1], opt.background_rgb[2], 1.0f);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LEQUAL);
+  glDisable(GL_CULL_FACE);  // stitching triangles have no meaningful orientation
+  glUseProgram(g.program);
+  glBindVertexArray(g.vao);
+  glBindTextureUnit(0, g.tex_z);
+  glBindTextureUnit(1, g.tex_zc);
+  glBindTextureUnit(2, g.tex_normal);
+  glUniformMatrix4fv(g.u_mvp, 1, GL_FALSE, mvp);
+  glUniform1i(g.u_n, n_);
+  glUniform1i(g.u_transitions, opt.transitions ? 2 : opt.snap_perimeter ? 1 : 0);
+  glUniform3f(g.u_light, opt.light_dir[0], opt.light_dir[1], opt.light_dir[2]);
+  glUniform1i(g.u_flat, opt.flat_colour ? 1 : 0);
+  glUniform3f(g.u_flat_rgb, opt.terrain_rgb[0], opt.terrain_rgb[1], opt.terrain_rgb[2]);
+  if (opt.z_hi > opt.z_lo) {
+    glUniform2f(g.u_zrange, opt.z_lo, opt.z_hi);
+  } else {
+    const ZRange zr = cm.z_bounds(0, cm.active_region(0));
+    glUniform2f(g.u_zrange, zr.lo, zr.hi);
+  }
+
+  const int64_t B = g.block.cols;  // quads per side of the m x m block
+  // One footprint instance: local (0,0) at `origin`, clamped to extent (ex, ey) quads in world axes;
+  // only the local rows that hold visible quads are submitted.
+  auto draw = [&](const Gl::Footprint& f, int64_t ox, int64_t oy, int64_t ex, int64_t ey, bool transpose) {
+    const int64_t local_rows = std::min<int64_t>(transpose ? ex : ey, f.rows);
+    glUniform2i(g.u_origin, GLint(ox), GLint(oy));
+    glUniform2i(g.u_extent, GLint(ex), GLint(ey));
+    glUniform1i(g.u_transpose, transpose ? 1 : 0);
+    glDrawElementsBaseVertex(GL_TRIANGLES, GLsizei(local_rows * f.row_indices), GL_UNSIGNED_SHORT,
+                             reinterpret_cast<const void*>(f.first_index * sizeof(uint16_t)), f.base_vertex);
+    ++stats.draw_calls;
+  };
+  // Fine to coarse, so that nearer terrain fills the depth buffer first.
+  for (int l = levels_ - 1; l >= 0; --l) {
+    const LevelRegion a = cm.active_region(l);
+    if (a.empty()) continue;
+    ++stats.levels_drawn;
+    const double gm = cm.spacing(l);
+    const auto v = cm.viewer_grid(l);
+    const Rect clip = cm.clip_region(l);
+    const GLint base_x = GLint(n_ * (std::abs(clip.x0) / n_ + 2)),
+                base_y = GLint(n_ * (std::abs(clip.y0) / n_ + 2));
+    glUniform1i(g.u_level, l);
+    glUniform2i(g.u_wrap_base, base_x, base_y);
+    glUniform1f(g.u_g, float(gm));
+    glUniform2f(g.u_viewer, float(v[0]), float(v[1]));
+    glUniform4i(g.u_active, GLint(a.x0), GLint(a.y0), GLint(a.x1), GLint(a.y1));
+    glUniform1f(g.u_w, float(cm.transition_width(l)));
+    glUniform1i(g.u_coarse_layer, l > 0 ? l - 1 : 0);
+    glUniform1f(g.u_coarse_scale, l > 0 ? 0.5f : 1.0f);
+
+    // A piece of the render region (x0..x1, y0..y1 vertices), culled against its extruded z range.
+    auto visible = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1) {
+      if (!opt.culling) return true;
+      const ZRange zr = cm.z_bounds(l, LevelRegion{x0, y0, x1, y1});
+      const double lo[3] = {double(x0) * gm, double(y0) * gm, double(zr.lo)};
+      const double hi[3] = {double(x1) * gm, double(y1) * gm, double(zr.hi)};
+      if (!box_outside(planes, lo, hi)) return true;
+      ++stats.blocks_culled;
+      return false;
+    };
+    // A strip 1 or 2 quads wide: trims or fix-ups laid end to end along it.
+    auto strip = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1) {
+      const bool along_x = (x1 - x0) > (y1 - y0);
+      const int64_t width = along_x ? y1 - y0 : x1 - x0, length = along_x ? x1 - x0 : y1 - y0;
+      const Gl::Footprint& f = width == 1 ? g.trim : g.fixup;
+      for (int64_t s = 0; s < length; s += f.rows) {
+        const int64_t len = std::min<int64_t>(f.rows, length - s);
+        const int64_t px = along_x ? x0 + s : x0, py = along_x ? y0 : y0 + s;
+        const int64_t ex = along_x ? len : width, ey = along_x ? width : len;
+        if (!visible(px, py, px + ex, py + ey)) continue;
+        draw(f, px, py, ex, ey, along_x);
+        ++stats.blocks_drawn;
+        stats.triangles += 2 * ex * ey;
+      }
+    };
+    // A rectangle of the render region: m x m blocks (the last ones clamped), a 1-2 quad remainder
+    // on the right and bottom as fix-up / trim strips (the paper's ring fix-ups and L-shaped trim).
+    auto tile = [&](const LevelRegion& p) {
+      const int64_t W = p.x1 - p.x0, H = p.y1 - p.y0;
+      if (W <= 0 || H <= 0) return;
+      if (W <= 2 || H <= 2) return strip(p.x0, p.y0, p.x1, p.y1);
+      const int64_t rw = W % B <= 2 ? W % B : 0, rh = H % B <= 2 ? H % B : 0;
+      const int64_t mx1 = p.x1 - rw, my1 = p.y1 - rh;
+      for (int64_t by = p.y0; by < my1; by += B)
+        for (int64_t bx = p.x0; bx < mx1; bx += B) {
+          const int64_t w = std::min<int64_t>(B, mx1 - bx), h = std::min<int64_t>(B, my1 - by);
+          if (!visible(bx, by, bx + w, by + h)) continue;
+          draw(g.block, bx, by, w, h, false);
+          ++stats.blocks_drawn;
+          stats.triangles += 2 * w * h;
+        }
+      if (rw > 0) strip(mx1, p.y0, p.x1, my1);
+      if (rh > 0) strip(p.x0, my1, p.x1, p.y1);
+    };
+
+    // render region = active(l) - active(l+1), as up to four rectangles.
+    LevelRegion inner;
+    if (l + 1 < levels_ && !cm.active_region(l + 1).empty()) {
+      const LevelRegion f = cm.active_region(l + 1);
+      inner = LevelRegion{f.x0 / 2, f.y0 / 2, f.x1 / 2, f.y1 / 2};
+    }
+    if (inner.empty()) {
+      tile(a);
+    } else {
+      tile(LevelRegion{a.x0, a.y0, a.x1, inner.y0});
+      tile(LevelRegion{a.x0, inner.y1, a.x1, a.y1});
+      tile(LevelRegion{a.x0, inner.y0, inner.x0, inner.y1});
+      tile(LevelRegion{inner.x1, inner.y0, a.x1, inner.y1});
+    }
+    // Zero-area triangles (v0, v1, v2) on each outer side close the T-junctions against level l-1.
+    if (opt.stitch && l > 0) {
+      const int64_t wx = a.x1 - a.x0, wy = a.y1 - a.y0;
+      const struct {
+        int64_t x, y, len;
+        bool along_x;
+      } sides[4] = {
+          {a.x0, a.y0, wx, true}, {a.x0, a.y1, wx, true}, {a.x0, a.y0, wy, false}, {a.x1, a.y0, wy, false}};
+      for (const auto& sd : sides) {
+        // The stitch line is local x with one row of triangles per 2 quads: extent (len, 0).
+        const int64_t tris = sd.len / 2;
+        glUniform2i(g.u_origin, GLint(sd.x), GLint(sd.y));
+        glUniform2i(g.u_extent, GLint(sd.along_x ? sd.len : 0), GLint(sd.along_x ? 0 : sd.len));
+        glUniform1i(g.u_transpose, sd.along_x ? 0 : 1);
+        glDrawElementsBaseVertex(GL_TRIANGLES, GLsizei(tris * 3), GL_UNSIGNED_SHORT,
+                                 reinterpret_cast<const void*>(g.stitch.first_index * sizeof(uint16_t)),
+                                 g.stitch.base_vertex);
+        ++stats.draw_calls;
+        stats.triangles += tris;
+      }
+    }
+  }
+  glFinish();
+  check_gl("render");
+  stats.seconds_render = since(t0);
+  return stats;
+}
+
+void ClipmapRenderer::read_rgba(std::vector<uint8_t>& out) const {
+  out.resize(size_t(width_) * size_t(height_) * 4);
+  glBindFramebuffer(GL_FRAMEBUFFER, gl_->fbo);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, out.data());
+  check_gl("read back");
+  // GL rows start at the bottom; images start at the top.
+  const size_t row = size_t(width_) * 4;
+  for (int y = 0; y < height_ / 2; ++y)
+    std::swap_ranges(out.begin() + ptrdiff_t(size_t(y) * row), out.begin() + ptrdiff_t(size_t(y + 1) * row),
+                     out.begin() + ptrdiff_t(size_t(height_ - 1 - y) * row));
+}
+
+}  // namespace terrain::runtime

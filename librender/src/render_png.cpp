@@ -1,0 +1,21 @@
+// PNG output of rendered frames, through libpyramid's image plugin (loaded on first use).
+#include <stdexcept>
+
+#include "readers/heightmap.h"
+#include "readers/image8.h"
+#include "render/renderer.h"
+
+namespace terrain::runtime {
+
+void write_png_rgba(const std::string& path, int width, int height, const std::vector<uint8_t>& rgba) {
+  if (width < 1 || height < 1 || rgba.size() != size_t(width) * size_t(height) * 4)
+    throw std::invalid_argument("write_png_rgba: " + path + ": pixel buffer does not match " +
+                                std::to_string(width) + "x" + std::to_string(height));
+  try {
+    write_image8(path, width, height, 4, rgba.data());
+  } catch (const IoError& e) {
+    throw std::runtime_error(std::string("cannot write ") + e.what());  // "cannot write <path>: <reason>"
+  }
+}
+
+}  // namespace terrain::runtime
