@@ -1,6 +1,6 @@
 // Shared plumbing of the file-reader fuzz targets: the readers take paths (the format is detected
 // from the name and the sidecar sits beside the file), so each input is written into a private
-// scratch directory under $TMPDIR and read back through the public API. Any IoError is fine;
+// scratch directory under $TMPDIR and read back through the public API. Any Error is fine;
 // crashes, sanitizer reports, leaks and other exception types are not.
 #pragma once
 
@@ -55,7 +55,7 @@ inline void read_both_ways(const std::string& path, const terrain::ReadOptions& 
   terrain::GridInfo info;
   try {
     info = terrain::probe(path, options);
-  } catch (const terrain::IoError&) {
+  } catch (const terrain::Error&) {
     return;
   }
   if (info.width <= 0 || info.height <= 0) std::abort();  // probe must reject empty grids
@@ -64,7 +64,7 @@ inline void read_both_ways(const std::string& path, const terrain::ReadOptions& 
   terrain::Heightmap map;
   try {
     map = terrain::read_heightmap(path, options);
-  } catch (const terrain::IoError&) {
+  } catch (const terrain::Error&) {
     whole_ok = false;
   }
   if (whole_ok) {
@@ -75,7 +75,7 @@ inline void read_both_ways(const std::string& path, const terrain::ReadOptions& 
   try {
     auto reader = terrain::open_band_reader(path, options);
     (void)terrain::stream_stats(*reader, 3);
-  } catch (const terrain::IoError&) {
+  } catch (const terrain::Error&) {
   }
 }
 

@@ -4,7 +4,7 @@
 // Each input is tried twice: as given (the CRCs must reject almost every mutation), and with
 // every container checksum recomputed (superblock, index, mask, metadata, level blobs; layout
 // from docs/format.md) so that mutations reach the index validation, the band tables and the
-// libcodec streams behind them. Any FormatError is fine; crashes, sanitizer reports, leaks and
+// libcodec streams behind them. Any Error is fine; crashes, sanitizer reports, leaks and
 // other exception types are not. When a file opens, small regions of every level are decoded
 // (units and metres), and a decode of a sub-rectangle must agree with the larger decode.
 //   Run: fuzz_pyramid_open -max_len=65536 -max_total_time=600 [corpus_dir]
@@ -58,16 +58,18 @@ void fix_checksums(std::vector<uint8_t>& f) {
 
 void decode_some(const std::string& path) {
   using namespace terrain::runtime;
+  using terrain::Error;
+  using terrain::ErrorCode;
   std::shared_ptr<const PyramidFile> file;
   try {
     file = PyramidFile::open(path);
-  } catch (const FormatError&) {
+  } catch (const Error&) {
     return;
   }
   try {
     (void)file->container().mask();
     file->container().verify();
-  } catch (const FormatError&) {
+  } catch (const Error&) {
   }
   RegionDecoder decoder(file, size_t(4) << 20);
   std::vector<int32_t> big(48 * 48), small(16 * 16);
@@ -78,7 +80,7 @@ void decode_some(const std::string& path) {
     const terrain::Rect r{(g.width - w) / 2, (g.height - h) / 2, w, h};
     try {
       decoder.decode_units(level, r, big.data(), w);
-    } catch (const FormatError&) {
+    } catch (const Error&) {
       continue;
     }
     // A nested rectangle, decoded without the cache, must give the same samples.

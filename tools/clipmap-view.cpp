@@ -38,7 +38,7 @@ struct Key {
 
 std::vector<Key> read_path(const std::string& path) {
   std::ifstream in(path);
-  if (!in) throw IoError(IoErrorCode::NotFound, "cannot open camera path " + path);
+  if (!in) throw Error(ErrorCode::NotFound, "cannot open camera path " + path);
   std::vector<Key> keys;
   std::string line;
   int number = 0;
@@ -51,14 +51,14 @@ std::vector<Key> read_path(const std::string& path) {
     if (!(s >> k.frame)) continue;  // blank or comment line
     if (!(s >> k.x >> k.y >> k.above >> k.yaw_deg >> k.pitch_deg) ||
         !std::isfinite(k.x + k.y + k.above + k.yaw_deg + k.pitch_deg))
-      throw IoError(IoErrorCode::MissingField, path + ":" + std::to_string(number) +
-                                                   ": expected 'frame x_m y_m above_m yaw_deg pitch_deg'");
+      throw Error(ErrorCode::MissingField, path + ":" + std::to_string(number) +
+                                               ": expected 'frame x_m y_m above_m yaw_deg pitch_deg'");
     if (!keys.empty() && k.frame <= keys.back().frame)
-      throw IoError(IoErrorCode::MissingField,
-                    path + ":" + std::to_string(number) + ": frame numbers must increase");
+      throw Error(ErrorCode::MissingField,
+                  path + ":" + std::to_string(number) + ": frame numbers must increase");
     keys.push_back(k);
   }
-  if (keys.empty()) throw IoError(IoErrorCode::MissingField, path + ": no keyframes");
+  if (keys.empty()) throw Error(ErrorCode::MissingField, path + ": no keyframes");
   return keys;
 }
 
@@ -190,8 +190,8 @@ int run_bench(const std::shared_ptr<const PyramidFile>& file, double spacing, Cl
         if (d.open(bands[b].data, bands[b].size) != codec::Status::Ok ||
             d.decode_region(codec::Rect{win.x0, y0 - bands[b].y0, w, y1 - y0}, residual.data(), w, cs) !=
                 codec::Status::Ok)
-          throw IoError(IoErrorCode::CorruptData,
-                        file->path() + ": residual band " + std::to_string(b) + " does not decode");
+          throw Error(ErrorCode::CorruptData,
+                      file->path() + ": residual band " + std::to_string(b) + " does not decode");
       }
       tr.push_back(since(t0) * 1e3);
     }
@@ -306,9 +306,9 @@ int run(int argc, char** argv) {
   try {
     file = PyramidFile::open(pyramid);
     if (!reference.empty()) ref_file = PyramidFile::open(reference);
-  } catch (const FormatError& e) {
+  } catch (const Error& e) {
     std::cerr << "clipmap-view: error: " << e.what() << "\n";
-    return exit_code(e.code());
+    return cli::exit_status(e.code());
   }
   const ContainerInfo& info = file->info();
   // Arc-second grids: about 30.87 m per arc-second (the terrain is rendered flat, as in the paper).
@@ -416,7 +416,7 @@ int run(int argc, char** argv) {
   std::filesystem::create_directories(out_dir, ec);
   const std::string csv_path = out_dir + "/stats.csv", json_path = out_dir + "/stats.json";
   std::ofstream csv(csv_path + ".tmp");
-  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + csv_path);
+  if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
   csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,residual_ms,zc_ms,normals_ms,bounds_ms,upload_ms,"
          "render_ms,frame_ms,"
          "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
@@ -547,7 +547,7 @@ int run(int argc, char** argv) {
   // CPU per frame covers everything in the loop (reference renders and PNG writing included).
   const double cpu_ms_per_frame = (cpu_seconds() - cpu0) * 1e3 / frames;
   csv.close();
-  if (!csv) throw IoError(IoErrorCode::WriteFailed, "cannot write " + csv_path);
+  if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
   std::filesystem::rename(csv_path + ".tmp", csv_path);
 
   const double med = percentile(frame_ms, 0.5), p99 = percentile(frame_ms, 0.99);
@@ -599,7 +599,7 @@ int run(int argc, char** argv) {
     j.end_object();
     j.finish();
     js.close();
-    if (!js) throw IoError(IoErrorCode::WriteFailed, "cannot write " + json_path);
+    if (!js) throw Error(ErrorCode::WriteFailed, "cannot write " + json_path);
   }
   std::filesystem::rename(json_path + ".tmp", json_path);
   std::printf(

@@ -4,7 +4,7 @@
 // --repeat runs, one core). Usage: codec-probe [--steps 1,2,4,...] [--tile N] [--repeat N]
 //   [--max-error E] FILE...
 // Exit codes (project-wide): 0 success; 1 usage error; 2 input not found or unreadable;
-// 3..8 input format problems (see terrain::IoErrorCode); 10 codec error; 70 internal error.
+// 3..8 input format problems (see terrain::ErrorCode); 10 codec error; 70 internal error.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "codec/codec.h"
 #include "readers/heightmap.h"
 
@@ -91,9 +92,9 @@ int main(int argc, char** argv) {
       terrain::ReadOptions ro;
       if (path.find("terrainrgb") != std::string::npos) ro.terrain_rgb = true;
       map = terrain::read_heightmap(path, ro);
-    } catch (const terrain::IoError& e) {
+    } catch (const terrain::Error& e) {
       std::fprintf(stderr, "codec-probe: %s\n", e.what());
-      return int(e.code());
+      return cli::exit_status(e.code());
     }
     bool integral = true;
     for (double v : map.values) integral = integral && v == std::floor(v);

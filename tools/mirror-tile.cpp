@@ -22,7 +22,7 @@ int64_t reflect(int64_t i, int64_t n) {
 
 void write_all(std::FILE* f, const void* data, size_t bytes, const std::string& path) {
   if (std::fwrite(data, 1, bytes, f) != bytes)
-    throw terrain::IoError(terrain::IoErrorCode::WriteFailed, path + ": cannot write (disk full?)");
+    throw terrain::Error(terrain::ErrorCode::WriteFailed, path + ": cannot write (disk full?)");
 }
 
 int run(int argc, char** argv) {
@@ -61,14 +61,14 @@ int run(int argc, char** argv) {
     }
     const double v = tile.values[size_t(k)];
     if (v != std::round(v) || v <= -32768.0 || v > 32767.0)
-      throw terrain::IoError(terrain::IoErrorCode::UnknownType,
-                             input + ": sample " + std::to_string(v) + " does not fit int16 (-32767..32767)");
+      throw terrain::Error(terrain::ErrorCode::UnknownType,
+                           input + ": sample " + std::to_string(v) + " does not fit int16 (-32767..32767)");
     samples[size_t(k)] = int16_t(v);
   }
 
   const std::string temp = output + ".tmp";
   std::FILE* f = std::fopen(temp.c_str(), "wb");
-  if (!f) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ": cannot create");
+  if (!f) throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ": cannot create");
   std::setvbuf(f, nullptr, _IOFBF, size_t(1) << 20);
   std::vector<int16_t> row(static_cast<size_t>(width));
   try {
@@ -77,14 +77,13 @@ int run(int argc, char** argv) {
       for (int64_t x = 0; x < width; ++x) row[size_t(x)] = src[reflect(x, tw)];  // little-endian host
       write_all(f, row.data(), row.size() * sizeof(int16_t), output);
     }
-    if (std::fclose(f) != 0)
-      throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ": cannot close");
+    if (std::fclose(f) != 0) throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ": cannot close");
   } catch (...) {
     std::remove(temp.c_str());
     throw;
   }
   std::FILE* js = std::fopen((output + ".json").c_str(), "wb");
-  if (!js) throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ".json: cannot create");
+  if (!js) throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ".json: cannot create");
   std::fprintf(
       js,
       "{\n  \"width\": %lld,\n  \"height\": %lld,\n  \"type\": \"int16\",\n  \"byte_order\": \"little\",\n"
@@ -94,7 +93,7 @@ int run(int argc, char** argv) {
       tile.info.horizontal_units.c_str(), tile.info.vertical_scale, tile.info.vertical_offset,
       has_voids ? "-32768" : "null");
   if (std::fclose(js) != 0)
-    throw terrain::IoError(terrain::IoErrorCode::WriteFailed, output + ".json: cannot write");
+    throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ".json: cannot write");
   std::filesystem::rename(temp, output);
   if (!common.quiet)
     std::cerr << "mirror-tile: wrote " << output << " (" << width << "x" << height << " int16, "

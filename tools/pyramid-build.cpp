@@ -117,8 +117,7 @@ int run(int argc, char** argv) {
     if (json_path != "-") {
       file.open(json_path);
       if (!file)
-        throw terrain::IoError(terrain::IoErrorCode::WriteFailed,
-                               json_path + ": cannot write the JSON report");
+        throw terrain::Error(terrain::ErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
     }
     std::ostream& os = json_path == "-" ? std::cout : file;
     cli::JsonWriter j(os);
@@ -151,12 +150,5 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return cli::run_tool("pyramid-build", [&] {
-    try {
-      return run(argc, argv);
-    } catch (const terrain::runtime::FormatError& e) {
-      std::cerr << "pyramid-build: error: " << e.what() << "\n";
-      return terrain::runtime::exit_code(e.code());
-    }
-  });
+  return cli::run_tool("pyramid-build", [&] { return run(argc, argv); });
 }

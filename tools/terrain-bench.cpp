@@ -30,6 +30,8 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
+
 namespace {
 
 constexpr int kExitOk = 0, kExitUsage = 1, kExitNotFound = 2, kExitWriteFailed = 9, kExitInternal = 70;
@@ -278,16 +280,6 @@ void write_csv_row(std::ostream& os, const Row& r) {
      << r.unit_m << ',' << r.width << ',' << r.height << ',' << buf << ",\"" << r.error << "\"\n";
 }
 
-std::string json_string(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (static_cast<unsigned char>(c) < 0x20) continue;
-    out += c;
-  }
-  return out + "\"";
-}
-
 void write_json(std::ostream& os, const std::vector<Row>& rows) {
   os << "[\n";
   for (size_t i = 0; i < rows.size(); ++i) {
@@ -295,8 +287,8 @@ void write_json(std::ostream& os, const std::vector<Row>& rows) {
     const peers::Result& x = r.result;
     const double psnr = std::isfinite(x.error.psnr_db) ? x.error.psnr_db : -1;
     const double n = double(r.width * r.height);
-    os << "  {\"file\": " << json_string(r.file) << ", \"codec\": " << json_string(r.codec)
-       << ", \"setting\": " << json_string(r.setting) << ", \"unit_m\": " << r.unit_m
+    os << "  {\"file\": " << terrain::json_quote(r.file) << ", \"codec\": " << terrain::json_quote(r.codec)
+       << ", \"setting\": " << terrain::json_quote(r.setting) << ", \"unit_m\": " << r.unit_m
        << ", \"width\": " << r.width << ", \"height\": " << r.height << ", \"bytes\": " << x.bytes
        << ", \"bits_per_sample\": " << x.bits_per_sample << ", \"rms_m\": " << x.error.rms * r.unit_m
        << ", \"max_abs_m\": " << x.error.max_abs * r.unit_m
@@ -305,7 +297,7 @@ void write_json(std::ostream& os, const std::vector<Row>& rows) {
        << ", \"encode_cpu_s\": " << x.encode_cpu_seconds << ", \"decode_cpu_s\": " << x.decode_cpu_seconds
        << ", \"region_cpu_msamples_s\": " << msps(double(r.region_samples), r.region_cpu_seconds)
        << ", \"encode_cpu_msamples_s\": " << msps(n, x.encode_cpu_seconds)
-       << ", \"error\": " << json_string(r.error) << "}" << (i + 1 < rows.size() ? ",\n" : "\n");
+       << ", \"error\": " << terrain::json_quote(r.error) << "}" << (i + 1 < rows.size() ? ",\n" : "\n");
   }
   os << "]\n";
 }
@@ -869,9 +861,9 @@ int main(int argc, char** argv) {
           (long long)file->level_size(finest).height, msps(double(t.samples), t.seconds),
           msps(double(t.samples), t.cpu_seconds));
       return kExitOk;
-    } catch (const terrain::runtime::FormatError& e) {
+    } catch (const terrain::Error& e) {
       std::fprintf(stderr, "terrain-bench: %s\n", e.what());
-      return terrain::runtime::exit_code(e.code());
+      return cli::exit_status(e.code());
     }
   }
 
@@ -918,9 +910,9 @@ int main(int argc, char** argv) {
     try {
       read_options.vertical_scale = opt.vertical_scale ? opt.vertical_scale : known_vertical_scale(path);
       map = terrain::read_heightmap(path, read_options);
-    } catch (const terrain::IoError& e) {
+    } catch (const terrain::Error& e) {
       std::fprintf(stderr, "terrain-bench: %s\n", e.what());
-      return int(e.code());
+      return cli::exit_status(e.code());
     } catch (const std::exception& e) {
       std::fprintf(stderr, "terrain-bench: %s: %s\n", path.c_str(), e.what());
       return kExitNotFound;

@@ -138,12 +138,7 @@ int run(int argc, char** argv) {
   parser.add_common(common);
   if (auto status = parser.parse(argc, argv)) return *status;
   if (terrain::runtime::is_container_file(path)) {
-    try {
-      return describe_pyramid(path, common, verify);
-    } catch (const terrain::runtime::FormatError& e) {
-      std::cerr << "terrain-info: error: " << e.what() << "\n";
-      return terrain::runtime::exit_code(e.code());
-    }
+    return describe_pyramid(path, common, verify);
   }
   if (verify) throw cli::UsageError("--verify applies to pyramid files only");
 

@@ -74,8 +74,8 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
   const std::string tmp = path + ".tmp.png";
   try {
     write_image8(tmp, int(ow), int(oh), 3, rgb.data());
-  } catch (const IoError& e) {
-    throw IoError(IoErrorCode::WriteFailed, path + ": cannot write the heat-map (" + e.what() + ")");
+  } catch (const Error& e) {
+    throw Error(ErrorCode::WriteFailed, path + ": cannot write the heat-map (" + e.what() + ")");
   }
   std::filesystem::rename(tmp, path);
 }
@@ -106,10 +106,10 @@ int run(int argc, char** argv) {
   const ContainerInfo& info = file->info();
   const Heightmap map = read_heightmap(input, read_options);
   if (uint64_t(map.width()) != info.width || uint64_t(map.height()) != info.height)
-    throw IoError(IoErrorCode::DimensionMismatch,
-                  input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
-                      " does not match the pyramid's " + std::to_string(info.width) + "x" +
-                      std::to_string(info.height));
+    throw Error(ErrorCode::DimensionMismatch,
+                input + ": " + std::to_string(map.width()) + "x" + std::to_string(map.height()) +
+                    " does not match the pyramid's " + std::to_string(info.width) + "x" +
+                    std::to_string(info.height));
   // The reference below is built without the builder's centring offset, so its units map to metres
   // with the input's own offset.
   const double mpu = info.vertical_scale, off = map.info.vertical_offset;
@@ -202,7 +202,7 @@ int run(int argc, char** argv) {
     std::ofstream f;
     if (json_path != "-") {
       f.open(json_path);
-      if (!f) throw IoError(IoErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
+      if (!f) throw Error(ErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
     }
     std::ostream& os = json_path == "-" ? std::cout : f;
     cli::JsonWriter j(os);
@@ -246,12 +246,5 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return cli::run_tool("terrain-report", [&] {
-    try {
-      return run(argc, argv);
-    } catch (const FormatError& e) {
-      std::cerr << "terrain-report: error: " << e.what() << "\n";
-      return exit_code(e.code());
-    }
-  });
+  return cli::run_tool("terrain-report", [&] { return run(argc, argv); });
 }

@@ -14,27 +14,13 @@
 #include "build/ptc_coder.h"
 #include "codec/codec.h"
 #include "container/pyramid_file.h"
+#include "core/text.h"
 
 namespace terrain::runtime {
 namespace {
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-std::string json_escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '"' || c == '\\')
-      out += '\\', out += c;
-    else if (static_cast<unsigned char>(c) < 0x20) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", c);
-      out += buf;
-    } else
-      out += c;
-  }
-  return out;
 }
 
 std::string directory_of(const std::string& path) {
@@ -102,7 +88,7 @@ Heightmap read_calibration_window(const std::string& input, const ReadOptions& r
   std::vector<uint8_t> valid(size_t(g.width));
   for (int64_t y = 0; y < ch; ++y) {
     if (reader->read_rows(1, row.data(), valid.data()) != 1)
-      throw IoError(IoErrorCode::Truncated, input + ": ended while reading the calibration window");
+      throw Error(ErrorCode::Truncated, input + ": ended while reading the calibration window");
     std::copy_n(row.begin() + x0, cw, map.values.begin() + y * cw);
     std::copy_n(valid.begin() + x0, cw, map.valid.begin() + y * cw);
   }
@@ -284,12 +270,12 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   // byte-identical file whatever the thread count or machine load (build times go to --json).
   std::ostringstream meta;
   meta.precision(10);
-  meta << "{\"tool\":\"pyramid-build\",\"version\":\"0.1.0\",\"source\":\"" << json_escape(input) << "\""
+  meta << "{\"tool\":\"pyramid-build\",\"version\":\"0.1.0\",\"source\":" << json_quote(input)
        << ",\"source_format\":\"" << file_format_name(g.format) << "\",\"source_type\":\""
        << sample_type_name(g.sample_type) << "\",\"step_units\":" << co.step
        << ",\"max_error_units\":" << out.max_error_units << ",\"tile_size\":" << co.tile_size
-       << ",\"band_rows\":" << coder.band_rows() << ",\"filter\":\""
-       << json_escape(out.build.filter_report.summary()) << "\""
+       << ",\"band_rows\":" << coder.band_rows()
+       << ",\"filter\":" << json_quote(out.build.filter_report.summary())
        << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
   writer.finish(out.build, info, meta.str());
   out.file_bytes = uint64_t(std::filesystem::file_size(output));

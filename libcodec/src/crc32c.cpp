@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "codec/codec.h"
+#include "core/bytes.h"
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <nmmintrin.h>
@@ -35,15 +36,13 @@ constexpr Tables make_tables() {
 }
 constexpr Tables kTables = make_tables();
 
-inline uint32_t load_le32(const uint8_t* p) {
-  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
-}
+using terrain::bytes::get_u32;
 
 // `state` is the inverted CRC register.
 uint32_t update_portable(uint32_t state, const uint8_t* p, size_t n) {
   while (n >= 8) {
-    const uint32_t lo = state ^ load_le32(p);
-    const uint32_t hi = load_le32(p + 4);
+    const uint32_t lo = state ^ get_u32(p);
+    const uint32_t hi = get_u32(p + 4);
     state = kTables[7][lo & 0xFF] ^ kTables[6][(lo >> 8) & 0xFF] ^ kTables[5][(lo >> 16) & 0xFF] ^
             kTables[4][lo >> 24] ^ kTables[3][hi & 0xFF] ^ kTables[2][(hi >> 8) & 0xFF] ^
             kTables[1][(hi >> 16) & 0xFF] ^ kTables[0][hi >> 24];

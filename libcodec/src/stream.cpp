@@ -10,6 +10,7 @@
 #include "codec/crc32c.h"
 #include "codec/internal/quantizer.h"
 #include "codec/internal/tile_coder.h"
+#include "core/bytes.h"
 
 namespace codec {
 
@@ -48,50 +49,19 @@ constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
 
-void put_u16(uint8_t* p, uint16_t v) {
-  for (int i = 0; i < 2; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-void put_u32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-void put_u64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-uint16_t get_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
-uint32_t get_u32(const uint8_t* p) {
-  uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-uint64_t get_u64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-// LEB128: 7 bits per byte, low groups first, high bit = more bytes follow.
-size_t put_varint(uint8_t* p, uint32_t v) {
-  size_t n = 0;
-  while (v >= 0x80) {
-    p[n++] = uint8_t(v | 0x80);
-    v >>= 7;
-  }
-  p[n++] = uint8_t(v);
-  return n;
-}
-// Reads a varint of at most 5 bytes from [p, end); false if it runs past end or exceeds 32 bits.
+using terrain::bytes::get_u16;
+using terrain::bytes::get_u32;
+using terrain::bytes::get_u64;
+using terrain::bytes::put_u16;
+using terrain::bytes::put_u32;
+using terrain::bytes::put_u64;
+size_t put_varint(uint8_t* p, uint32_t v) { return size_t(terrain::bytes::put_varint(p, v) - p); }
+// A tile size in the index is at most 32 bits.
 bool get_varint(const uint8_t*& p, const uint8_t* end, uint32_t* v) {
   uint64_t value = 0;
-  for (int shift = 0; shift < 35; shift += 7) {
-    if (p == end) return false;
-    const uint8_t byte = *p++;
-    value |= uint64_t(byte & 0x7F) << shift;
-    if (!(byte & 0x80)) {
-      if (value > UINT32_MAX) return false;
-      *v = uint32_t(value);
-      return true;
-    }
-  }
-  return false;
+  if (!terrain::bytes::get_varint(p, end, &value, UINT32_MAX)) return false;
+  *v = uint32_t(value);
+  return true;
 }
 
 bool valid_tile_size(uint32_t t) { return t >= kMinTile && t <= kMaxTile && t % 16 == 0; }

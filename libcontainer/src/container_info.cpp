@@ -1,4 +1,4 @@
-// Error code names and the consistency rules of a pyramid description, shared by writer and reader.
+// Error-mode names and the consistency rules of a pyramid description, shared by writer and reader.
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -6,26 +6,6 @@
 #include "container/container.h"
 
 namespace terrain::runtime {
-
-const char* format_error_code_name(FormatErrorCode code) {
-  switch (code) {
-    case FormatErrorCode::NotFound:
-      return "not found";
-    case FormatErrorCode::Truncated:
-      return "truncated";
-    case FormatErrorCode::BadMagic:
-      return "not a pyramid container";
-    case FormatErrorCode::UnsupportedVersion:
-      return "unsupported version";
-    case FormatErrorCode::ChecksumMismatch:
-      return "checksum mismatch";
-    case FormatErrorCode::Corrupt:
-      return "corrupt";
-    case FormatErrorCode::WriteFailed:
-      return "write failed";
-  }
-  return "unknown";
-}
 
 const char* error_mode_name(ErrorMode mode) {
   switch (mode) {
@@ -46,24 +26,6 @@ std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t l
   if (!e) return std::nullopt;
   const double metres_per_unit = std::abs(info.vertical_scale);
   return LevelError{e->rms * metres_per_unit, e->max_abs * metres_per_unit};
-}
-
-int exit_code(FormatErrorCode code) {
-  switch (code) {
-    case FormatErrorCode::NotFound:
-      return 2;
-    case FormatErrorCode::Truncated:
-      return 3;
-    case FormatErrorCode::BadMagic:
-      return 6;
-    case FormatErrorCode::WriteFailed:
-      return 9;
-    case FormatErrorCode::UnsupportedVersion:
-    case FormatErrorCode::ChecksumMismatch:
-    case FormatErrorCode::Corrupt:
-      return 10;
-  }
-  return 70;
 }
 
 namespace {

@@ -28,11 +28,11 @@ class Parser {
  public:
   Parser(const std::string& path, uint64_t file_size) : path_(path), file_size_(file_size) {}
 
-  [[noreturn]] void fail(FormatErrorCode code, const std::string& what) const {
-    throw FormatError(code, path_ + ": " + what);
+  [[noreturn]] void fail(ErrorCode code, const std::string& what) const {
+    throw Error(code, path_ + ": " + what);
   }
   void require(bool ok, const std::string& what) const {
-    if (!ok) fail(FormatErrorCode::Corrupt, what);
+    if (!ok) fail(ErrorCode::CorruptData, what);
   }
   // Regions are checked with subtraction only, so no 64-bit sum can wrap.
   void require_region(uint64_t offset, uint64_t size, uint64_t min_offset, const std::string& what) const {
@@ -44,7 +44,7 @@ class Parser {
   void require_crc(const uint8_t* data, uint64_t size, uint32_t stored, const std::string& what) const {
     const uint32_t actual = crc32c(data, size_t(size));
     if (actual != stored) {
-      fail(FormatErrorCode::ChecksumMismatch,
+      fail(ErrorCode::ChecksumMismatch,
            what + " checksum mismatch (stored " + hex(stored) + ", computed " + hex(actual) + ")");
     }
   }
@@ -92,12 +92,12 @@ Container Container::open(const std::string& path) {
   const uint8_t* base = c.file_->data();
   const uint64_t size = c.file_->size();
   const Parser parse(path, size);
-  using Code = FormatErrorCode;
+  using Code = ErrorCode;
 
   // --- superblock
   if (size == 0) parse.fail(Code::Truncated, "empty file");
   if (std::memcmp(base, kMagic, size_t(std::min<uint64_t>(size, sizeof kMagic))) != 0) {
-    parse.fail(Code::BadMagic, "not a pyramid container (bad magic bytes)");
+    parse.fail(Code::UnknownType, "not a pyramid container (bad magic bytes)");
   }
   if (size < 16)
     parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, too short for a header");
@@ -233,7 +233,7 @@ Container Container::open(const std::string& path) {
   try {
     validate_info(info);
   } catch (const std::invalid_argument& e) {
-    parse.fail(Code::Corrupt, e.what());
+    parse.fail(Code::CorruptData, e.what());
   }
 
   // --- metadata and mask, each with its own checksum
@@ -276,10 +276,10 @@ Container Container::open(const std::string& path) {
   uint64_t covered_to = 0;
   for (size_t i = 0; i < regions.size(); ++i) {
     if (covered_to > regions[i].offset) {
-      parse.fail(Code::Corrupt, regions[i - 1].what + " overlaps " + regions[i].what);
+      parse.fail(Code::CorruptData, regions[i - 1].what + " overlaps " + regions[i].what);
     }
     if (!Parser::all_zero(base + covered_to, size_t(regions[i].offset - covered_to))) {
-      parse.fail(Code::Corrupt, "padding before " + regions[i].what + " is not zero");
+      parse.fail(Code::CorruptData, "padding before " + regions[i].what + " is not zero");
     }
     covered_to = regions[i].offset + regions[i].size;
   }
@@ -329,10 +329,10 @@ void Container::verify() const {
   for (uint32_t l = 0; l < level_count(); ++l) {
     if (!level_checksum_ok(l)) {
       const LevelView v = level(l);
-      throw FormatError(FormatErrorCode::ChecksumMismatch,
-                        path_ + ": level " + std::to_string(l) + " blob checksum mismatch (stored " +
-                            Parser::hex(info_.levels[l].blob_crc) + ", computed " +
-                            Parser::hex(crc32c(v.data, v.size)) + ")");
+      throw Error(ErrorCode::ChecksumMismatch, path_ + ": level " + std::to_string(l) +
+                                                   " blob checksum mismatch (stored " +
+                                                   Parser::hex(info_.levels[l].blob_crc) + ", computed " +
+                                                   Parser::hex(crc32c(v.data, v.size)) + ")");
     }
   }
 }

@@ -55,7 +55,7 @@ ContainerWriter::~ContainerWriter() {
 
 void ContainerWriter::fail(const std::string& what) {
   const int err = errno;  // before any allocation below can disturb it
-  throw FormatError(FormatErrorCode::WriteFailed, temp_path_ + ": " + what + ": " + std::strerror(err));
+  throw Error(ErrorCode::WriteFailed, temp_path_ + ": " + what + ": " + std::strerror(err));
 }
 
 void ContainerWriter::write_bytes(const void* data, size_t size) {
@@ -269,8 +269,8 @@ void ContainerWriter::finish() {
   fd_ = -1;
   if (::close(fd) != 0) fail("cannot close");
   if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
-    throw FormatError(FormatErrorCode::WriteFailed,
-                      path_ + ": cannot rename " + temp_path_ + " onto it: " + std::strerror(errno));
+    throw Error(ErrorCode::WriteFailed,
+                path_ + ": cannot rename " + temp_path_ + " onto it: " + std::strerror(errno));
   }
   finished_ = true;
   // The rename is durable only once the directory entry is synced; failure here loses nothing

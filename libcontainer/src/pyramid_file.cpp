@@ -118,9 +118,7 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
 
 std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
                                        const std::string& what) {
-  auto corrupt = [&](const std::string& why) {
-    return FormatError(FormatErrorCode::Corrupt, what + ": " + why);
-  };
+  auto corrupt = [&](const std::string& why) { return Error(ErrorCode::CorruptData, what + ": " + why); };
   if (size < kFooterSize) throw corrupt("level blob too small for its band table");
   const uint8_t* footer = blob + size - kFooterSize;
   const uint64_t count = get_u64(footer);
@@ -129,7 +127,7 @@ std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t
   const size_t table_bytes = size_t(count) * kBandRecordSize;
   const uint8_t* table = footer - table_bytes;
   if (crc32c(table, table_bytes) != get_u32(footer + 12))
-    throw FormatError(FormatErrorCode::ChecksumMismatch, what + ": band table checksum mismatch");
+    throw Error(ErrorCode::ChecksumMismatch, what + ": band table checksum mismatch");
   const uint64_t data_end = uint64_t(table - blob);
   std::vector<BandView> out;
   uint64_t next_row = 0;

@@ -270,7 +270,7 @@ class LevelOrderBuffer {
     uint8_t b;
     for (int shift = 0;; shift += 7) {
       if (shift > 63 || !f.read_byte(&b))
-        throw IoError(IoErrorCode::Truncated, f.path() + ": band spill truncated");
+        throw Error(ErrorCode::Truncated, f.path() + ": band spill truncated");
       v |= uint64_t(b & 0x7f) << shift;
       if (!(b & 0x80)) return v;
     }
@@ -354,8 +354,8 @@ class StreamingBuilder {
       for (int64_t got = 0; got < b.rows;) {
         const int64_t n = input.read_rows(b.rows - got, b.values.data() + got * W, b.valid.data() + got * W);
         if (n <= 0 || n > b.rows - got)
-          throw IoError(IoErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) +
-                                                    " of " + std::to_string(H) + " rows");
+          throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) + " of " +
+                                                std::to_string(H) + " rows");
         got += n;
       }
       b.voids = converter.convert(b.values.data(), b.valid.data(), y, b.rows, b.ints.data());

@@ -42,7 +42,7 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
                                     std::vector<uint8_t>* valid) {
   const auto& levels = p.header.levels;
   if (up_to_level < 0 || up_to_level >= int(levels.size()) || p.bands.size() != levels.size())
-    throw IoError(IoErrorCode::CorruptData, "pyramid: level " + std::to_string(up_to_level) + " not present");
+    throw Error(ErrorCode::CorruptData, "pyramid: level " + std::to_string(up_to_level) + " not present");
   std::vector<int32_t> prev, cur, rhat;
   UpsampleScratch scratch;
   for (int l = 0; l <= up_to_level; ++l) {
@@ -56,12 +56,11 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
     int64_t covered = 0;
     for (const auto& b : p.bands[size_t(l)]) {
       if (b.y0 != covered || b.rows <= 0 || b.y0 + b.rows > fs.height)
-        throw IoError(IoErrorCode::CorruptData,
-                      "pyramid: bands of level " + std::to_string(l) + " out of order");
+        throw Error(ErrorCode::CorruptData, "pyramid: bands of level " + std::to_string(l) + " out of order");
       rhat.resize(size_t(b.rows * fs.width));
       if (!coder.decode(b.bytes.data(), b.bytes.size(), fs.width, b.rows, rhat.data()))
-        throw IoError(IoErrorCode::CorruptData, "pyramid: bad residual band at level " + std::to_string(l) +
-                                                    ", row " + std::to_string(b.y0));
+        throw Error(ErrorCode::CorruptData, "pyramid: bad residual band at level " + std::to_string(l) +
+                                                ", row " + std::to_string(b.y0));
       int32_t* row = cur.data() + b.y0 * fs.width;
       for (size_t k = 0; k < rhat.size(); ++k)
         row[k] = int32_t(std::clamp<int64_t>(int64_t(row[k]) + rhat[k], std::numeric_limits<int32_t>::min(),
@@ -69,7 +68,7 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
       covered += b.rows;
     }
     if (covered != fs.height)
-      throw IoError(IoErrorCode::CorruptData, "pyramid: level " + std::to_string(l) + " is incomplete");
+      throw Error(ErrorCode::CorruptData, "pyramid: level " + std::to_string(l) + " is incomplete");
     prev.swap(cur);
   }
   if (valid) {
@@ -81,11 +80,11 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
         if (b.y0 != covered || b.y0 + b.rows > fs.height ||
             !decode_mask_rows(b.bytes.data(), b.bytes.size(), fs.width, b.rows,
                               valid->data() + b.y0 * fs.width))
-          throw IoError(IoErrorCode::CorruptData,
-                        "pyramid: bad validity mask band at row " + std::to_string(b.y0));
+          throw Error(ErrorCode::CorruptData,
+                      "pyramid: bad validity mask band at row " + std::to_string(b.y0));
         covered += b.rows;
       }
-      if (covered != fs.height) throw IoError(IoErrorCode::CorruptData, "pyramid: validity mask incomplete");
+      if (covered != fs.height) throw Error(ErrorCode::CorruptData, "pyramid: validity mask incomplete");
     }
   }
   return prev;

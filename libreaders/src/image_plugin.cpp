@@ -97,7 +97,7 @@ LoadedPlugin load_plugin() {
 
 }  // namespace
 
-const ImagePlugin& image_plugin(IoErrorCode code, const std::string& image_path) {
+const ImagePlugin& image_plugin(ErrorCode code, const std::string& image_path) {
   static std::once_flag once;
   static LoadedPlugin loaded;
   std::call_once(once, [] { loaded = load_plugin(); });

@@ -57,8 +57,8 @@ const char* file_format_name(FileFormat f) {
 
 namespace io {
 
-void fail(IoErrorCode code, const std::string& path, const std::string& problem) {
-  throw IoError(code, path + ": " + problem);
+void fail(ErrorCode code, const std::string& path, const std::string& problem) {
+  throw Error(code, path + ": " + problem);
 }
 
 std::string to_lower(std::string s) {
@@ -79,10 +79,10 @@ bool file_exists(const std::string& path) {
 uint64_t existing_file_size(const std::string& path) {
   std::error_code ec;
   auto status = std::filesystem::status(path, ec);
-  if (ec || !std::filesystem::exists(status)) fail(IoErrorCode::NotFound, path, "no such file");
-  if (!std::filesystem::is_regular_file(status)) fail(IoErrorCode::NotFound, path, "not a regular file");
+  if (ec || !std::filesystem::exists(status)) fail(ErrorCode::NotFound, path, "no such file");
+  if (!std::filesystem::is_regular_file(status)) fail(ErrorCode::NotFound, path, "not a regular file");
   auto size = std::filesystem::file_size(path, ec);
-  if (ec) fail(IoErrorCode::NotFound, path, "cannot read size: " + ec.message());
+  if (ec) fail(ErrorCode::NotFound, path, "cannot read size: " + ec.message());
   return size;
 }
 
@@ -120,7 +120,7 @@ uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
   // 2^31 per side keeps width*height*bytes far below 2^64 and every row index within int64.
   constexpr int64_t kMaxSide = int64_t(1) << 31;
   if (g.width <= 0 || g.height <= 0 || g.width > kMaxSide || g.height > kMaxSide)
-    fail(IoErrorCode::DimensionMismatch, path,
+    fail(ErrorCode::DimensionMismatch, path,
          "invalid dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height));
   return uint64_t(g.width) * uint64_t(g.height) * uint64_t(stored_bytes(layout.stored));
 }
@@ -162,14 +162,14 @@ AtomicOutput::~AtomicOutput() {
 void AtomicOutput::commit() {
   std::error_code ec;
   std::filesystem::rename(temp_, target_, ec);
-  if (ec) fail(IoErrorCode::WriteFailed, target_, "cannot rename " + temp_ + " into place: " + ec.message());
+  if (ec) fail(ErrorCode::WriteFailed, target_, "cannot rename " + temp_ + " into place: " + ec.message());
   committed_ = true;
 }
 
 double value_for_writing(const Heightmap& map, int64_t x, int64_t y, const std::string& path) {
   if (map.is_valid(x, y)) return map.at(x, y);
   if (!map.info.nodata)
-    fail(IoErrorCode::WriteFailed, path,
+    fail(ErrorCode::WriteFailed, path,
          "sample at row " + std::to_string(y) + ", column " + std::to_string(x) +
              " is void but the grid has no nodata value to write for it");
   return *map.info.nodata;

@@ -26,7 +26,7 @@ Kind detect_kind(const std::string& path, const ReadOptions& options) {
     got = std::fread(magic, 1, 4, f);
     std::fclose(f);
   } else {
-    io::fail(IoErrorCode::NotFound, path, std::string("cannot open: ") + std::strerror(errno));
+    io::fail(ErrorCode::NotFound, path, std::string("cannot open: ") + std::strerror(errno));
   }
   if (got == 4) {
     if (std::memcmp(magic, "\x89PNG", 4) == 0 || std::memcmp(magic, "II*\0", 4) == 0 ||
@@ -35,7 +35,7 @@ Kind detect_kind(const std::string& path, const ReadOptions& options) {
   }
   if (options.width || options.height || options.sample_type || io::file_exists(path + ".json"))
     return Kind::Raw;
-  io::fail(IoErrorCode::UnknownType, path,
+  io::fail(ErrorCode::UnknownType, path,
            "unknown format: expected .hgt[.gz], .bil/.flt, .png/.tif/.exr, or a raw grid with a .json "
            "sidecar or --type/--width/--height");
 }
@@ -76,7 +76,7 @@ Heightmap read_heightmap(const std::string& path, const ReadOptions& options) {
   map.info = reader->info();
   const int64_t w = map.info.width, h = map.info.height;
   if (uint64_t(w) * uint64_t(h) > (uint64_t(1) << 34))
-    io::fail(IoErrorCode::DimensionMismatch, path, "grid too large to hold in memory; use the band reader");
+    io::fail(ErrorCode::DimensionMismatch, path, "grid too large to hold in memory; use the band reader");
   map.values.resize(size_t(w * h));
   map.valid.resize(size_t(w * h));
   // Rows land directly in place, so no band buffer is needed on top of the result.
@@ -84,7 +84,7 @@ Heightmap read_heightmap(const std::string& path, const ReadOptions& options) {
   int64_t row = 0;
   while (row < h) {
     int64_t n = reader->read_rows(kBandRows, map.values.data() + row * w, map.valid.data() + row * w);
-    if (n <= 0) io::fail(IoErrorCode::Truncated, path, "reader stopped at row " + std::to_string(row));
+    if (n <= 0) io::fail(ErrorCode::Truncated, path, "reader stopped at row " + std::to_string(row));
     row += n;
   }
   bool all_valid = true;

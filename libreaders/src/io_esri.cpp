@@ -25,14 +25,14 @@ using Header = std::map<std::string, std::string>;  // upper-case keyword -> val
 // `where` names the grid and its header in error messages.
 Header read_header(const std::string& hdr, const std::string& where) {
   if (!file_exists(hdr))
-    fail(IoErrorCode::MissingField, where, "missing header file " + hdr + " for the ESRI grid");
+    fail(ErrorCode::MissingField, where, "missing header file " + hdr + " for the ESRI grid");
   std::ifstream in(hdr);
-  if (!in) fail(IoErrorCode::NotFound, where, "cannot open the header");
+  if (!in) fail(ErrorCode::NotFound, where, "cannot open the header");
   Header out;
   std::string line;
   int line_no = 0;
   while (std::getline(in, line)) {
-    if (++line_no > 10000) fail(IoErrorCode::MissingField, where, "header has too many lines");
+    if (++line_no > 10000) fail(ErrorCode::MissingField, where, "header has too many lines");
     std::istringstream ls(line);
     std::string key, value;
     if (!(ls >> key)) continue;
@@ -54,16 +54,16 @@ std::optional<double> header_number(const Header& h, const std::string& key, con
   auto res = std::from_chars(begin, t.data() + t.size(), v);
   if (res.ec != std::errc() || res.ptr != t.data() + t.size()) {
     if (to_lower(t) == "nan") return std::nan("");
-    fail(IoErrorCode::MissingField, where, key + " is not a number: \"" + t + "\"");
+    fail(ErrorCode::MissingField, where, key + " is not a number: \"" + t + "\"");
   }
   return v;
 }
 
 int64_t header_dimension(const Header& h, const std::string& key, const std::string& where) {
   auto v = header_number(h, key, where);
-  if (!v) fail(IoErrorCode::MissingField, where, "missing " + key);
+  if (!v) fail(ErrorCode::MissingField, where, "missing " + key);
   if (!(*v >= 1 && *v <= 2147483648.0) || *v != std::floor(*v))
-    fail(IoErrorCode::MissingField, where, key + " must be a positive integer");
+    fail(ErrorCode::MissingField, where, key + " must be a positive integer");
   return int64_t(*v);
 }
 
@@ -82,19 +82,19 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
   g.height = header_dimension(h, "NROWS", where);
   g.width = header_dimension(h, "NCOLS", where);
   if (auto nb = header_number(h, "NBANDS", where); nb && *nb != 1)
-    fail(IoErrorCode::UnknownType, where,
+    fail(ErrorCode::UnknownType, where,
          "only single-band grids are supported (NBANDS " + format_double(*nb) + ")");
 
   int nbits = is_flt ? 32 : 8;  // the BIL default is 8-bit unsigned
   if (auto nb = header_number(h, "NBITS", where)) {
     if (!(*nb == 8 || *nb == 16 || *nb == 32))
-      fail(IoErrorCode::UnknownType, where, "unsupported NBITS " + format_double(*nb));
+      fail(ErrorCode::UnknownType, where, "unsupported NBITS " + format_double(*nb));
     nbits = int(*nb);
   }
   std::string pixel = h.count("PIXELTYPE") ? to_lower(h["PIXELTYPE"]) : (is_flt ? "float" : "");
   if (pixel.empty()) pixel = nbits == 8 ? "unsignedint" : "signedint";
   if (pixel == "float" || pixel == "floatingpoint") {
-    if (nbits != 32) fail(IoErrorCode::UnknownType, where, "float grids must have NBITS 32");
+    if (nbits != 32) fail(ErrorCode::UnknownType, where, "float grids must have NBITS 32");
     layout.stored = StoredType::Float32;
     g.sample_type = SampleType::Float32;
   } else if (pixel == "signedint" || pixel == "unsignedint") {
@@ -109,11 +109,11 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
       layout.stored = StoredType::Int32;
       g.sample_type = SampleType::Int32;
     } else {
-      fail(IoErrorCode::UnknownType, where,
+      fail(ErrorCode::UnknownType, where,
            "unsupported NBITS " + std::to_string(nbits) + " for PIXELTYPE " + h["PIXELTYPE"]);
     }
   } else {
-    fail(IoErrorCode::UnknownType, where, "unknown PIXELTYPE \"" + h["PIXELTYPE"] + "\"");
+    fail(ErrorCode::UnknownType, where, "unknown PIXELTYPE \"" + h["PIXELTYPE"] + "\"");
   }
 
   if (h.count("BYTEORDER")) {
@@ -123,16 +123,16 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
     else if (bo == "m" || bo == "msbfirst")
       layout.big_endian = true;
     else
-      fail(IoErrorCode::UnknownType, where, "unknown BYTEORDER \"" + h["BYTEORDER"] + "\"");
+      fail(ErrorCode::UnknownType, where, "unknown BYTEORDER \"" + h["BYTEORDER"] + "\"");
   }
   if (auto layout_kw = h.find("LAYOUT"); layout_kw != h.end()) {
     std::string l = to_lower(layout_kw->second);
     if (l != "bil" && l != "bip" && l != "bsq")
-      fail(IoErrorCode::UnknownType, where, "unknown LAYOUT \"" + layout_kw->second + "\"");
+      fail(ErrorCode::UnknownType, where, "unknown LAYOUT \"" + layout_kw->second + "\"");
   }
   if (auto skip = header_number(h, "SKIPBYTES", where)) {
     if (!(*skip >= 0 && *skip <= 4.0e18) || *skip != std::floor(*skip))
-      fail(IoErrorCode::MissingField, where, "SKIPBYTES must be a non-negative integer");
+      fail(ErrorCode::MissingField, where, "SKIPBYTES must be a non-negative integer");
     layout.data_offset = uint64_t(*skip);
   }
   if (auto v = header_number(h, "NODATA", where)) g.nodata = *v;
@@ -166,7 +166,7 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
   apply_common_overrides(g, options);
   uint64_t need = layout_bytes(path, layout) + layout.data_offset;
   if (size != need)
-    fail(IoErrorCode::DimensionMismatch, path,
+    fail(ErrorCode::DimensionMismatch, path,
          "header " + hdr + " describes " + std::to_string(g.width) + "x" + std::to_string(g.height) + " " +
              std::to_string(nbits) + "-bit samples (" + std::to_string(need) + " bytes) but the file has " +
              std::to_string(size) + " bytes (" + (size < need ? "too short" : "too long") + ")");

@@ -32,15 +32,15 @@ bool parse_tile_name(const std::string& name, int& lat, int& lon) {
 
 // gzip keeps the uncompressed length modulo 2^32 in its last four bytes (ISIZE, little endian).
 uint64_t gzip_uncompressed_size(const std::string& path, uint64_t file_size) {
-  if (file_size < 18) fail(IoErrorCode::Truncated, path, "too short to be a gzip stream");
+  if (file_size < 18) fail(ErrorCode::Truncated, path, "too short to be a gzip stream");
   FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) fail(IoErrorCode::NotFound, path, "cannot open");
+  if (!f) fail(ErrorCode::NotFound, path, "cannot open");
   unsigned char magic[2] = {0, 0}, tail[4] = {0, 0, 0, 0};
   bool ok = std::fread(magic, 1, 2, f) == 2 && fseeko(f, -4, SEEK_END) == 0 && std::fread(tail, 1, 4, f) == 4;
   std::fclose(f);
-  if (!ok) fail(IoErrorCode::NotFound, path, "read error");
+  if (!ok) fail(ErrorCode::NotFound, path, "read error");
   if (magic[0] != 0x1f || magic[1] != 0x8b)
-    fail(IoErrorCode::CorruptData, path, "not a gzip stream (bad magic)");
+    fail(ErrorCode::CorruptData, path, "not a gzip stream (bad magic)");
   return uint64_t(tail[0]) | uint64_t(tail[1]) << 8 | uint64_t(tail[2]) << 16 | uint64_t(tail[3]) << 24;
 }
 
@@ -68,7 +68,7 @@ RawLayout probe_hgt_layout(const std::string& path, const ReadOptions& options) 
     g.spacing_y = g.height > 1 ? 3600.0 / double(g.height - 1) : 3600.0;
     uint64_t need = layout_bytes(path, layout);
     if (size != need)
-      fail(size < need ? IoErrorCode::Truncated : IoErrorCode::Oversized, path,
+      fail(size < need ? ErrorCode::Truncated : ErrorCode::Oversized, path,
            std::string(what) + std::to_string(size) + " bytes, but " + std::to_string(g.width) + "x" +
                std::to_string(g.height) + " needs " + std::to_string(need));
   } else if (size == kSrtm3Bytes || size == kSrtm1Bytes) {
@@ -80,11 +80,11 @@ RawLayout probe_hgt_layout(const std::string& path, const ReadOptions& options) 
         (size < kSrtm3Bytes || size - kSrtm3Bytes < kSrtm1Bytes - size) ? kSrtm3Bytes : kSrtm1Bytes;
     const char* tile = nearest == kSrtm3Bytes ? "1201x1201 (SRTM3)" : "3601x3601 (SRTM1)";
     if (size < nearest)
-      fail(IoErrorCode::Truncated, path,
+      fail(ErrorCode::Truncated, path,
            std::string("truncated: ") + what + std::to_string(size) + " bytes, " +
                std::to_string(nearest - size) + " short of a " + tile + " tile (" + std::to_string(nearest) +
                " bytes)");
-    fail(IoErrorCode::Oversized, path,
+    fail(ErrorCode::Oversized, path,
          std::string("oversized: ") + what + std::to_string(size) + " bytes, " +
              std::to_string(size - nearest) + " more than a " + tile + " tile (" + std::to_string(nearest) +
              " bytes)");

@@ -33,14 +33,14 @@ struct OpenedImage {
 OpenedImage open_image(const std::string& path) {
   existing_file_size(path);  // NotFound with a clear message before the decoder's own
   OpenedImage image;
-  image.plugin = &image_plugin(IoErrorCode::UnknownType, path);
+  image.plugin = &image_plugin(ErrorCode::UnknownType, path);
   Message message{};
   terrain_image_reader* reader = nullptr;
   const int32_t status =
       image.plugin->open(path.c_str(), &reader, &image.header, message.data(), message.size());
   image.reader = ImageReaderHandle(reader, {image.plugin->close});
   if (status != TERRAIN_IMAGE_OK)
-    fail(IoErrorCode::CorruptData, path, "cannot decode image: " + std::string(message.data()));
+    fail(ErrorCode::CorruptData, path, "cannot decode image: " + std::string(message.data()));
   return image;
 }
 
@@ -52,14 +52,14 @@ ImagePlan plan_image(const std::string& path, const terrain_image_header& header
   g.height = header.height;
   g.format = FileFormat::Image;
   if (header.width <= 0 || header.height <= 0 || header.depth > 1)
-    fail(IoErrorCode::DimensionMismatch, path, "image has no usable 2-D size");
+    fail(ErrorCode::DimensionMismatch, path, "image has no usable 2-D size");
   const int32_t fmt = header.pixel;
   const std::string fmt_name = header.pixel_name;
   const bool rgb8 = fmt == TERRAIN_PIXEL_UINT8 && (header.channels == 3 || header.channels == 4);
   const bool is_png = ends_with_ci(path, ".png");
   if (options.terrain_rgb || (rgb8 && is_png)) {
     if (!rgb8)
-      fail(IoErrorCode::UnknownType, path,
+      fail(ErrorCode::UnknownType, path,
            "Terrain-RGB needs an 8-bit RGB or RGBA image, this one has " + std::to_string(header.channels) +
                " channels of " + fmt_name);
     g.format = FileFormat::TerrainRgbImage;
@@ -72,7 +72,7 @@ ImagePlan plan_image(const std::string& path, const terrain_image_header& header
     plan.channels = 3;
   } else {
     if (header.channels != 1 && header.channels != 2)
-      fail(IoErrorCode::UnknownType, path,
+      fail(ErrorCode::UnknownType, path,
            std::to_string(header.channels) + "-channel " + fmt_name +
                " image: expected one grey channel (or 8-bit RGB with --terrain-rgb)");
     if (fmt == TERRAIN_PIXEL_UINT16 || fmt == TERRAIN_PIXEL_UINT8) {
@@ -92,7 +92,7 @@ ImagePlan plan_image(const std::string& path, const terrain_image_header& header
       plan.read_pixel = TERRAIN_PIXEL_FLOAT;
       plan.read_bytes = 4;
     } else {
-      fail(IoErrorCode::UnknownType, path, "unsupported pixel type " + fmt_name);
+      fail(ErrorCode::UnknownType, path, "unsupported pixel type " + fmt_name);
     }
     plan.channels = 1;
   }
@@ -125,7 +125,7 @@ class ImageBandReader final : public BandReader {
       if (image_.plugin->read_rows(image_.reader.get(), int32_t(rows_read_), int32_t(rows_read_ + m),
                                    plan_.channels, plan_.read_pixel, buffer_.data(), message_.data(),
                                    message_.size()) != TERRAIN_IMAGE_OK)
-        fail(IoErrorCode::CorruptData, path_,
+        fail(ErrorCode::CorruptData, path_,
              "cannot decode rows " + std::to_string(rows_read_) + ".." + std::to_string(rows_read_ + m - 1) +
                  ": " + message_.data());
       buffer_y0_ = rows_read_;
@@ -172,7 +172,7 @@ class ImageBandReader final : public BandReader {
         // A NaN nodata value is matched by bit pattern, since NaN never compares equal.
         bool is_void = has_nodata && (bits == nodata_float_bits_ || f == nodata_as_float_);
         if (!is_void && !std::isfinite(f))
-          fail(IoErrorCode::NonFinite, path_,
+          fail(ErrorCode::NonFinite, path_,
                std::string(std::isnan(f) ? "NaN" : "Inf") + " at row " +
                    std::to_string(rows_read_ + i / g.width) + ", column " + std::to_string(i % g.width));
         values[i] = is_void ? 0.0 : double(f);
@@ -228,20 +228,20 @@ void write_image_bands(const std::string& path, const Heightmap& map, int32_t pi
                        Convert convert) {
   const GridInfo& g = map.info;
   if (g.width <= 0 || g.height <= 0 || map.values.size() != size_t(g.width * g.height))
-    fail(IoErrorCode::WriteFailed, path, "heightmap dimensions do not match its sample count");
+    fail(ErrorCode::WriteFailed, path, "heightmap dimensions do not match its sample count");
   if (g.width > (int64_t(1) << 30) || g.height > (int64_t(1) << 30))
-    fail(IoErrorCode::WriteFailed, path, "image too large");
+    fail(ErrorCode::WriteFailed, path, "image too large");
   // Convert (and so validate) every value before creating anything, so a refused grid leaves no file.
   for (int64_t y = 0; y < g.height; ++y)
     for (int64_t x = 0; x < g.width; ++x) convert(value_for_writing(map, x, y, path), x, y);
   AtomicOutput target(path);
   PluginImageWriter out(
-      image_plugin(IoErrorCode::WriteFailed, path));  // closed before the temporary is removed
+      image_plugin(ErrorCode::WriteFailed, path));  // closed before the temporary is removed
   const int32_t created =
       out.create(target.temp_path(), g.width, g.height, 1, pixel, compression, TERRAIN_IMAGE_NO_TIMESTAMP);
   if (created == TERRAIN_IMAGE_NO_WRITER)
-    fail(IoErrorCode::WriteFailed, path, "no image writer for this extension: " + out.message());
-  if (created != TERRAIN_IMAGE_OK) fail(IoErrorCode::WriteFailed, path, "cannot create: " + out.message());
+    fail(ErrorCode::WriteFailed, path, "no image writer for this extension: " + out.message());
+  if (created != TERRAIN_IMAGE_OK) fail(ErrorCode::WriteFailed, path, "cannot create: " + out.message());
   constexpr int64_t kBandRows = 64;
   std::vector<T> band(size_t(std::min<int64_t>(kBandRows, g.height) * g.width));
   for (int64_t y0 = 0; y0 < g.height; y0 += kBandRows) {
@@ -250,10 +250,10 @@ void write_image_bands(const std::string& path, const Heightmap& map, int32_t pi
       for (int64_t x = 0; x < g.width; ++x)
         band[size_t((y - y0) * g.width + x)] = convert(value_for_writing(map, x, y, path), x, y);
     if (out.write_rows(y0, y0 + n, band.data()) != TERRAIN_IMAGE_OK)
-      fail(IoErrorCode::WriteFailed, path, "write error: " + out.message());
+      fail(ErrorCode::WriteFailed, path, "write error: " + out.message());
   }
   if (out.finish() != TERRAIN_IMAGE_OK)
-    fail(IoErrorCode::WriteFailed, path, "write error on close: " + out.message());
+    fail(ErrorCode::WriteFailed, path, "write error on close: " + out.message());
   target.commit();
 }
 
@@ -277,7 +277,7 @@ namespace terrain {
 void write_image16(const std::string& path, const Heightmap& map) {
   const bool is_tiff = io::ends_with_ci(path, ".tif") || io::ends_with_ci(path, ".tiff");
   if (!is_tiff && !io::ends_with_ci(path, ".png"))
-    io::fail(IoErrorCode::WriteFailed, path, "16-bit images are written as .png, .tif or .tiff");
+    io::fail(ErrorCode::WriteFailed, path, "16-bit images are written as .png, .tif or .tiff");
   // Signed data goes to an int16 TIFF; PNG only holds unsigned samples.
   bool any_negative = false;
   for (int64_t y = 0; y < map.height() && !any_negative; ++y)
@@ -290,7 +290,7 @@ void write_image16(const std::string& path, const Heightmap& map) {
   const double lo = write_signed ? -32768 : 0, hi = write_signed ? 32767 : 65535;
   auto check = [&](double v, int64_t x, int64_t y) {
     if (!(v >= lo && v <= hi) || v != std::floor(v))
-      io::fail(IoErrorCode::WriteFailed, path,
+      io::fail(ErrorCode::WriteFailed, path,
                "value " + io::format_double(v) + " at row " + std::to_string(y) + ", column " +
                    std::to_string(x) + " does not fit a " + (write_signed ? "signed" : "unsigned") +
                    " 16-bit " + (is_tiff ? "TIFF" : "PNG"));
@@ -307,11 +307,11 @@ void write_image16(const std::string& path, const Heightmap& map) {
 
 void write_exr(const std::string& path, const Heightmap& map) {
   if (!io::ends_with_ci(path, ".exr"))
-    io::fail(IoErrorCode::WriteFailed, path, "float images are written as .exr");
+    io::fail(ErrorCode::WriteFailed, path, "float images are written as .exr");
   io::write_image_bands<float>(path, map, TERRAIN_PIXEL_FLOAT, "zip", [&](double v, int64_t x, int64_t y) {
     float f = float(v);
     if (double(f) != v && !std::isnan(v))
-      io::fail(IoErrorCode::WriteFailed, path,
+      io::fail(ErrorCode::WriteFailed, path,
                "value " + io::format_double(v) + " at row " + std::to_string(y) + ", column " +
                    std::to_string(x) + " is not exactly representable as float32");
     return f;
@@ -320,11 +320,11 @@ void write_exr(const std::string& path, const Heightmap& map) {
 
 void write_image8(const std::string& path, int width, int height, int channels, const uint8_t* pixels) {
   if (width < 1 || height < 1 || channels < 1 || channels > 4 || !pixels)
-    io::fail(IoErrorCode::WriteFailed, path, "no pixels, or not 1 to 4 channels");
-  io::PluginImageWriter out(io::image_plugin(IoErrorCode::WriteFailed, path));
+    io::fail(ErrorCode::WriteFailed, path, "no pixels, or not 1 to 4 channels");
+  io::PluginImageWriter out(io::image_plugin(ErrorCode::WriteFailed, path));
   if (out.create(path, width, height, channels, TERRAIN_PIXEL_UINT8, nullptr, 0) != TERRAIN_IMAGE_OK ||
       out.write_rows(0, height, pixels) != TERRAIN_IMAGE_OK || out.finish() != TERRAIN_IMAGE_OK)
-    io::fail(IoErrorCode::WriteFailed, path, out.message());
+    io::fail(ErrorCode::WriteFailed, path, out.message());
 }
 
 }  // namespace terrain

@@ -30,15 +30,15 @@ class RawStreamReader final : public BandReader {
     }
     if (layout_.gzip) {
       gz_ = gzopen(path_.c_str(), "rb");
-      if (!gz_) fail(IoErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
+      if (!gz_) fail(ErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
       gzbuffer(gz_, 1 << 17);
       if (layout_.data_offset > 0 && gzseek(gz_, z_off_t(layout_.data_offset), SEEK_SET) < 0)
-        fail(IoErrorCode::Truncated, path_, "gzip stream ends before the data offset");
+        fail(ErrorCode::Truncated, path_, "gzip stream ends before the data offset");
     } else {
       file_ = std::fopen(path_.c_str(), "rb");
-      if (!file_) fail(IoErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
+      if (!file_) fail(ErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
       if (layout_.data_offset > 0 && fseeko(file_, off_t(layout_.data_offset), SEEK_SET) != 0)
-        fail(IoErrorCode::Truncated, path_, "cannot seek to the data offset");
+        fail(ErrorCode::Truncated, path_, "cannot seek to the data offset");
     }
   }
   ~RawStreamReader() override {
@@ -57,8 +57,8 @@ class RawStreamReader final : public BandReader {
     if (buffer_.size() < want) buffer_.resize(want);
     size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_);
     if (got < want) {
-      if (file_ && std::ferror(file_)) fail(IoErrorCode::NotFound, path_, "read error");
-      fail(IoErrorCode::Truncated, path_,
+      if (file_ && std::ferror(file_)) fail(ErrorCode::NotFound, path_, "read error");
+      fail(ErrorCode::Truncated, path_,
            "data ends in row " + std::to_string(rows_read_ + int64_t(got / row_bytes_)) + " of " +
                std::to_string(layout_.info.height) + " (" + std::to_string(layout_.info.width) + "x" +
                std::to_string(layout_.info.height) + " " + sample_type_name(layout_.info.sample_type) + ")");
@@ -89,7 +89,7 @@ class RawStreamReader final : public BandReader {
       if (r < 0) {
         int errnum = 0;
         const char* msg = gzerror(gz_, &errnum);
-        fail(IoErrorCode::CorruptData, path_,
+        fail(ErrorCode::CorruptData, path_,
              std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
       }
       if (r == 0) break;
@@ -105,10 +105,10 @@ class RawStreamReader final : public BandReader {
     if (r < 0) {
       int errnum = 0;
       const char* msg = gzerror(gz_, &errnum);
-      fail(IoErrorCode::CorruptData, path_,
+      fail(ErrorCode::CorruptData, path_,
            std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
     }
-    if (r > 0) fail(IoErrorCode::Oversized, path_, "gzip stream holds more bytes than the dimensions need");
+    if (r > 0) fail(ErrorCode::Oversized, path_, "gzip stream holds more bytes than the dimensions need");
   }
 
   template <typename Fn> void decode_with(const uint8_t* src, double* values, uint8_t* valid, Fn fetch) {
@@ -162,7 +162,7 @@ class RawStreamReader final : public BandReader {
       // A NaN nodata value is matched by bit pattern, since NaN never compares equal.
       bool is_void = has_nodata && (bits == nodata_float_bits_ || f == nodata_as_float_);
       if (!is_void && !std::isfinite(f))
-        fail(IoErrorCode::NonFinite, path_,
+        fail(ErrorCode::NonFinite, path_,
              std::string(std::isnan(f) ? "NaN" : "Inf") + " at " + row_col(row, x));
       values[x] = is_void ? 0.0 : double(f);
       valid[x] = is_void ? 0 : 1;
@@ -172,13 +172,13 @@ class RawStreamReader final : public BandReader {
 
 std::string read_small_text_file(const std::string& path, size_t limit) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) fail(IoErrorCode::NotFound, path, "cannot open");
+  if (!in) fail(ErrorCode::NotFound, path, "cannot open");
   std::string text;
   text.resize(limit + 1);
   in.read(text.data(), std::streamsize(limit + 1));
   text.resize(size_t(in.gcount()));
   if (text.size() > limit)
-    fail(IoErrorCode::MissingField, path, "sidecar larger than " + std::to_string(limit) + " bytes");
+    fail(ErrorCode::MissingField, path, "sidecar larger than " + std::to_string(limit) + " bytes");
   return text;
 }
 
@@ -204,14 +204,14 @@ std::optional<double> number_member(const JsonObject& obj, const std::string& ke
     std::string s = to_lower(v.text);
     if (s == "nan") return std::nan("");  // JSON has no NaN literal; float nodata may be NaN
   }
-  fail(IoErrorCode::MissingField, sidecar, "field \"" + key + "\" must be a number");
+  fail(ErrorCode::MissingField, sidecar, "field \"" + key + "\" must be a number");
 }
 
 int64_t dimension_member(const JsonObject& obj, const std::string& key, const std::string& sidecar) {
   auto v = number_member(obj, key, sidecar);
-  if (!v) fail(IoErrorCode::MissingField, sidecar, "missing required field \"" + key + "\"");
+  if (!v) fail(ErrorCode::MissingField, sidecar, "missing required field \"" + key + "\"");
   if (!(*v >= 1 && *v <= 2147483648.0) || *v != std::floor(*v))
-    fail(IoErrorCode::MissingField, sidecar,
+    fail(ErrorCode::MissingField, sidecar,
          "field \"" + key + "\" must be a positive integer, got " + format_double(*v));
   return int64_t(*v);
 }
@@ -234,19 +234,19 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
   if (sidecar) {
     std::string error;
     auto obj = parse_json_object(read_small_text_file(*sidecar, 1 << 16), error);
-    if (!obj) fail(IoErrorCode::MissingField, *sidecar, "malformed JSON sidecar: " + error);
+    if (!obj) fail(ErrorCode::MissingField, *sidecar, "malformed JSON sidecar: " + error);
     // The sidecar must describe the grid fully; command-line options may still override it.
     int64_t w = dimension_member(*obj, "width", *sidecar);
     int64_t h = dimension_member(*obj, "height", *sidecar);
     if (!width) width = w;
     if (!height) height = h;
     auto t = obj->find("type");
-    if (t == obj->end()) fail(IoErrorCode::MissingField, *sidecar, "missing required field \"type\"");
+    if (t == obj->end()) fail(ErrorCode::MissingField, *sidecar, "missing required field \"type\"");
     if (t->second.kind != JsonScalar::Kind::String)
-      fail(IoErrorCode::MissingField, *sidecar, "field \"type\" must be a string");
+      fail(ErrorCode::MissingField, *sidecar, "field \"type\" must be a string");
     auto parsed = sample_type_from_name(t->second.text);
     if (!parsed)
-      fail(IoErrorCode::UnknownType, *sidecar,
+      fail(ErrorCode::UnknownType, *sidecar,
            "unknown sample type \"" + t->second.text + "\" (expected int16, uint16, int32 or float32)");
     if (!type) type = parsed;
     auto bo = obj->find("byte_order");
@@ -258,7 +258,7 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
       else if (order == "big" || order == "big_endian" || order == "be")
         big = true;
       else
-        fail(IoErrorCode::UnknownType, *sidecar, "unknown byte_order (expected \"little\" or \"big\")");
+        fail(ErrorCode::UnknownType, *sidecar, "unknown byte_order (expected \"little\" or \"big\")");
       if (!big_endian) big_endian = big;
     }
     GridInfo& g = layout.info;
@@ -279,7 +279,7 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     else if (ends_with_ci(path, ".r32"))
       type = SampleType::Float32;
     else
-      fail(IoErrorCode::DimensionMismatch, path,
+      fail(ErrorCode::DimensionMismatch, path,
            "raw grid without a sidecar (" + path + ".json): give --type and --width/--height");
   }
   layout.info.sample_type = *type;
@@ -291,14 +291,14 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     uint64_t samples = size / bytes;
     auto side = int64_t(std::llround(std::sqrt(double(samples))));
     if (size % bytes != 0 || side <= 0 || uint64_t(side) * uint64_t(side) != samples)
-      fail(IoErrorCode::DimensionMismatch, path,
+      fail(ErrorCode::DimensionMismatch, path,
            std::to_string(size) + " bytes is not a square " + sample_type_name(*type) +
                " grid: give --width/--height");
     width = height = side;
   } else if (!height || !width) {
     int64_t known = width ? *width : *height;
     if (known <= 0 || size % (uint64_t(known) * bytes) != 0)
-      fail(IoErrorCode::DimensionMismatch, path,
+      fail(ErrorCode::DimensionMismatch, path,
            std::to_string(size) + " bytes is not a whole number of " + std::to_string(known) +
                "-sample lines");
     int64_t other = int64_t(size / (uint64_t(known) * bytes));
@@ -312,7 +312,7 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
   apply_common_overrides(layout.info, options);
   uint64_t need = layout_bytes(path, layout);
   if (need != size)
-    fail(IoErrorCode::DimensionMismatch, path,
+    fail(ErrorCode::DimensionMismatch, path,
          std::to_string(layout.info.width) + "x" + std::to_string(layout.info.height) + " " +
              sample_type_name(*type) + " needs " + std::to_string(need) + " bytes but the file has " +
              std::to_string(size) + " (" + (size < need ? "too short" : "too long") + ")");
@@ -322,13 +322,13 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
 void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool big_endian) {
   const GridInfo& g = map.info;
   if (g.width <= 0 || g.height <= 0 || map.values.size() != size_t(g.width * g.height))
-    fail(IoErrorCode::WriteFailed, path, "heightmap dimensions do not match its sample count");
+    fail(ErrorCode::WriteFailed, path, "heightmap dimensions do not match its sample count");
   const StoredType stored = stored_type_for(g.sample_type);
   const SampleType written_type = g.sample_type == SampleType::TerrainRGB ? SampleType::Int32 : g.sample_type;
   AtomicOutput out(path);
   {
     FILE* f = std::fopen(out.temp_path().c_str(), "wb");
-    if (!f) fail(IoErrorCode::WriteFailed, path, std::string("cannot create: ") + std::strerror(errno));
+    if (!f) fail(ErrorCode::WriteFailed, path, std::string("cannot create: ") + std::strerror(errno));
     std::unique_ptr<FILE, int (*)(FILE*)> guard(f, std::fclose);
     const int bytes = stored_bytes(stored);
     std::vector<uint8_t> row(size_t(g.width) * size_t(bytes));
@@ -366,14 +366,14 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
           }
         }
         if (!fits)
-          fail(IoErrorCode::WriteFailed, path,
+          fail(ErrorCode::WriteFailed, path,
                "value " + format_double(v) + " at " + row_col(y, x) + " does not fit " +
                    sample_type_name(written_type));
       }
       if (std::fwrite(row.data(), 1, row.size(), f) != row.size())
-        fail(IoErrorCode::WriteFailed, path, std::string("write error: ") + std::strerror(errno));
+        fail(ErrorCode::WriteFailed, path, std::string("write error: ") + std::strerror(errno));
     }
-    if (std::fclose(guard.release()) != 0) fail(IoErrorCode::WriteFailed, path, "write error on close");
+    if (std::fclose(guard.release()) != 0) fail(ErrorCode::WriteFailed, path, "write error on close");
   }
 
   std::ostringstream js;
@@ -398,10 +398,10 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
   {
     FILE* f = std::fopen(side.temp_path().c_str(), "wb");
     if (!f)
-      fail(IoErrorCode::WriteFailed, path + ".json", std::string("cannot create: ") + std::strerror(errno));
+      fail(ErrorCode::WriteFailed, path + ".json", std::string("cannot create: ") + std::strerror(errno));
     bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
     ok = (std::fclose(f) == 0) && ok;
-    if (!ok) fail(IoErrorCode::WriteFailed, path + ".json", "write error");
+    if (!ok) fail(ErrorCode::WriteFailed, path + ".json", "write error");
   }
   // The sidecar goes in first, so a reader never sees new samples described by an old sidecar.
   side.commit();

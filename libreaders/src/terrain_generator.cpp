@@ -49,9 +49,9 @@ int64_t clamp_unit(int64_t v) { return std::clamp<int64_t>(v, 0, kOne); }
 
 Heightmap synthesize_terrain(const SynthOptions& options) {
   if (options.width <= 0 || options.height <= 0 || options.width > 65536 || options.height > 65536)
-    throw IoError(IoErrorCode::DimensionMismatch, "synthetic terrain: size " + std::to_string(options.width) +
-                                                      "x" + std::to_string(options.height) +
-                                                      " must be between 1 and 65536 per side");
+    throw Error(ErrorCode::DimensionMismatch, "synthetic terrain: size " + std::to_string(options.width) +
+                                                  "x" + std::to_string(options.height) +
+                                                  " must be between 1 and 65536 per side");
   Heightmap map;
   GridInfo& g = map.info;
   g.width = options.width;

@@ -13,7 +13,7 @@ void write_png_rgba(const std::string& path, int width, int height, const std::v
                                 std::to_string(width) + "x" + std::to_string(height));
   try {
     write_image8(path, width, height, 4, rgba.data());
-  } catch (const IoError& e) {
+  } catch (const Error& e) {
     throw std::runtime_error(std::string("cannot write ") + e.what());  // "cannot write <path>: <reason>"
   }
 }

@@ -80,8 +80,8 @@ GridSize checked_size(const PyramidFile& file, int level, const Rect& rect) {
 RegionDecoder::RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes)
     : file_(std::move(file)), cache_capacity_(cache_bytes) {
   if (file_->level_count() > kMaxLevels)
-    throw FormatError(FormatErrorCode::Corrupt,
-                      file_->path() + ": more than " + std::to_string(kMaxLevels) + " levels");
+    throw Error(ErrorCode::CorruptData,
+                file_->path() + ": more than " + std::to_string(kMaxLevels) + " levels");
   bands_.resize(size_t(file_->level_count()));
   for (int l = 0; l < file_->level_count(); ++l) {
     bands_[size_t(l)].resize(file_->bands(l).size());
@@ -119,11 +119,10 @@ void RegionDecoder::count_decoded(int level, uint64_t tiles, uint64_t samples) c
 namespace {
 [[noreturn]] void throw_band_error(const PyramidFile& file, int level, size_t b, const BandView& band,
                                    int64_t x0, int64_t width, codec::Status s) {
-  throw FormatError(
-      s == codec::Status::ChecksumMismatch ? FormatErrorCode::ChecksumMismatch : FormatErrorCode::Corrupt,
-      file.path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
-          std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) + "), columns " +
-          std::to_string(x0) + ".." + std::to_string(x0 + width - 1) + ": " + codec::status_name(s));
+  throw Error(s == codec::Status::ChecksumMismatch ? ErrorCode::ChecksumMismatch : ErrorCode::CorruptData,
+              file.path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
+                  std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) + "), columns " +
+                  std::to_string(x0) + ".." + std::to_string(x0 + width - 1) + ": " + codec::status_name(s));
 }
 }  // namespace
 

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 
+#include "cli.h"
 #include "io_test_util.h"
 #include "readers/heightmap.h"
 
@@ -22,15 +23,15 @@ std::vector<uint8_t> float_le(const std::vector<float>& values) {
   return out;
 }
 
-terrain::IoErrorCode library_error(const std::string& path, const terrain::ReadOptions& o = {}) {
+terrain::ErrorCode library_error(const std::string& path, const terrain::ReadOptions& o = {}) {
   try {
     terrain::read_heightmap(path, o);
-  } catch (const terrain::IoError& e) {
+  } catch (const terrain::Error& e) {
     CHECK(std::string(e.what()).find(path) != std::string::npos);
     return e.code();
   }
-  FAIL("no IoError for " << path);
-  return terrain::IoErrorCode::NotFound;
+  FAIL("no Error for " << path);
+  return terrain::ErrorCode::NotFound;
 }
 
 const char* kSidecar10x10 = R"({"width": 10, "height": 10, "type": "int16", "byte_order": "little"})";
@@ -140,10 +141,33 @@ TEST_CASE("terrain-info usage, help and success paths", "[io][errors]") {
   CHECK(r[3].out.find("\"width\": 3") != std::string::npos);
 }
 
+TEST_CASE("one mapping from error codes to the tools' documented exit statuses", "[io][errors]") {
+  using terrain::ErrorCode;
+  CHECK(cli::exit_status(ErrorCode::InvalidOption) == 1);
+  CHECK(cli::exit_status(ErrorCode::NotFound) == 2);
+  CHECK(cli::exit_status(ErrorCode::Truncated) == 3);
+  CHECK(cli::exit_status(ErrorCode::Oversized) == 4);
+  CHECK(cli::exit_status(ErrorCode::DimensionMismatch) == 5);
+  CHECK(cli::exit_status(ErrorCode::UnknownType) == 6);
+  CHECK(cli::exit_status(ErrorCode::NonFinite) == 7);
+  CHECK(cli::exit_status(ErrorCode::MissingField) == 8);
+  CHECK(cli::exit_status(ErrorCode::WriteFailed) == 9);
+  CHECK(cli::exit_status(ErrorCode::ChecksumMismatch) == 10);
+  CHECK(cli::exit_status(ErrorCode::UnsupportedVersion) == 10);
+  CHECK(cli::exit_status(ErrorCode::CorruptData) == 10);
+  // Every code is documented in --help and has a name.
+  const std::string help = cli::exit_codes_help();
+  for (int c = 0; c <= int(ErrorCode::InvalidOption); ++c) {
+    const int status = cli::exit_status(ErrorCode(c));
+    CHECK(help.find((status < 10 ? "  " : " ") + std::to_string(status) + "  ") != std::string::npos);
+    CHECK(std::string(terrain::error_code_name(ErrorCode(c))) != "unknown error");
+  }
+}
+
 TEST_CASE("library error codes match the classes", "[io][errors]") {
   iotest::TempDir dir;
-  using terrain::IoErrorCode;
-  CHECK(library_error(dir.file("absent.raw")) == IoErrorCode::NotFound);
+  using terrain::ErrorCode;
+  CHECK(library_error(dir.file("absent.raw")) == ErrorCode::NotFound);
 
   std::string f = dir.file("grid.raw");
   iotest::write_file(f, std::vector<uint8_t>(200, 0));
@@ -151,20 +175,20 @@ TEST_CASE("library error codes match the classes", "[io][errors]") {
   CHECK_NOTHROW(terrain::read_heightmap(f));
   terrain::ReadOptions wrong;
   wrong.width = 11;  // options override the sidecar, and 11x10 int16 needs 220 bytes
-  CHECK(library_error(f, wrong) == IoErrorCode::DimensionMismatch);
+  CHECK(library_error(f, wrong) == ErrorCode::DimensionMismatch);
   iotest::write_file(f + ".json",
                      std::string(R"({"width": 10, "height": 10, "type": "int16", "byte_order": "middle"})"));
-  CHECK(library_error(f) == IoErrorCode::UnknownType);
+  CHECK(library_error(f) == ErrorCode::UnknownType);
   iotest::write_file(f + ".json", std::string(R"({"width": -10, "height": 10, "type": "int16"})"));
-  CHECK(library_error(f) == IoErrorCode::MissingField);
+  CHECK(library_error(f) == ErrorCode::MissingField);
   iotest::write_file(f + ".json", std::string(R"({"width": "10", "height": 10, "type": "int16"})"));
-  CHECK(library_error(f) == IoErrorCode::MissingField);
+  CHECK(library_error(f) == ErrorCode::MissingField);
   iotest::write_file(f + ".json", std::string(R"({"width": 10, "height": 10, "type": "int16",})"));
-  CHECK(library_error(f) == IoErrorCode::MissingField);
+  CHECK(library_error(f) == ErrorCode::MissingField);
 
   std::string bare = dir.file("bare.raw");  // no sidecar, no options: dimensions cannot be derived
   iotest::write_file(bare, std::vector<uint8_t>(150, 0));
-  CHECK(library_error(bare) == IoErrorCode::DimensionMismatch);
+  CHECK(library_error(bare) == ErrorCode::DimensionMismatch);
   terrain::ReadOptions square;
   square.sample_type = terrain::SampleType::Int16;
   iotest::write_file(bare, std::vector<uint8_t>(2 * 9 * 9, 0));
@@ -172,7 +196,7 @@ TEST_CASE("library error codes match the classes", "[io][errors]") {
 
   std::string mystery = dir.file("mystery.xyz");
   iotest::write_file(mystery, std::string("not a heightmap"));
-  CHECK(library_error(mystery) == IoErrorCode::UnknownType);
+  CHECK(library_error(mystery) == ErrorCode::UnknownType);
 
   std::vector<float> v(4 * 4, 1.0f);
   v[15] = -std::numeric_limits<float>::infinity();
@@ -181,18 +205,18 @@ TEST_CASE("library error codes match the classes", "[io][errors]") {
   terrain::ReadOptions as_float;
   as_float.sample_type = terrain::SampleType::Float32;
   as_float.width = 4;
-  CHECK(library_error(inf, as_float) == IoErrorCode::NonFinite);
+  CHECK(library_error(inf, as_float) == ErrorCode::NonFinite);
 
   std::string no_hdr = dir.file("nohdr.bil");
   iotest::write_file(no_hdr, std::vector<uint8_t>(200, 0));
-  CHECK(library_error(no_hdr) == IoErrorCode::MissingField);
+  CHECK(library_error(no_hdr) == ErrorCode::MissingField);
   iotest::write_file(dir.file("nohdr.hdr"),
                      std::string("NROWS 10\nNCOLS 10\nNBITS 16\nPIXELTYPE SIGNEDINT\nBYTEORDER X\n"));
-  CHECK(library_error(no_hdr) == IoErrorCode::UnknownType);
+  CHECK(library_error(no_hdr) == ErrorCode::UnknownType);
   iotest::write_file(dir.file("nohdr.hdr"), std::string("NROWS 10\nNBITS 16\n"));
-  CHECK(library_error(no_hdr) == IoErrorCode::MissingField);
+  CHECK(library_error(no_hdr) == ErrorCode::MissingField);
   iotest::write_file(dir.file("nohdr.hdr"), std::string("NROWS 10\nNCOLS 11\nNBITS 16\n"));
-  CHECK(library_error(no_hdr) == IoErrorCode::DimensionMismatch);
+  CHECK(library_error(no_hdr) == ErrorCode::DimensionMismatch);
 
   std::string rgb_tif = dir.file("rgb.tif");  // an image that is neither grey nor Terrain-RGB
   terrain::Heightmap m;
@@ -201,7 +225,7 @@ TEST_CASE("library error codes match the classes", "[io][errors]") {
   terrain::write_image16(rgb_tif, m);
   terrain::ReadOptions rgb;
   rgb.terrain_rgb = true;
-  CHECK(library_error(rgb_tif, rgb) == IoErrorCode::UnknownType);
+  CHECK(library_error(rgb_tif, rgb) == ErrorCode::UnknownType);
 }
 
 TEST_CASE("sidecar parser survives every truncation and corruption of a sidecar", "[io][errors]") {
@@ -217,7 +241,7 @@ TEST_CASE("sidecar parser survives every truncation and corruption of a sidecar"
     iotest::write_file(f + ".json", text);
     try {
       terrain::probe(f);
-    } catch (const terrain::IoError& e) {
+    } catch (const terrain::Error& e) {
       ++errors;
       CHECK(std::string(e.what()).find("fuzz.raw") != std::string::npos);
     }

@@ -164,7 +164,7 @@ TEST_CASE("16-bit PNG and TIFF round-trip exactly", "[io][image]") {
     Heightmap m = test_grid(SampleType::Int16);
     m.valid.clear();
     std::string path = dir.file("neg.png");
-    REQUIRE_THROWS_AS(terrain::write_image16(path, m), terrain::IoError);
+    REQUIRE_THROWS_AS(terrain::write_image16(path, m), terrain::Error);
     CHECK_FALSE(std::filesystem::exists(path));
     CHECK(std::filesystem::is_empty(std::filesystem::path(path).parent_path()));
   }
@@ -237,8 +237,8 @@ TEST_CASE("ESRI .bil and .flt written by hand decode as their headers say", "[io
     try {
       terrain::read_heightmap(dir.file("u32.bil"));
       FAIL("no error");
-    } catch (const terrain::IoError& e) {
-      CHECK(e.code() == terrain::IoErrorCode::UnknownType);
+    } catch (const terrain::Error& e) {
+      CHECK(e.code() == terrain::ErrorCode::UnknownType);
     }
   }
 }

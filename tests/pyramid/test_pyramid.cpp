@@ -299,5 +299,5 @@ TEST_CASE("bad input gives clear errors") {
   CHECK_THROWS_AS(build_pyramid(empty, options(), coder, out), std::invalid_argument);
   BuildOptions bad = options();
   bad.temp_dir = "/nonexistent/dir";
-  CHECK_THROWS_AS(build_pyramid(grid_from({1}, 1, 1), bad, coder, out), IoError);
+  CHECK_THROWS_AS(build_pyramid(grid_from({1}, 1, 1), bad, coder, out), Error);
 }

@@ -19,6 +19,8 @@
 
 namespace fs = std::filesystem;
 using namespace terrain::runtime;
+using terrain::Error;
+using terrain::ErrorCode;
 
 namespace {
 
@@ -278,19 +280,19 @@ Sample small_sample() {
   return s;
 }
 
-FormatErrorCode open_error_code(const std::string& path) {
+ErrorCode open_error_code(const std::string& path) {
   try {
     Container::open(path);
-  } catch (const FormatError& e) {
+  } catch (const Error& e) {
     return e.code();
   }
   FAIL("open succeeded on " << path);
-  return FormatErrorCode::Corrupt;
+  return ErrorCode::CorruptData;
 }
 
 // Writes edited bytes with their checksums made to match again (so only the edit can be noticed),
 // then opens them.
-FormatErrorCode resealed_open_error(const std::string& path, std::vector<uint8_t> bytes) {
+ErrorCode resealed_open_error(const std::string& path, std::vector<uint8_t> bytes) {
   reseal(bytes);
   write_bytes(path, bytes);
   return open_error_code(path);
@@ -486,25 +488,18 @@ TEST_CASE("container writer rejects inconsistent input", "[runtime][container]")
 
 TEST_CASE("container open reports missing and foreign files", "[runtime][container]") {
   TempDir dir;
-  CHECK(open_error_code(dir.file("missing.pyr")) == FormatErrorCode::NotFound);
+  CHECK(open_error_code(dir.file("missing.pyr")) == ErrorCode::NotFound);
   fs::create_directories(dir.file("a_directory"));
-  CHECK(open_error_code(dir.file("a_directory")) == FormatErrorCode::NotFound);
+  CHECK(open_error_code(dir.file("a_directory")) == ErrorCode::NotFound);
   const std::string text = dir.file("text.pyr");
   const std::string hello = "hello, this is not a pyramid container but it is long enough for a header......";
   write_bytes(text, reinterpret_cast<const uint8_t*>(hello.data()), hello.size());
-  CHECK(open_error_code(text) == FormatErrorCode::BadMagic);
+  CHECK(open_error_code(text) == ErrorCode::UnknownType);
   try {
     Container::open(text);
-  } catch (const FormatError& e) {
+  } catch (const Error& e) {
     CHECK_THAT(e.what(), Catch::Contains(text) && Catch::Contains("magic"));
   }
-  CHECK(exit_code(FormatErrorCode::NotFound) == 2);
-  CHECK(exit_code(FormatErrorCode::Truncated) == 3);
-  CHECK(exit_code(FormatErrorCode::BadMagic) == 6);
-  CHECK(exit_code(FormatErrorCode::WriteFailed) == 9);
-  CHECK(exit_code(FormatErrorCode::ChecksumMismatch) == 10);
-  CHECK(exit_code(FormatErrorCode::UnsupportedVersion) == 10);
-  CHECK(exit_code(FormatErrorCode::Corrupt) == 10);
 }
 
 TEST_CASE("container version rules", "[runtime][container]") {
@@ -525,8 +520,8 @@ TEST_CASE("container version rules", "[runtime][container]") {
       try {
         Container::open(path);
         FAIL("version 2 accepted");
-      } catch (const FormatError& e) {
-        CHECK(e.code() == FormatErrorCode::UnsupportedVersion);
+      } catch (const Error& e) {
+        CHECK(e.code() == ErrorCode::UnsupportedVersion);
         CHECK_THAT(e.what(),
                    Catch::Contains(path) && Catch::Contains("version 2." + std::to_string(kFormatMinor)));
       }
@@ -580,7 +575,7 @@ TEST_CASE("container version 1.0 files (no level error figures) are still read",
 
   SECTION("1.0 records cannot claim error figures") {
     put_le(v10, index_offset + kInfoSize + kFlags, 3, 4);
-    CHECK(resealed_open_error(path, v10) == FormatErrorCode::Corrupt);
+    CHECK(resealed_open_error(path, v10) == ErrorCode::CorruptData);
   }
 }
 
@@ -600,10 +595,10 @@ TEST_CASE("container level error figures are validated", "[runtime][container]")
     put_le(b, at, value, bytes);
     return resealed_open_error(path, b);
   };
-  CHECK(damaged(records + kErrorMax, std::bit_cast<uint64_t>(std::nan("")), 8) == FormatErrorCode::Corrupt);
-  CHECK(damaged(records + kErrorRms, std::bit_cast<uint64_t>(-1.0), 8) == FormatErrorCode::Corrupt);
-  CHECK(damaged(records + kRecord + kErrorRms, std::bit_cast<uint64_t>(1.0), 8) == FormatErrorCode::Corrupt);
-  CHECK(damaged(records + kRecord + kFlags, 1 | 2 | 4, 4) == FormatErrorCode::Corrupt);  // unknown flag
+  CHECK(damaged(records + kErrorMax, std::bit_cast<uint64_t>(std::nan("")), 8) == ErrorCode::CorruptData);
+  CHECK(damaged(records + kErrorRms, std::bit_cast<uint64_t>(-1.0), 8) == ErrorCode::CorruptData);
+  CHECK(damaged(records + kRecord + kErrorRms, std::bit_cast<uint64_t>(1.0), 8) == ErrorCode::CorruptData);
+  CHECK(damaged(records + kRecord + kFlags, 1 | 2 | 4, 4) == ErrorCode::CorruptData);  // unknown flag
   {  // the flag set on zero figures is a valid record: no error at all
     std::vector<uint8_t> b = good;
     put_le(b, records + kRecord + kFlags, 1 | 2, 4);
@@ -630,13 +625,13 @@ TEST_CASE("container checksum mismatches are reported", "[runtime][container]") 
     std::vector<uint8_t> b = good;
     b[50] ^= 0x01;  // a reserved byte: only the checksum can notice
     write_bytes(path, b);
-    CHECK(open_error_code(path) == FormatErrorCode::ChecksumMismatch);
+    CHECK(open_error_code(path) == ErrorCode::ChecksumMismatch);
   }
   SECTION("index") {
     std::vector<uint8_t> b = good;
     b[get_le(good, kSbIndexOffset, 8) + 100] ^= 0x40;
     write_bytes(path, b);
-    CHECK(open_error_code(path) == FormatErrorCode::ChecksumMismatch);
+    CHECK(open_error_code(path) == ErrorCode::ChecksumMismatch);
   }
   SECTION("a blob, found by verify() only") {
     const Container original = Container::open(path);
@@ -651,8 +646,8 @@ TEST_CASE("container checksum mismatches are reported", "[runtime][container]") 
     try {
       c.verify();
       FAIL("verify() accepted a damaged blob");
-    } catch (const FormatError& e) {
-      CHECK(e.code() == FormatErrorCode::ChecksumMismatch);
+    } catch (const Error& e) {
+      CHECK(e.code() == ErrorCode::ChecksumMismatch);
       CHECK_THAT(e.what(), Catch::Contains("level 2"));
     }
   }
@@ -680,9 +675,9 @@ TEST_CASE("container: a damaged byte anywhere is caught by open() or verify()", 
     if (in_blob(at)) {
       ++blob_bytes;
       const Container c = Container::open(damaged);
-      CHECK_THROWS_AS(c.verify(), FormatError);
+      CHECK_THROWS_AS(c.verify(), Error);
     } else {
-      CHECK_THROWS_AS(Container::open(damaged), FormatError);
+      CHECK_THROWS_AS(Container::open(damaged), Error);
     }
   }
   CHECK(blob_bytes == 42);
@@ -698,17 +693,17 @@ TEST_CASE("container: every truncation is rejected as truncated", "[runtime][con
   for (size_t length = 0; length < good.size(); ++length) {
     write_bytes(cut, good.data(), length);
     INFO("length " << length << " of " << good.size());
-    CHECK(open_error_code(cut) == FormatErrorCode::Truncated);
+    CHECK(open_error_code(cut) == ErrorCode::Truncated);
   }
   std::vector<uint8_t> longer = good;
   longer.push_back(0);
   write_bytes(cut, longer);
-  CHECK(open_error_code(cut) == FormatErrorCode::Corrupt);
+  CHECK(open_error_code(cut) == ErrorCode::CorruptData);
 }
 
 TEST_CASE("container: resealed random index edits never crash the reader", "[runtime][container]") {
   // Edits with recomputed checksums reach the structural checks behind the CRCs: each file must
-  // either be rejected with FormatError or be fully readable within its bounds.
+  // either be rejected with Error or be fully readable within its bounds.
   TempDir dir;
   const std::string path = dir.file("fuzz.pyr");
   std::mt19937_64 rng(8);
@@ -770,10 +765,10 @@ TEST_CASE("container: resealed random index edits never crash the reader", "[run
       for (char ch : c.metadata_json()) sum += uint8_t(ch);
       try {
         c.verify();
-      } catch (const FormatError&) {
+      } catch (const Error&) {
       }
       CHECK(sum < (uint64_t(1) << 40));
-    } catch (const FormatError&) {
+    } catch (const Error&) {
     }
   }
   // Edits of stats, spacing and filter values leave valid files: the loop did reach the accessors.
@@ -802,18 +797,18 @@ TEST_CASE("container: crafted huge offsets are rejected without overflow", "[run
     reseal(b);
     write_bytes(path, b);
     INFO("offset " << c[0] << " size " << c[1]);
-    CHECK(open_error_code(path) == FormatErrorCode::Corrupt);
+    CHECK(open_error_code(path) == ErrorCode::CorruptData);
   }
   std::vector<uint8_t> b = good;
   put_le(b, kSbFileSize, ~uint64_t(0), 8);
   reseal(b);
   write_bytes(path, b);
-  CHECK(open_error_code(path) == FormatErrorCode::Truncated);
+  CHECK(open_error_code(path) == ErrorCode::Truncated);
   b = good;
   put_le(b, kSbIndexOffset, ~uint64_t(0) - 7, 8);
   reseal(b);
   write_bytes(path, b);
-  CHECK(open_error_code(path) == FormatErrorCode::Corrupt);
+  CHECK(open_error_code(path) == ErrorCode::CorruptData);
 }
 
 // Hidden (run with "[large]"): a level blob beyond 4 GiB, so offsets and sizes need 64 bits.

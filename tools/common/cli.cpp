@@ -11,9 +11,33 @@
 
 namespace cli {
 
-int exit_code_for(const terrain::IoError& error) {
-  int code = static_cast<int>(error.code());
-  return (code >= 2 && code <= 10) ? code : kExitInternal;
+int exit_status(terrain::ErrorCode code) {
+  using terrain::ErrorCode;
+  switch (code) {
+    case ErrorCode::InvalidOption:
+      return kExitUsage;
+    case ErrorCode::NotFound:
+      return 2;
+    case ErrorCode::Truncated:
+      return 3;
+    case ErrorCode::Oversized:
+      return 4;
+    case ErrorCode::DimensionMismatch:
+      return 5;
+    case ErrorCode::UnknownType:
+      return 6;
+    case ErrorCode::NonFinite:
+      return 7;
+    case ErrorCode::MissingField:
+      return 8;
+    case ErrorCode::WriteFailed:
+      return 9;
+    case ErrorCode::CorruptData:
+    case ErrorCode::ChecksumMismatch:
+    case ErrorCode::UnsupportedVersion:
+      return 10;
+  }
+  return kExitInternal;
 }
 
 const char* exit_codes_help() {
@@ -208,20 +232,12 @@ void add_read_options(ArgParser& p, terrain::ReadOptions& o) {
          &o.terrain_rgb);
 }
 
-std::string shortest(double v) {
-  if (std::isnan(v)) return "nan";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  char buf[64];
-  auto res = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, res.ptr);
-}
-
 int run_tool(const std::string& program, const std::function<int()>& body) {
   try {
     return body();
-  } catch (const terrain::IoError& e) {
+  } catch (const terrain::Error& e) {
     std::cerr << program << ": error: " << e.what() << "\n";
-    return exit_code_for(e);
+    return exit_status(e.code());
   } catch (const UsageError& e) {
     std::cerr << program << ": " << e.what() << "\nTry '" << program << " --help'.\n";
     return kExitUsage;

@@ -9,15 +9,17 @@
 #include <string>
 #include <vector>
 
+#include "core/text.h"
 #include "readers/heightmap.h"
 
 namespace cli {
 
-// Exit statuses shared by all tools (the IoError ones equal terrain::IoErrorCode values).
+// Exit statuses shared by all tools: exit_status() is the one mapping from the libraries' error codes
+// (core/error.h) to the statuses exit_codes_help() documents.
 constexpr int kExitOk = 0;
 constexpr int kExitUsage = 1;
 constexpr int kExitInternal = 70;
-int exit_code_for(const terrain::IoError& error);
+int exit_status(terrain::ErrorCode code);
 // The exit-status table, for the end of every tool's --help.
 const char* exit_codes_help();
 
@@ -79,12 +81,11 @@ double parse_double(const std::string& option, const std::string& text);
 // Adds --vscale --voffset --spacing --width --height --type --endian --nodata --terrain-rgb.
 void add_read_options(ArgParser& parser, terrain::ReadOptions& options);
 
-// Shortest decimal text that reads back as exactly `v` (locale independent), e.g. "0.1" not
-// "0.10000000000000001".
-std::string shortest(double v);
+// Shortest decimal text that reads back as exactly `v` (core/text.h).
+using terrain::shortest;
 
 // Runs a tool body, turning exceptions into "<program>: error: <message>" on stderr and the documented
-// exit status (IoError -> its code, UsageError -> 1, anything else -> 70).
+// exit status (terrain::Error -> exit_status(code), UsageError -> 1, anything else -> 70).
 int run_tool(const std::string& program, const std::function<int()>& body);
 
 }  // namespace cli

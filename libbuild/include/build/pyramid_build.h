@@ -43,7 +43,7 @@ struct BuildFileResult {
 // Progress: phase name and fraction done in [0, 1]; called from the building thread.
 using BuildProgress = std::function<void(const std::string& phase, double fraction)>;
 
-// Builds `output` from `input`. Throws IoError for input problems (naming the file), FormatError for
+// Builds `output` from `input`. Throws Error for input problems (naming the file), Error for
 // output problems, std::invalid_argument for options the input cannot honour (e.g. a step below the
 // input's quantum, lossless on float input without a quantum). Nothing is left at `output` on failure.
 BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,

@@ -8,7 +8,7 @@
 // Writing is streamed (blobs may be gigabytes) into a temporary file that is renamed onto the
 // target only by finish(), so a file at the target path is always complete. Reading maps the file
 // read-only and hands out zero-copy views of the blobs; every offset, size, checksum and the level
-// dimension chain are validated on open, so bad input gives FormatError, never a crash.
+// dimension chain are validated on open, so bad input gives Error, never a crash.
 #pragma once
 
 #include <cstddef>
@@ -21,34 +21,9 @@
 #include <vector>
 
 #include "codec/crc32c.h"
+#include "core/error.h"
 
 namespace terrain::runtime {
-
-// ---------------------------------------------------------------------------------------------
-// Errors
-
-enum class FormatErrorCode {
-  NotFound,            // file missing or unreadable
-  Truncated,           // file shorter than its header says
-  BadMagic,            // not a pyramid container at all
-  UnsupportedVersion,  // a major version this reader does not know
-  ChecksumMismatch,    // a CRC32C does not match the bytes it covers
-  Corrupt,             // checksums match but the contents are inconsistent (offsets, dims, ...)
-  WriteFailed,         // the writer could not create, write, sync or rename its file
-};
-const char* format_error_code_name(FormatErrorCode code);
-// The project-wide tool exit status for a code (2 not found, 3 truncated, 6 unknown format,
-// 9 cannot write, 10 corrupted data).
-int exit_code(FormatErrorCode code);
-
-class FormatError : public std::runtime_error {
- public:
-  FormatError(FormatErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
-  FormatErrorCode code() const { return code_; }
-
- private:
-  FormatErrorCode code_;
-};
 
 // ---------------------------------------------------------------------------------------------
 // Checksum used throughout the format: CRC-32C (Castagnoli, reflected polynomial 0x82F63B78,
@@ -146,7 +121,7 @@ void validate_info(const ContainerInfo& info);
 class ContainerWriter {
  public:
   // Creates `path + ".tmp.<pid>"` (with a further ".N" if another writer of this process holds
-  // that name); throws FormatError(WriteFailed) if it cannot.
+  // that name); throws Error(WriteFailed) if it cannot.
   explicit ContainerWriter(std::string path);
   // Removes the temporary file unless finish() succeeded.
   ~ContainerWriter();
@@ -224,7 +199,7 @@ bool is_container_file(const std::string& path);
 
 class Container {
  public:
-  // Maps and validates the file; throws FormatError whose message names the file and the problem.
+  // Maps and validates the file; throws Error whose message names the file and the problem.
   // The file must not be modified in place while open (the writer only ever renames over it).
   static Container open(const std::string& path);
   Container(Container&&) noexcept;
@@ -243,7 +218,7 @@ class Container {
   // 1 = data, 0 = void; all 1 without voids). Throws std::out_of_range past the last row.
   void mask_rows(uint64_t first_row, uint64_t row_count, uint8_t* out) const;
   // Checks every stored per-level CRC (the mask, metadata and index were checked on open);
-  // throws FormatError(ChecksumMismatch) naming the first bad level.
+  // throws Error(ChecksumMismatch) naming the first bad level.
   void verify() const;
   // False if level's stored CRC does not match; true if it matches or none is stored.
   bool level_checksum_ok(uint32_t level) const;

@@ -52,7 +52,7 @@ struct BandView {
 
 class PyramidFile {
  public:
-  // Opens and validates the container and every level's band table; throws FormatError.
+  // Opens and validates the container and every level's band table; throws Error.
   static std::shared_ptr<const PyramidFile> open(const std::string& path);
 
   const Container& container() const { return container_; }
@@ -71,7 +71,7 @@ class PyramidFile {
   std::vector<std::vector<BandView>> bands_;
 };
 
-// Parses a level blob's band table (exposed for tests); throws FormatError(Corrupt) naming `what`.
+// Parses a level blob's band table (exposed for tests); throws Error(Corrupt) naming `what`.
 std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
                                        const std::string& what);
 

@@ -286,7 +286,7 @@ class PyramidSink {
 
 // Builds the pyramid from the input streamed through `input`: one pass, nothing spilled but the coded
 // bands (ordered output). Level l lags the input by about 8 * 2^l of its rows, so memory is
-// O(width * 2^levels), independent of the input height. Throws IoError for I/O problems
+// O(width * 2^levels), independent of the input height. Throws Error for I/O problems
 // (naming the file) and std::invalid_argument for unusable input or options.
 BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder,
                           PyramidSink& sink);
@@ -332,7 +332,7 @@ class MemoryPyramid final : public PyramidSink {
 
 // Decodes levels 0..up_to_level coarse to fine (U + decoded residual) and returns level
 // up_to_level; valid (when non-null) receives the finest level's mask when up_to_level is finest.
-// Throws IoError(CorruptData) on bad bytes.
+// Throws Error(CorruptData) on bad bytes.
 std::vector<int32_t> decode_pyramid(const MemoryPyramid& pyramid, ResidualCoder& coder, int up_to_level,
                                     std::vector<uint8_t>* valid = nullptr);
 

@@ -5,7 +5,7 @@
 // vertical_offset. Doubles hold every supported sample type exactly, so integer inputs can be
 // coded losslessly downstream.
 //
-// Errors: every reader/writer throws terrain::IoError whose message names the file and the
+// Errors: every reader/writer throws terrain::Error whose message names the file and the
 // problem, and whose code() classifies it (tools map codes to documented exit statuses).
 #pragma once
 
@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
+
 namespace terrain {
 
 enum class SampleType { Int16, UInt16, Int32, Float32, TerrainRGB };
@@ -25,27 +27,6 @@ std::optional<SampleType> sample_type_from_name(const std::string& name);
 
 enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage };
 const char* file_format_name(FileFormat f);
-
-enum class IoErrorCode {
-  NotFound = 2,       // file missing or unreadable (values equal the tools' exit codes)
-  Truncated,          // fewer bytes than the dimensions need
-  Oversized,          // more bytes than the dimensions need
-  DimensionMismatch,  // size cannot be derived / does not match the header or sidecar
-  UnknownType,        // unsupported sample type, format or byte order
-  NonFinite,          // NaN or Inf in float input
-  MissingField,       // sidecar/header lacks a required field, or a field is malformed
-  WriteFailed,        // could not write output (= 9)
-  CorruptData,        // bad checksum, bad bitstream, unknown version (= 10)
-};
-
-class IoError : public std::runtime_error {
- public:
-  IoError(IoErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
-  IoErrorCode code() const { return code_; }
-
- private:
-  IoErrorCode code_;
-};
 
 // Everything known about a grid except its samples.
 struct GridInfo {
@@ -96,7 +77,7 @@ class BandReader {
   virtual ~BandReader() = default;
   virtual const GridInfo& info() const = 0;
   // Reads up to `rows` further rows into values (rows*width) and valid (rows*width, 1 = data).
-  // Returns the number of rows read: 0 at the end. Throws IoError on bad data (e.g. NaN, truncation).
+  // Returns the number of rows read: 0 at the end. Throws Error on bad data (e.g. NaN, truncation).
   virtual int64_t read_rows(int64_t rows, double* values, uint8_t* valid) = 0;
   int64_t rows_read() const { return rows_read_; }
 
@@ -128,7 +109,7 @@ struct GridStats {
 };
 GridStats compute_stats(const Heightmap& map);
 // Same statistics, streamed from a freshly opened band reader in bands of band_rows rows
-// (memory O(width * band_rows)). Throws IoError like read_rows.
+// (memory O(width * band_rows)). Throws Error like read_rows.
 GridStats stream_stats(BandReader& reader, int64_t band_rows = 256);
 
 }  // namespace terrain

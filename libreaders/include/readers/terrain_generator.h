@@ -19,7 +19,7 @@ struct SynthOptions {
 // Generates a width x height int16 grid of whole metres in [0, 3100] (the lowest quarter of the area is a
 // flat sea at 0; the highest sample is 3100 m), no voids.
 // Feature sizes scale with the larger side, so small and large outputs both show several ranges.
-// Throws IoError(DimensionMismatch) for non-positive or absurd (> 65536) sizes.
+// Throws Error(DimensionMismatch) for non-positive or absurd (> 65536) sizes.
 Heightmap synthesize_terrain(const SynthOptions& options);
 
 }  // namespace terrain

@@ -148,7 +148,7 @@ class GridHeightSource final : public HeightSource {
 // The original (uncompressed) heightmap `input`, in any format libpyramid reads, as a lossless
 // pyramid with the level count and the D filter of a compressed pyramid: level l is then the
 // exact T_l that the compressed file approximates by T^_l. Voids come out as 0 m (as from
-// RegionDecoderSource) and are flagged in finest_valid. Throws IoError naming the file, or
+// RegionDecoderSource) and are flagged in finest_valid. Throws Error naming the file, or
 // std::invalid_argument when the input's size differs from `finest` (not the pyramid's input).
 GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
                                  int level_count, const std::vector<double>& filter_11x11, double spacing_m);

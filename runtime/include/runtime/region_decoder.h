@@ -45,7 +45,7 @@ class RegionDecoder {
   ~RegionDecoder();
 
   // T^_level on rect in level units (int32); rect must lie inside the level (else std::out_of_range).
-  // Throws FormatError naming the file, level, band and libcodec status when data is damaged.
+  // Throws Error naming the file, level, band and libcodec status when data is damaged.
   void decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
   // T^_level on rect from the caller's own T^_{level-1}: U(coarser) + the decoded residual, no
   // recursion (the clipmap's update, paper §5: the coarser level is already in the clipmap).

@@ -8,6 +8,8 @@
 #include <cstring>
 #include <string>
 
+#include "core/bytes.h"
+
 namespace terrain::runtime::layout {
 
 inline constexpr uint8_t kMagic[8] = {0x89, 'T', 'P', 'Y', 'R', '\r', '\n', 0x1A};
@@ -49,29 +51,20 @@ inline constexpr uint32_t kFlagHasError = 2;  // version 1.1: error_rms and erro
 inline constexpr uint32_t kMaskNone = 0;  // no voids: mask size 0
 inline constexpr uint32_t kMaskRunsLeb128 = 1;
 
-inline void put_u16(uint8_t* p, uint16_t v) {
-  p[0] = uint8_t(v);
-  p[1] = uint8_t(v >> 8);
-}
-inline void put_u32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-inline void put_u64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-inline void put_f64(uint8_t* p, double v) { put_u64(p, std::bit_cast<uint64_t>(v)); }
+using bytes::put_f64;
+using bytes::put_u16;
+using bytes::put_u32;
+using bytes::put_u64;
 // Writes s NUL-padded into a field of `field` bytes; the caller has checked s.size() < field.
 inline void put_string(uint8_t* p, const std::string& s, size_t field) {
   std::memset(p, 0, field);
   std::memcpy(p, s.data(), s.size());
 }
 
-inline uint16_t get_u16(const uint8_t* p) { return uint16_t(p[0] | p[1] << 8); }
-inline uint32_t get_u32(const uint8_t* p) {
-  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
-}
-inline uint64_t get_u64(const uint8_t* p) { return uint64_t(get_u32(p)) | uint64_t(get_u32(p + 4)) << 32; }
-inline double get_f64(const uint8_t* p) { return std::bit_cast<double>(get_u64(p)); }
+using bytes::get_f64;
+using bytes::get_u16;
+using bytes::get_u32;
+using bytes::get_u64;
 
 inline uint64_t align_up(uint64_t v) { return (v + kAlignment - 1) & ~(kAlignment - 1); }
 

@@ -9,7 +9,7 @@ namespace terrain::runtime {
 
 class MappedFile {
  public:
-  // Maps `path` read-only; throws FormatError(NotFound) naming the file if it cannot be opened,
+  // Maps `path` read-only; throws Error(NotFound) naming the file if it cannot be opened,
   // is not a regular file, or cannot be mapped. An empty file maps to data() == nullptr, size() 0.
   explicit MappedFile(const std::string& path);
   ~MappedFile();

@@ -10,7 +10,7 @@ namespace terrain::detail {
 
 class SpillFile {
  public:
-  explicit SpillFile(std::string path);  // creates/truncates; IoError(WriteFailed) naming the path
+  explicit SpillFile(std::string path);  // creates/truncates; Error(WriteFailed) naming the path
   ~SpillFile();
   SpillFile(const SpillFile&) = delete;
   SpillFile& operator=(const SpillFile&) = delete;
@@ -18,7 +18,7 @@ class SpillFile {
   void write(const void* data, size_t bytes);
   // Switches from writing to reading from the start.
   void rewind_for_reading();
-  // Reads exactly `bytes`; IoError(Truncated) when the file is shorter.
+  // Reads exactly `bytes`; Error(Truncated) when the file is shorter.
   void read(void* data, size_t bytes);
   bool read_byte(uint8_t* b);
   const std::string& path() const { return path_; }

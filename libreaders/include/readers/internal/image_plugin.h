@@ -23,8 +23,8 @@ struct ImagePlugin {
 
 // Loads the plugin once per process (thread-safe): $TERRAIN_IMAGE_PLUGIN when set, else the module
 // of this build (its absolute path is compiled in). When it cannot be loaded, throws
-// IoError(code, "<image_path>: cannot load the image plugin <plugin path>: <dlerror()>") on every call.
-const ImagePlugin& image_plugin(IoErrorCode code, const std::string& image_path);
+// Error(code, "<image_path>: cannot load the image plugin <plugin path>: <dlerror()>") on every call.
+const ImagePlugin& image_plugin(ErrorCode code, const std::string& image_path);
 
 // Room for the plugin's reason text; longer reasons are truncated.
 constexpr size_t kImageMessageSize = 1024;

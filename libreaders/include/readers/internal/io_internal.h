@@ -11,8 +11,8 @@
 
 namespace terrain::io {
 
-// Throws IoError(code, "<path>: <problem>") so that every message names the file.
-[[noreturn]] void fail(IoErrorCode code, const std::string& path, const std::string& problem);
+// Throws Error(code, "<path>: <problem>") so that every message names the file.
+[[noreturn]] void fail(ErrorCode code, const std::string& path, const std::string& problem);
 
 std::string to_lower(std::string s);
 bool ends_with_ci(const std::string& s, const std::string& suffix);

@@ -6,6 +6,8 @@
 #include <optional>
 #include <string>
 
+#include "core/text.h"
+
 namespace terrain::io {
 
 struct JsonScalar {
@@ -20,8 +22,5 @@ using JsonObject = std::map<std::string, JsonScalar>;
 // Parses `text` as one JSON object. On failure returns nullopt and sets `error` to a short
 // description with the byte offset (e.g. "expected ':' at byte 17").
 std::optional<JsonObject> parse_json_object(const std::string& text, std::string& error);
-
-// Quotes and escapes `s` as a JSON string literal.
-std::string json_quote(const std::string& s);
 
 }  // namespace terrain::io

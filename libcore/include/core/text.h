@@ -1,0 +1,17 @@
+// Text forms shared by every tool and library that writes JSON or numbers for people and programs.
+#pragma once
+
+#include <string>
+#include <string_view>
+
+namespace terrain {
+
+// s as a JSON string literal, quotes included: '"' and '\' escaped, \n \r \t by name, other control
+// characters as \u00XX; every other byte (UTF-8 included) unchanged. Pure, thread-safe.
+std::string json_quote(std::string_view s);
+
+// The shortest decimal text that reads back as exactly v, locale-independent ("0.1", "1e+20",
+// "-0"); "nan", "inf" and "-inf" for the non-finite values (callers writing JSON map those to null).
+std::string shortest(double v);
+
+}  // namespace terrain
