@@ -319,8 +319,8 @@ Status Decoder::open(const uint8_t* data, size_t size) {
 Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const {
   assert(dst && dst_stride >= rect.width);
   if (!data_) return Status::InvalidArgument;
-  if (rect.width < 1 || rect.height < 1 || rect.x < 0 || rect.y < 0 || rect.x > header_.width - rect.width ||
-      rect.y > header_.height - rect.height)
+  if (rect.width < 1 || rect.height < 1 || rect.x0 < 0 || rect.y0 < 0 ||
+      rect.x0 > header_.width - rect.width || rect.y0 > header_.height - rect.height)
     return Status::InvalidArgument;
   detail::TileParams params;
   params.fraction_bits = int(get_u32(data_ + 40));
@@ -330,21 +330,21 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
   params.max_error = header_.max_error;
   detail::TileWork& work = scratch.impl().work;
   const int64_t t = header_.tile_size;
-  const int64_t tx0 = rect.x / t, tx1 = (rect.x + rect.width - 1) / t;
-  const int64_t ty0 = rect.y / t, ty1 = (rect.y + rect.height - 1) / t;
+  const int64_t tx0 = rect.x0 / t, tx1 = (rect.x0 + rect.width - 1) / t;
+  const int64_t ty0 = rect.y0 / t, ty1 = (rect.y0 + rect.height - 1) / t;
   for (int64_t ty = ty0; ty <= ty1; ++ty)
     for (int64_t tx = tx0; tx <= tx1; ++tx) {
       const TileEntry& entry = index_[size_t(ty * header_.tiles_x + tx)];
       const uint8_t* payload = data_ + entry.offset;
       if (crc32c(payload, entry.size) != entry.crc) return Status::ChecksumMismatch;
       const int tw = tile_extent(header_.width, t, tx), th = tile_extent(header_.height, t, ty);
-      const int64_t x0 = std::max(rect.x, tx * t), x1 = std::min(rect.x + rect.width, tx * t + tw);
-      const int64_t y0 = std::max(rect.y, ty * t), y1 = std::min(rect.y + rect.height, ty * t + th);
+      const int64_t x0 = std::max(rect.x0, tx * t), x1 = std::min(rect.x0 + rect.width, tx * t + tw);
+      const int64_t y0 = std::max(rect.y0, ty * t), y1 = std::min(rect.y0 + rect.height, ty * t + th);
       const detail::TileWindow window{int(x0 - tx * t),
                                       int(y0 - ty * t),
                                       int(x1 - tx * t),
                                       int(y1 - ty * t),
-                                      dst + (y0 - rect.y) * dst_stride + (x0 - rect.x),
+                                      dst + (y0 - rect.y0) * dst_stride + (x0 - rect.x0),
                                       dst_stride};
       if (detail::decode_tile(payload, entry.size, tw, th, params, work, window) != detail::TileResult::Ok)
         return Status::Corrupt;

@@ -159,7 +159,7 @@ std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int leve
   const codec::Rect r{tx * ts, ty * ts, std::min(ts, h.width - tx * ts), std::min(ts, h.height - ty * ts)};
   std::shared_ptr<Tile> t = std::make_shared_for_overwrite<Tile>(size_t(r.width * r.height));
   const codec::Status s = bd.decoder.decode_region(r, t.get(), r.width, thread_codec_scratch());
-  if (s != codec::Status::Ok) throw_band_error(*file_, level, b, file_->bands(level)[b], r.x, r.width, s);
+  if (s != codec::Status::Ok) throw_band_error(*file_, level, b, file_->bands(level)[b], r.x0, r.width, s);
   count_decoded(level, 1, uint64_t(r.width * r.height));
   std::lock_guard<std::mutex> lock(mutex_);
   if (map_.find(key) == map_.end()) {
@@ -186,14 +186,14 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
     const codec::Rect cr{rect.x0, y0 - view.y0, rect.width, y1 - y0};
     const codec::HeaderInfo& h = bd.decoder.header();
     const int64_t ts = h.tile_size;
-    const int64_t tx0 = cr.x / ts, tx1 = (cr.x + cr.width - 1) / ts, ty0 = cr.y / ts,
-                  ty1 = (cr.y + cr.height - 1) / ts;
+    const int64_t tx0 = cr.x0 / ts, tx1 = (cr.x0 + cr.width - 1) / ts, ty0 = cr.y0 / ts,
+                  ty1 = (cr.y0 + cr.height - 1) / ts;
     int32_t* band_out = out + (y0 - rect.y0) * out_stride;
     if (cache_capacity_ == 0) {
       thread_local std::vector<int32_t> residual;
       residual.resize(size_t(cr.width * cr.height));
       const codec::Status s = bd.decoder.decode_region(cr, residual.data(), cr.width, thread_codec_scratch());
-      if (s != codec::Status::Ok) throw_band_error(*file_, level, b, view, cr.x, cr.width, s);
+      if (s != codec::Status::Ok) throw_band_error(*file_, level, b, view, cr.x0, cr.width, s);
       count_decoded(level, uint64_t((tx1 - tx0 + 1) * (ty1 - ty0 + 1)),
                     uint64_t(tiles_extent(tx0, tx1, ts, h.width) * tiles_extent(ty0, ty1, ts, h.height)));
       add_rows(band_out, out_stride, residual.data(), cr.width, cr.width, cr.height);
@@ -203,9 +203,9 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
       for (int64_t tx = tx0; tx <= tx1; ++tx) {
         const std::shared_ptr<const Tile> t = residual_tile(level, b, bd, tx, ty);
         const int64_t tw = std::min(ts, h.width - tx * ts);
-        const int64_t x0 = std::max(cr.x, tx * ts), x1 = std::min(cr.x + cr.width, tx * ts + tw);
-        const int64_t ya = std::max(cr.y, ty * ts), yb = std::min(cr.y + cr.height, (ty + 1) * ts);
-        add_rows(band_out + (ya - cr.y) * out_stride + (x0 - cr.x), out_stride,
+        const int64_t x0 = std::max(cr.x0, tx * ts), x1 = std::min(cr.x0 + cr.width, tx * ts + tw);
+        const int64_t ya = std::max(cr.y0, ty * ts), yb = std::min(cr.y0 + cr.height, (ty + 1) * ts);
+        add_rows(band_out + (ya - cr.y0) * out_stride + (x0 - cr.x0), out_stride,
                  t.get() + (ya - ty * ts) * tw + (x0 - tx * ts), tw, x1 - x0, yb - ya);
       }
   }

@@ -304,15 +304,15 @@ TEST_CASE("decode_region equals the same window of a full decode", "[codec]") {
       codec::Rect r;
       r.width = std::uniform_int_distribution<int64_t>(1, img.width)(rng);
       r.height = std::uniform_int_distribution<int64_t>(1, img.height)(rng);
-      r.x = std::uniform_int_distribution<int64_t>(0, img.width - r.width)(rng);
-      r.y = std::uniform_int_distribution<int64_t>(0, img.height - r.height)(rng);
+      r.x0 = std::uniform_int_distribution<int64_t>(0, img.width - r.width)(rng);
+      r.y0 = std::uniform_int_distribution<int64_t>(0, img.height - r.height)(rng);
       const ptrdiff_t stride = r.width + 3;
       std::vector<int32_t> window(size_t(stride * r.height), 12345);
       REQUIRE(decoder.decode_region(r, window.data(), stride, scratch) == codec::Status::Ok);
       bool same = true;
       for (int64_t y = 0; y < r.height; ++y)
         for (int64_t x = 0; x < r.width; ++x)
-          same = same && window[size_t(y * stride + x)] == full[size_t((r.y + y) * img.width + r.x + x)];
+          same = same && window[size_t(y * stride + x)] == full[size_t((r.y0 + y) * img.width + r.x0 + x)];
       for (int64_t y = 0; y < r.height; ++y)  // padding past the row width is untouched
         for (int64_t x = r.width; x < stride; ++x) same = same && window[size_t(y * stride + x)] == 12345;
       CHECK(same);

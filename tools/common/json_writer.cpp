@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/text.h"
+
 namespace cli {
 
 void JsonWriter::newline_indent() {
@@ -69,9 +71,7 @@ JsonWriter& JsonWriter::value(double v) {
     out_ << "null";
     return *this;
   }
-  char buf[64];
-  auto res = std::to_chars(buf, buf + sizeof buf, v);
-  out_.write(buf, res.ptr - buf);
+  out_ << terrain::shortest(v);
   return *this;
 }
 
@@ -101,36 +101,6 @@ JsonWriter& JsonWriter::null() {
 
 void JsonWriter::finish() { out_ << '\n' << std::flush; }
 
-void JsonWriter::write_string(std::ostream& out, std::string_view s) {
-  out << '"';
-  for (char c : s) {
-    switch (c) {
-      case '"':
-        out << "\\\"";
-        break;
-      case '\\':
-        out << "\\\\";
-        break;
-      case '\n':
-        out << "\\n";
-        break;
-      case '\r':
-        out << "\\r";
-        break;
-      case '\t':
-        out << "\\t";
-        break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(static_cast<unsigned char>(c)));
-          out << buf;
-        } else {
-          out << c;
-        }
-    }
-  }
-  out << '"';
-}
+void JsonWriter::write_string(std::ostream& out, std::string_view s) { out << terrain::json_quote(s); }
 
 }  // namespace cli

@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "codec/crc32c.h"
+#include "core/rect.h"
 
 namespace codec {
 
@@ -84,9 +85,8 @@ struct TileEntry {
   uint32_t crc = 0;     // CRC32C of the tile's bytes
 };
 
-struct Rect {
-  int64_t x = 0, y = 0, width = 0, height = 0;
-};
+// A window of the image in samples (core/rect.h).
+using Rect = terrain::Rect;
 
 // Caller-owned working memory. Buffers grow on first use and are reused, so steady-state encode and
 // decode calls do not allocate. One per thread.

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "core/rect.h"
 #include "readers/heightmap.h"
 
 namespace terrain {
@@ -39,11 +40,7 @@ inline int64_t coarse_extent(int64_t fine) { return (fine + 1) / 2; }
 // longer side would still be >= min_coarsest_side.
 std::vector<GridSize> pyramid_level_sizes(GridSize finest, int level_count, int64_t min_coarsest_side = 128);
 
-// An axis-aligned rectangle of samples on one level.
-struct Rect {
-  int64_t x0 = 0, y0 = 0, width = 0, height = 0;
-  bool operator==(const Rect&) const = default;
-};
+// Rectangles of samples on one level: terrain::Rect (core/rect.h).
 
 // ---------------------------------------------------------------------------------------------
 // U: four-point interpolatory subdivision, exact integer arithmetic.
