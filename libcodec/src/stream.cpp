@@ -11,6 +11,7 @@
 #include "codec/internal/quantizer.h"
 #include "codec/internal/tile_coder.h"
 #include "core/bytes.h"
+#include "core/text.h"
 
 namespace codec {
 
@@ -90,25 +91,15 @@ bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
 }  // namespace
 
 const char* status_name(Status status) {
-  switch (status) {
-    case Status::Ok:
-      return "ok";
-    case Status::BufferTooSmall:
-      return "output buffer too small";
-    case Status::Truncated:
-      return "truncated stream";
-    case Status::Corrupt:
-      return "corrupt stream";
-    case Status::ChecksumMismatch:
-      return "checksum mismatch";
-    case Status::UnsupportedVersion:
-      return "unsupported stream version";
-    case Status::InvalidArgument:
-      return "invalid argument";
-    case Status::ValueOutOfRange:
-      return "sample value out of range";
-  }
-  return "unknown status";
+  static constexpr const char* kNames[] = {"ok",
+                                           "output buffer too small",
+                                           "truncated stream",
+                                           "corrupt stream",
+                                           "checksum mismatch",
+                                           "unsupported stream version",
+                                           "invalid argument",
+                                           "sample value out of range"};
+  return terrain::enum_name(status, kNames);
 }
 
 double predicted_rms(double step) { return step * kRmsPerStep; }

@@ -8,24 +8,14 @@
 #include <filesystem>
 #include <system_error>
 
+#include "core/text.h"
 #include "readers/internal/io_internal.h"
 
 namespace terrain {
 
 const char* sample_type_name(SampleType t) {
-  switch (t) {
-    case SampleType::Int16:
-      return "int16";
-    case SampleType::UInt16:
-      return "uint16";
-    case SampleType::Int32:
-      return "int32";
-    case SampleType::Float32:
-      return "float32";
-    case SampleType::TerrainRGB:
-      return "terrain-rgb";
-  }
-  return "unknown";
+  static constexpr const char* kNames[] = {"int16", "uint16", "int32", "float32", "terrain-rgb"};
+  return enum_name(t, kNames);
 }
 
 std::optional<SampleType> sample_type_from_name(const std::string& name) {
@@ -38,21 +28,9 @@ std::optional<SampleType> sample_type_from_name(const std::string& name) {
 }
 
 const char* file_format_name(FileFormat f) {
-  switch (f) {
-    case FileFormat::Hgt:
-      return "srtm-hgt";
-    case FileFormat::Raw:
-      return "raw";
-    case FileFormat::EsriBil:
-      return "esri-bil";
-    case FileFormat::EsriFlt:
-      return "esri-flt";
-    case FileFormat::Image:
-      return "image";
-    case FileFormat::TerrainRgbImage:
-      return "terrain-rgb-image";
-  }
-  return "unknown";
+  static constexpr const char* kNames[] = {"srtm-hgt", "raw",   "esri-bil",
+                                           "esri-flt", "image", "terrain-rgb-image"};
+  return enum_name(f, kNames);
 }
 
 namespace io {

@@ -143,18 +143,14 @@ TEST_CASE("terrain-info usage, help and success paths", "[io][errors]") {
 
 TEST_CASE("one mapping from error codes to the tools' documented exit statuses", "[io][errors]") {
   using terrain::ErrorCode;
-  CHECK(cli::exit_status(ErrorCode::InvalidOption) == 1);
-  CHECK(cli::exit_status(ErrorCode::NotFound) == 2);
-  CHECK(cli::exit_status(ErrorCode::Truncated) == 3);
-  CHECK(cli::exit_status(ErrorCode::Oversized) == 4);
-  CHECK(cli::exit_status(ErrorCode::DimensionMismatch) == 5);
-  CHECK(cli::exit_status(ErrorCode::UnknownType) == 6);
-  CHECK(cli::exit_status(ErrorCode::NonFinite) == 7);
-  CHECK(cli::exit_status(ErrorCode::MissingField) == 8);
-  CHECK(cli::exit_status(ErrorCode::WriteFailed) == 9);
-  CHECK(cli::exit_status(ErrorCode::ChecksumMismatch) == 10);
-  CHECK(cli::exit_status(ErrorCode::UnsupportedVersion) == 10);
-  CHECK(cli::exit_status(ErrorCode::CorruptData) == 10);
+  const std::pair<ErrorCode, int> expected[] = {
+      {ErrorCode::InvalidOption, 1},     {ErrorCode::NotFound, 2},
+      {ErrorCode::Truncated, 3},         {ErrorCode::Oversized, 4},
+      {ErrorCode::DimensionMismatch, 5}, {ErrorCode::UnknownType, 6},
+      {ErrorCode::NonFinite, 7},         {ErrorCode::MissingField, 8},
+      {ErrorCode::WriteFailed, 9},       {ErrorCode::ChecksumMismatch, 10},
+      {ErrorCode::CorruptData, 10},      {ErrorCode::UnsupportedVersion, 10}};
+  for (const auto& [code, status] : expected) CHECK(cli::exit_status(code) == status);
   // Every code is documented in --help and has a name.
   const std::string help = cli::exit_codes_help();
   for (int c = 0; c <= int(ErrorCode::InvalidOption); ++c) {

@@ -11,49 +11,53 @@
 
 namespace cli {
 
+namespace {
+// The documented exit statuses: each library error code maps to one (exit_status), and --help prints
+// this table (exit_codes_help), so the two cannot disagree.
+struct ExitStatus {
+  int status;
+  const char* meaning;
+  std::vector<terrain::ErrorCode> codes;
+};
+const std::vector<ExitStatus>& exit_table() {
+  using C = terrain::ErrorCode;
+  static const std::vector<ExitStatus> table = {
+      {kExitOk, "success", {}},
+      {kExitUsage, "usage error (unknown, missing or out-of-range option)", {C::InvalidOption}},
+      {2, "input not found or unreadable", {C::NotFound}},
+      {3, "truncated input", {C::Truncated}},
+      {4, "oversized input (more bytes than the dimensions need)", {C::Oversized}},
+      {5, "dimensions don't match the file size / cannot be derived", {C::DimensionMismatch}},
+      {6, "unknown sample type or format", {C::UnknownType}},
+      {7, "NaN/Inf in float input", {C::NonFinite}},
+      {8, "missing or malformed header/sidecar field", {C::MissingField}},
+      {9, "cannot write output", {C::WriteFailed}},
+      {10,
+       "corrupted compressed data (bad checksum, bad bitstream, unknown version)",
+       {C::CorruptData, C::ChecksumMismatch, C::UnsupportedVersion}},
+      {kExitInternal, "internal error", {}},
+  };
+  return table;
+}
+}  // namespace
+
 int exit_status(terrain::ErrorCode code) {
-  using terrain::ErrorCode;
-  switch (code) {
-    case ErrorCode::InvalidOption:
-      return kExitUsage;
-    case ErrorCode::NotFound:
-      return 2;
-    case ErrorCode::Truncated:
-      return 3;
-    case ErrorCode::Oversized:
-      return 4;
-    case ErrorCode::DimensionMismatch:
-      return 5;
-    case ErrorCode::UnknownType:
-      return 6;
-    case ErrorCode::NonFinite:
-      return 7;
-    case ErrorCode::MissingField:
-      return 8;
-    case ErrorCode::WriteFailed:
-      return 9;
-    case ErrorCode::CorruptData:
-    case ErrorCode::ChecksumMismatch:
-    case ErrorCode::UnsupportedVersion:
-      return 10;
-  }
+  for (const ExitStatus& e : exit_table())
+    for (const terrain::ErrorCode c : e.codes)
+      if (c == code) return e.status;
   return kExitInternal;
 }
 
-const char* exit_codes_help() {
-  return "Exit status:\n"
-         "  0  success\n"
-         "  1  usage error (unknown, missing or out-of-range option)\n"
-         "  2  input not found or unreadable\n"
-         "  3  truncated input\n"
-         "  4  oversized input (more bytes than the dimensions need)\n"
-         "  5  dimensions don't match the file size / cannot be derived\n"
-         "  6  unknown sample type or format\n"
-         "  7  NaN/Inf in float input\n"
-         "  8  missing or malformed header/sidecar field\n"
-         "  9  cannot write output\n"
-         " 10  corrupted compressed data (bad checksum, bad bitstream, unknown version)\n"
-         " 70  internal error\n";
+const std::string& exit_codes_help() {
+  static const std::string text = [] {
+    std::string t = "Exit status:\n";
+    for (const ExitStatus& e : exit_table()) {
+      const std::string n = std::to_string(e.status);
+      t += std::string(n.size() < 2 ? "  " : " ") + n + "  " + e.meaning + "\n";
+    }
+    return t;
+  }();
+  return text;
 }
 
 ArgParser::ArgParser(std::string program, std::string synopsis, std::string description)

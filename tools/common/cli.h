@@ -21,7 +21,7 @@ constexpr int kExitUsage = 1;
 constexpr int kExitInternal = 70;
 int exit_status(terrain::ErrorCode code);
 // The exit-status table, for the end of every tool's --help.
-const char* exit_codes_help();
+const std::string& exit_codes_help();
 
 // Bad command line: reported as "<tool>: <message>" plus a hint to --help, exit status 1.
 class UsageError : public std::runtime_error {

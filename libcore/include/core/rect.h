@@ -7,8 +7,8 @@
 namespace terrain {
 
 struct Rect {
-  int64_t x0 = 0, y0 = 0;          // first column and row
-  int64_t width = 0, height = 0;   // in samples; a rectangle with either <= 0 is empty
+  int64_t x0 = 0, y0 = 0;         // first column and row
+  int64_t width = 0, height = 0;  // in samples; a rectangle with either <= 0 is empty
   bool operator==(const Rect&) const = default;
 };
 

@@ -1,6 +1,7 @@
 // Text forms shared by every tool and library that writes JSON or numbers for people and programs.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <string_view>
 
@@ -13,5 +14,12 @@ std::string json_quote(std::string_view s);
 // The shortest decimal text that reads back as exactly v, locale-independent ("0.1", "1e+20",
 // "-0"); "nan", "inf" and "-inf" for the non-finite values (callers writing JSON map those to null).
 std::string shortest(double v);
+
+// names[e] for an enum whose values are 0, 1, ... in the order of `names`; "unknown" for any other
+// value (a value read from a file may be anything). The one way enum names are written.
+template <class Enum, size_t N> const char* enum_name(Enum e, const char* const (&names)[N]) {
+  const auto i = static_cast<unsigned long long>(e);
+  return i < N ? names[i] : "unknown";
+}
 
 }  // namespace terrain
