@@ -6,6 +6,7 @@
 #include <random>
 
 #include "runtime/clipmap.h"
+#include "runtime/height_source.h"
 
 using namespace terrain;
 using namespace terrain::runtime;

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "pyramid/pyramid.h"
-#include "runtime/clipmap.h"
+#include "runtime/height_source.h"
 
 namespace terrain::runtime {
 
