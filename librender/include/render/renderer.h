@@ -24,18 +24,8 @@
 #include <vector>
 
 #include "runtime/clipmap.h"
-
-// AddressSanitizer builds: GCC defines __SANITIZE_ADDRESS__, Clang answers __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define TERRAIN_RUNTIME_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define TERRAIN_RUNTIME_ASAN 1
-#endif
-#endif
-#if defined(TERRAIN_RUNTIME_ASAN)
-#include <sanitizer/lsan_interface.h>
-#endif
+// Not needed here: kept while tools/clipmap-view.cpp still reaches GlLeakCheckPause through this header.
+#include "render/leak_check.h"
 
 namespace terrain::runtime {
 
@@ -68,26 +58,6 @@ struct RenderStats {
   double seconds_upload = 0;  // texture uploads of the last upload()
   double seconds_render = 0;  // draw + glFinish
   int64_t samples_uploaded = 0;
-};
-
-// Pauses LeakSanitizer on the calling thread while it lives (nothing in builds without ASan). Mesa
-// keeps a few allocations for the life of the process (libgio at driver load, llvmpipe's JIT on the
-// first draws) that LeakSanitizer reports at exit; an ASan build wraps its GL calls (context, renderer
-// construction, upload, render, read-back) in one of these so its exit status speaks of its own leaks.
-class GlLeakCheckPause {
- public:
-  GlLeakCheckPause() {
-#if defined(TERRAIN_RUNTIME_ASAN)
-    __lsan_disable();
-#endif
-  }
-  ~GlLeakCheckPause() {
-#if defined(TERRAIN_RUNTIME_ASAN)
-    __lsan_enable();
-#endif
-  }
-  GlLeakCheckPause(const GlLeakCheckPause&) = delete;
-  GlLeakCheckPause& operator=(const GlLeakCheckPause&) = delete;
 };
 
 // An EGL display + OpenGL 4.5 core context, current on the calling thread. Throws
