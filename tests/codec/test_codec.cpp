@@ -113,6 +113,17 @@ ErrorStats error_stats(const Image& img, const std::vector<int32_t>& decoded) {
   return {std::sqrt(sum / double(decoded.size())), worst};
 }
 
+// A max-error stream's options: tiles of tile_size, quantiser step `step`, every sample within
+// max_error.
+codec::EncodeOptions max_error_options(uint32_t tile_size, double step, uint32_t max_error) {
+  codec::EncodeOptions options;
+  options.tile_size = tile_size;
+  options.step = step;
+  options.bound_max_error = true;
+  options.max_error = max_error;
+  return options;
+}
+
 }  // namespace
 
 TEST_CASE("lossless round trip at step 1 on every shared DEM", "[codec][data]") {
@@ -350,12 +361,7 @@ TEST_CASE("decode_region reads only the tiles it intersects", "[codec]") {
 
 TEST_CASE("header and tile index are readable without decoding", "[codec]") {
   const Image img = residual_like(130, 70, 2.0, 4);
-  codec::EncodeOptions options;
-  options.tile_size = 32;
-  options.step = 2.5;
-  options.bound_max_error = true;
-  options.max_error = 4;
-  const auto stream = encode_image(img, options);
+  const auto stream = encode_image(img, max_error_options(32, 2.5, 4));
   codec::HeaderInfo header;
   REQUIRE(codec::read_header(stream.data(), stream.size(), &header) == codec::Status::Ok);
   CHECK(header.version == codec::kFormatVersion);
@@ -377,12 +383,7 @@ TEST_CASE("header and tile index are readable without decoding", "[codec]") {
 
 TEST_CASE("truncated and corrupted streams are rejected", "[codec]") {
   const Image img = residual_like(40, 35, 3.0, 8);
-  codec::EncodeOptions options;
-  options.tile_size = 16;
-  options.step = 2;
-  options.bound_max_error = true;
-  options.max_error = 2;
-  const auto stream = encode_image(img, options);
+  const auto stream = encode_image(img, max_error_options(16, 2, 2));
   codec::Scratch scratch;
   std::vector<int32_t> out(img.samples.size());
   for (size_t len = 0; len < stream.size(); ++len) {

@@ -50,6 +50,16 @@ void gzip_file(const std::string& from, const std::string& to) {
   REQUIRE(gzclose(gz) == Z_OK);
 }
 
+// A width x height grid of `type` whose sample i (row-major) is f(i).
+template <class F> terrain::Heightmap grid_of(int64_t width, int64_t height, terrain::SampleType type, F f) {
+  terrain::Heightmap m;
+  m.info.width = width;
+  m.info.height = height;
+  m.info.sample_type = type;
+  for (int64_t i = 0; i < width * height; ++i) m.values.push_back(f(i));
+  return m;
+}
+
 }  // namespace
 
 TEST_CASE("band reader matches whole reads on hgt and hgt.gz", "[io][band]") {
@@ -73,11 +83,8 @@ TEST_CASE("band reader matches whole reads on PNG", "[io][band]") {
   // A PNG written here takes every band height (a 1-row band costs one OIIO call per row, which is
   // slow under sanitizers on a 1025-row image); the shared Puget Sound PNG takes the larger bands.
   iotest::TempDir dir;
-  terrain::Heightmap m;
-  m.info.width = 211;
-  m.info.height = 97;
-  m.info.sample_type = terrain::SampleType::UInt16;
-  for (int64_t i = 0; i < 211 * 97; ++i) m.values.push_back(double((i * 2654435761u) % 65536));
+  const terrain::Heightmap m = grid_of(211, 97, terrain::SampleType::UInt16,
+                                       [](int64_t i) { return double((i * 2654435761u) % 65536); });
   std::string png = dir.file("band.png");
   terrain::write_image16(png, m);
   check_bands_match(png);
@@ -92,12 +99,9 @@ TEST_CASE("band reader matches whole reads on PNG", "[io][band]") {
 
 TEST_CASE("band reader matches whole reads on raw", "[io][band]") {
   iotest::TempDir dir;
-  terrain::Heightmap m;
-  m.info.width = 301;
-  m.info.height = 150;
-  m.info.sample_type = terrain::SampleType::Float32;
+  terrain::Heightmap m = grid_of(301, 150, terrain::SampleType::Float32,
+                                 [](int64_t i) { return double(float(double(i % 977) * 0.5 - 17.25)); });
   m.info.nodata = -1.0;
-  for (int64_t i = 0; i < 301 * 150; ++i) m.values.push_back(double(float(double(i % 977) * 0.5 - 17.25)));
   m.valid.assign(m.values.size(), 1);
   m.valid[1234] = 0;
   m.values[1234] = 0;

@@ -75,7 +75,8 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
           "find_package(terrain REQUIRED)\nadd_executable(consumer main.cpp)\n"
           "target_link_libraries(consumer PRIVATE terrain::runtime)\n";
     std::ofstream main(project + "/main.cpp");
-    main << "#include <codec/codec.h>\n#include <readers/terrain_generator.h>\n#include <runtime/clipmap.h>\n"
+    main << "#include <codec/codec.h>\n#include <readers/terrain_generator.h>\n"
+            "#include <runtime/screen_error.h>\n"
             "int main() {\n"
             "  const terrain::Heightmap map = terrain::synthesize_terrain({.seed = 1, .width = 33, .height = "
             "17});\n"

@@ -130,35 +130,32 @@ TEST_CASE("raw + JSON sidecar round-trips all four types in both byte orders", "
 
 TEST_CASE("16-bit PNG and TIFF round-trip exactly", "[io][image]") {
   iotest::TempDir dir;
+  // m written as a 16-bit image at dir/name (format by extension) comes back with its sample type
+  // and samples; the read is returned for further checks.
+  const auto round_trip = [&](const Heightmap& m, const std::string& name) {
+    const std::string path = dir.file(name);
+    terrain::write_image16(path, m);
+    Heightmap r = terrain::read_heightmap(path);
+    CHECK(r.info.sample_type == m.info.sample_type);
+    require_same_samples(m, r);
+    return r;
+  };
   SECTION("PNG uint16") {
     Heightmap m = test_grid(SampleType::UInt16);
     m.valid.clear();  // images carry no nodata value
     m.values[size_t(m.width() + 5)] = 65535;
-    std::string path = dir.file("grid.png");
-    terrain::write_image16(path, m);
-    Heightmap r = terrain::read_heightmap(path);
-    CHECK(r.info.sample_type == SampleType::UInt16);
-    CHECK(r.info.format == terrain::FileFormat::Image);
-    require_same_samples(m, r);
+    CHECK(round_trip(m, "grid.png").info.format == terrain::FileFormat::Image);
   }
   SECTION("TIFF int16 with negative values") {
     Heightmap m = test_grid(SampleType::Int16);
     m.valid.clear();
     m.values[size_t(m.width() + 5)] = -32768;
-    std::string path = dir.file("grid.tif");
-    terrain::write_image16(path, m);
-    Heightmap r = terrain::read_heightmap(path);
-    CHECK(r.info.sample_type == SampleType::Int16);
-    require_same_samples(m, r);
+    round_trip(m, "grid.tif");
   }
   SECTION("TIFF uint16") {
     Heightmap m = test_grid(SampleType::UInt16);
     m.valid.clear();
-    std::string path = dir.file("grid.tiff");
-    terrain::write_image16(path, m);
-    Heightmap r = terrain::read_heightmap(path);
-    CHECK(r.info.sample_type == SampleType::UInt16);
-    require_same_samples(m, r);
+    round_trip(m, "grid.tiff");
   }
   SECTION("PNG refuses values a 16-bit PNG cannot hold, leaving no file behind") {
     Heightmap m = test_grid(SampleType::Int16);

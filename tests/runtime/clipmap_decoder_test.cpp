@@ -9,7 +9,9 @@
 #include "io/io_test_util.h"
 #include "readers/terrain_generator.h"
 #include "runtime/clipmap.h"
+#include "runtime/height_source.h"
 #include "runtime/region_decoder.h"
+#include "runtime/screen_error.h"
 
 using namespace terrain;
 using namespace terrain::runtime;

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "runtime/clipmap.h"
+#include "runtime/height_source.h"
 
 using namespace terrain;
 using namespace terrain::runtime;
@@ -27,6 +28,15 @@ constexpr int kLevels = 6;
 
 FunctionHeightSource hashed_source() {
   return FunctionHeightSource(kLevels, GridSize{1 << 12, 1 << 12}, 1.0, hashed_height, true);
+}
+
+// Options under which every update refills every level and none is switched off by height.
+ClipmapOptions whole_updates(int n) {
+  ClipmapOptions o;
+  o.n = n;
+  o.budget = 1 << 30;
+  o.deactivate_by_height = false;
+  return o;
 }
 
 bool same_level(const Clipmap& a, const Clipmap& b, int l, std::string& why) {
@@ -61,10 +71,7 @@ bool same_level(const Clipmap& a, const Clipmap& b, int l, std::string& why) {
 
 TEST_CASE("clipmap: toroidal storage holds the source's samples at their level coordinates", "[clipmap]") {
   auto src = hashed_source();
-  ClipmapOptions o;
-  o.n = 31;
-  o.budget = 1 << 30;
-  o.deactivate_by_height = false;
+  const ClipmapOptions o = whole_updates(31);
   Clipmap cm(src, o);
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> step(-40.0, 40.0);
@@ -106,10 +113,7 @@ TEST_CASE("clipmap: toroidal storage holds the source's samples at their level c
 
 TEST_CASE("clipmap: desired regions are centred, even-cornered and nested", "[clipmap]") {
   auto src = hashed_source();
-  ClipmapOptions o;
-  o.n = 63;
-  o.budget = 1 << 30;
-  o.deactivate_by_height = false;
+  const ClipmapOptions o = whole_updates(63);
   Clipmap cm(src, o);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> pos(-3000.0, 3000.0);
@@ -260,10 +264,7 @@ TEST_CASE("clipmap: levels switch off when the viewer is high above the terrain"
 
 TEST_CASE("clipmap: z bounds cover z and zc of every vertex", "[clipmap]") {
   auto src = hashed_source();
-  ClipmapOptions o;
-  o.n = 31;
-  o.budget = 1 << 30;
-  o.deactivate_by_height = false;
+  const ClipmapOptions o = whole_updates(31);
   Clipmap cm(src, o);
   cm.update(17.5, -44.25, 3);
   cm.update(30, -20, 3);
@@ -306,10 +307,7 @@ TEST_CASE("clipmap: the normal map has twice the geometry's resolution (slopes o
       levels, GridSize{1 << 10, 1 << 10}, g,
       [](int, int64_t x, int64_t y) { return float(c * double(x) * double(x) * double(x) + d * double(y)); },
       true);
-  ClipmapOptions o;
-  o.n = 31;
-  o.budget = 1 << 30;
-  o.deactivate_by_height = false;
+  const ClipmapOptions o = whole_updates(31);
   Clipmap cm(src, o);
   cm.update(37.0 * g, 11.0 * g, 10.0);
   cm.update(61.0 * g, 3.0 * g, 10.0);  // an incremental move: ring and border texels recomputed

@@ -280,6 +280,12 @@ Sample small_sample() {
   return s;
 }
 
+// write_sample, then the file's bytes.
+std::vector<uint8_t> write_sample_bytes(const std::string& path, const Sample& s, std::mt19937_64& rng) {
+  write_sample(path, s, rng);
+  return read_bytes(path);
+}
+
 ErrorCode open_error_code(const std::string& path) {
   try {
     Container::open(path);
@@ -506,8 +512,7 @@ TEST_CASE("container version rules", "[runtime][container]") {
   TempDir dir;
   const std::string path = dir.file("v.pyr");
   std::mt19937_64 rng(3);
-  write_sample(path, small_sample(), rng);
-  const std::vector<uint8_t> good = read_bytes(path);
+  const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
   CHECK(get_le(good, kSbMajor, 2) == kFormatMajor);
   CHECK(get_le(good, kSbMinor, 2) == kFormatMinor);
 
@@ -547,8 +552,7 @@ TEST_CASE("container version 1.0 files (no level error figures) are still read",
   std::mt19937_64 rng(5);
   Sample s = small_sample();
   for (LevelInfo& li : s.info.levels) li.error = LevelError{1.5, 4.0};
-  write_sample(path, s, rng);
-  const std::vector<uint8_t> v11 = read_bytes(path);
+  const std::vector<uint8_t> v11 = write_sample_bytes(path, s, rng);
   constexpr size_t kInfoSize = 264, kRecordSizeField = 8, kRecordV10 = 80, kRecordV11 = 96, kFlags = 36;
   const size_t index_offset = size_t(get_le(v11, kSbIndexOffset, 8));
   REQUIRE(get_le(v11, kSbMinor, 2) == 1);
@@ -586,8 +590,7 @@ TEST_CASE("container level error figures are validated", "[runtime][container]")
   Sample s = small_sample();
   s.info.levels[0].error = LevelError{0.5, 2.0};
   s.info.levels[1].error.reset();
-  write_sample(path, s, rng);
-  const std::vector<uint8_t> good = read_bytes(path);
+  const std::vector<uint8_t> good = write_sample_bytes(path, s, rng);
   const size_t records = size_t(get_le(good, kSbIndexOffset, 8)) + 264;
   constexpr size_t kRecord = 96, kFlags = 36, kErrorRms = 80, kErrorMax = 88;
   const auto damaged = [&](size_t at, uint64_t value, int bytes) {
@@ -618,8 +621,7 @@ TEST_CASE("container checksum mismatches are reported", "[runtime][container]") 
   TempDir dir;
   const std::string path = dir.file("crc.pyr");
   std::mt19937_64 rng(4);
-  write_sample(path, small_sample(), rng);
-  const std::vector<uint8_t> good = read_bytes(path);
+  const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
 
   SECTION("superblock") {
     std::vector<uint8_t> b = good;
@@ -687,8 +689,7 @@ TEST_CASE("container: every truncation is rejected as truncated", "[runtime][con
   TempDir dir;
   const std::string path = dir.file("trunc.pyr");
   std::mt19937_64 rng(7);
-  write_sample(path, small_sample(), rng);
-  const std::vector<uint8_t> good = read_bytes(path);
+  const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
   const std::string cut = dir.file("cut.pyr");
   for (size_t length = 0; length < good.size(); ++length) {
     write_bytes(cut, good.data(), length);
@@ -707,9 +708,7 @@ TEST_CASE("container: resealed random index edits never crash the reader", "[run
   TempDir dir;
   const std::string path = dir.file("fuzz.pyr");
   std::mt19937_64 rng(8);
-  const Sample s = small_sample();
-  write_sample(path, s, rng);
-  const std::vector<uint8_t> good = read_bytes(path);
+  const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
   const uint64_t index_offset = get_le(good, kSbIndexOffset, 8);
   const std::string edited = dir.file("edited.pyr");
   int accepted = 0;
@@ -780,8 +779,7 @@ TEST_CASE("container: crafted huge offsets are rejected without overflow", "[run
   TempDir dir;
   const std::string path = dir.file("huge.pyr");
   std::mt19937_64 rng(9);
-  write_sample(path, small_sample(), rng);
-  const std::vector<uint8_t> good = read_bytes(path);
+  const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
   const uint64_t index = get_le(good, kSbIndexOffset, 8);
   // Level records start 264 bytes into the index (96 bytes each, blob offset at +16, size at +24).
   const size_t record2 = size_t(index) + 264 + 2 * 96;
@@ -794,21 +792,15 @@ TEST_CASE("container: crafted huge offsets are rejected without overflow", "[run
     std::vector<uint8_t> b = good;
     put_le(b, record2 + 16, c[0], 8);
     put_le(b, record2 + 24, c[1], 8);
-    reseal(b);
-    write_bytes(path, b);
     INFO("offset " << c[0] << " size " << c[1]);
-    CHECK(open_error_code(path) == ErrorCode::CorruptData);
+    CHECK(resealed_open_error(path, b) == ErrorCode::CorruptData);
   }
   std::vector<uint8_t> b = good;
   put_le(b, kSbFileSize, ~uint64_t(0), 8);
-  reseal(b);
-  write_bytes(path, b);
-  CHECK(open_error_code(path) == ErrorCode::Truncated);
+  CHECK(resealed_open_error(path, b) == ErrorCode::Truncated);
   b = good;
   put_le(b, kSbIndexOffset, ~uint64_t(0) - 7, 8);
-  reseal(b);
-  write_bytes(path, b);
-  CHECK(open_error_code(path) == ErrorCode::CorruptData);
+  CHECK(resealed_open_error(path, b) == ErrorCode::CorruptData);
 }
 
 // Hidden (run with "[large]"): a level blob beyond 4 GiB, so offsets and sizes need 64 bits.
@@ -848,9 +840,7 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   TempDir dir;
   const std::string path = dir.file("layout.pyr");
   std::mt19937_64 rng(10);
-  const Sample s = small_sample();
-  write_sample(path, s, rng);
-  const std::vector<uint8_t> b = read_bytes(path);
+  const std::vector<uint8_t> b = write_sample_bytes(path, small_sample(), rng);
   const uint8_t magic[8] = {0x89, 'T', 'P', 'Y', 'R', 0x0D, 0x0A, 0x1A};
   CHECK(std::equal(magic, magic + 8, b.begin()));
   CHECK(get_le(b, 12, 4) == 64);

@@ -63,6 +63,24 @@ double bits_per_sample(uint64_t file_bytes, const Heightmap& map) {
   return 8.0 * double(file_bytes) / double(map.width() * map.height());
 }
 
+BuildFileOptions target(ErrorTarget t, double metres) {
+  BuildFileOptions o;
+  o.target = t;
+  o.target_metres = metres;
+  return o;
+}
+
+// synthesize_terrain(seed, width x height) written as a raw file in dir and built at quantiser step
+// step_m into dir/name; returns the .pyr path.
+std::string synthetic_pyramid(iotest::TempDir& dir, uint64_t seed, int64_t width, int64_t height,
+                              double step_m, const std::string& name) {
+  const std::string src = dir.file("synth.raw");
+  write_raw(src, synthesize_terrain(SynthOptions{.seed = seed, .width = width, .height = height}));
+  const std::string pyr = dir.file(name);
+  build_pyramid_file(src, {}, pyr, target(ErrorTarget::Step, step_m));  // default tile size
+  return pyr;
+}
+
 // Calls body(dem, read options, heightmap, stem, scratch .pyr path) for each DEM of the heavy set.
 template <class Body> void for_each_heavy_dem(Body&& body) {
   iotest::TempDir dir;
@@ -92,10 +110,7 @@ TEST_CASE("e2e: every shared DEM codes losslessly", "[e2e]") {
 TEST_CASE("e2e: every shared DEM meets rms 1 m", "[e2e]") {
   for_each_heavy_dem([](const std::string& dem, const ReadOptions& ro, const Heightmap& map,
                         const std::string& name, const std::string& pyr) {
-    BuildFileOptions rms;
-    rms.target = ErrorTarget::Rms;
-    rms.target_metres = 1.0;
-    const auto r = build_pyramid_file(dem, ro, pyr, rms);
+    const auto r = build_pyramid_file(dem, ro, pyr, target(ErrorTarget::Rms, 1.0));
     const Finest f = compare_finest(pyr, map);
     // Integer-metre inputs that code losslessly at step 1 cannot reach 1 m rms from below; the
     // target is then met as closely as the quantum allows (the check states it).
@@ -112,10 +127,7 @@ TEST_CASE("e2e: every shared DEM meets rms 1 m", "[e2e]") {
 TEST_CASE("e2e: every shared DEM meets max-error 2 m", "[e2e]") {
   for_each_heavy_dem([](const std::string& dem, const ReadOptions& ro, const Heightmap& map,
                         const std::string& name, const std::string& pyr) {
-    BuildFileOptions maxe;
-    maxe.target = ErrorTarget::MaxError;
-    maxe.target_metres = 2.0;
-    const auto r = build_pyramid_file(dem, ro, pyr, maxe);
+    const auto r = build_pyramid_file(dem, ro, pyr, target(ErrorTarget::MaxError, 2.0));
     const Finest f = compare_finest(pyr, map);
     CHECK(f.max <= 2.0 + 1e-6);
     CHECK(f.nan_mismatch == 0);
@@ -126,14 +138,7 @@ TEST_CASE("e2e: every shared DEM meets max-error 2 m", "[e2e]") {
 
 TEST_CASE("e2e: decode_region equals the same window of a full decode, any level", "[e2e]") {
   iotest::TempDir dir;
-  const Heightmap map = synthesize_terrain(SynthOptions{.seed = 7, .width = 517, .height = 389});
-  const std::string src = dir.file("synth.raw");
-  write_raw(src, map);
-  BuildFileOptions o;
-  o.target = ErrorTarget::Step;
-  o.target_metres = 6;
-  build_pyramid_file(src, {}, dir.file("s.pyr"), o);
-  auto file = PyramidFile::open(dir.file("s.pyr"));
+  auto file = PyramidFile::open(synthetic_pyramid(dir, 7, 517, 389, 6, "s.pyr"));
   RegionDecoder full_dec(file, 0), roi_dec(file, size_t(1) << 20);
   std::mt19937 rng(42);
   for (int l = 0; l < file->level_count(); ++l) {
@@ -158,14 +163,7 @@ TEST_CASE("e2e: decode_region equals the same window of a full decode, any level
 
 TEST_CASE("e2e: a 255x255 window touches at most 1.3x its area at its level", "[e2e]") {
   iotest::TempDir dir;
-  const Heightmap map = synthesize_terrain(SynthOptions{.seed = 3, .width = 1201, .height = 1201});
-  const std::string src = dir.file("synth.raw");
-  write_raw(src, map);
-  BuildFileOptions o;  // default tile size
-  o.target = ErrorTarget::Step;
-  o.target_metres = 4;
-  build_pyramid_file(src, {}, dir.file("s.pyr"), o);
-  auto file = PyramidFile::open(dir.file("s.pyr"));
+  auto file = PyramidFile::open(synthetic_pyramid(dir, 3, 1201, 1201, 4, "s.pyr"));
   const int top = file->level_count() - 1;
   std::mt19937 rng(5);
   double worst_level = 0, worst_all = 0, worst_reconstructed = 0;
@@ -195,14 +193,7 @@ TEST_CASE("e2e: a 255x255 window touches at most 1.3x its area at its level", "[
 
 TEST_CASE("e2e: corrupted pyramid files are rejected or the damaged tile reported, never a crash", "[e2e]") {
   iotest::TempDir dir;
-  const Heightmap map = synthesize_terrain(SynthOptions{.seed = 11, .width = 200, .height = 150});
-  const std::string src = dir.file("synth.raw");
-  write_raw(src, map);
-  BuildFileOptions o;
-  o.target = ErrorTarget::Step;
-  o.target_metres = 3;
-  build_pyramid_file(src, {}, dir.file("good.pyr"), o);
-  const std::vector<uint8_t> good = iotest::read_file(dir.file("good.pyr"));
+  const std::vector<uint8_t> good = iotest::read_file(synthetic_pyramid(dir, 11, 200, 150, 3, "good.pyr"));
   std::mt19937 rng(99);
   int rejected = 0, reported = 0, unaffected = 0;
   for (int trial = 0; trial < 150; ++trial) {

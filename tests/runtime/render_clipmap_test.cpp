@@ -4,14 +4,15 @@
 #include <cmath>
 #include <memory>
 
+#include "render/leak_check.h"
 #include "render/renderer.h"
 #include "render_test_util.h"
 #include "runtime/clipmap.h"
+#include "runtime/height_source.h"
 
 using namespace terrain;
 using namespace terrain::runtime;
 using rendertest::gl;
-using rendertest::LeakCheckPause;
 
 namespace {
 
@@ -72,14 +73,14 @@ Camera camera_at(double x, double y, double above, double yaw, double pitch) {
 }  // namespace
 
 TEST_CASE("render: a headless OpenGL 4.5 core context comes up", "[render]") {
-  LeakCheckPause pause;
+  GlLeakCheckPause pause;
   INFO("EGL platform " << gl().platform());
   CHECK(!gl().renderer_name().empty());
   WARN("OpenGL renderer: " << gl().renderer_name() << " (EGL " << gl().platform() << ")");
 }
 
 TEST_CASE("render: rings are watertight from many viewpoints", "[render]") {
-  LeakCheckPause pause;
+  GlLeakCheckPause pause;
   Scene scene(31);
   const RenderOptions opt = rendertest::crack_check_options();
   // Negative control: no morph, no perimeter snap, no stitching leaves real cracks at the ring
@@ -109,7 +110,7 @@ TEST_CASE("render: rings are watertight from many viewpoints", "[render]") {
 }
 
 TEST_CASE("render: cropped active regions stay watertight", "[render]") {
-  LeakCheckPause pause;
+  GlLeakCheckPause pause;
   // A budget of n^2 samples per update and a fast viewer: the finer levels fall behind, their
   // active regions are cropped off-centre (L&H 2004 §6.1), and the footprints are clamped to
   // pieces of every size. No crack may open.
@@ -140,7 +141,7 @@ TEST_CASE("render: cropped active regions stay watertight", "[render]") {
 }
 
 TEST_CASE("render: frustum culling never removes a visible block", "[render]") {
-  LeakCheckPause pause;
+  GlLeakCheckPause pause;
   Scene scene(31);
   RenderOptions on, off;
   off.culling = false;
@@ -161,7 +162,7 @@ TEST_CASE("render: frustum culling never removes a visible block", "[render]") {
 }
 
 TEST_CASE("render: frustum culling never removes visible terrain in low grazing views", "[render]") {
-  LeakCheckPause pause;
+  GlLeakCheckPause pause;
   // Low cameras (32-48 m above the ground) looking down so that the top of the frame is 0.15 rad
   // below the horizon, over a bounded source (edge repeat outside), a fresh clipmap per view: the
   // frame reaches from below the camera to past a kilometre ahead where the ground falls away, across
@@ -212,7 +213,7 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
 }
 
 TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") {
-  LeakCheckPause pause;
+  GlLeakCheckPause pause;
   // A slow flight: the camera itself moves 0.6 m per frame (a small fraction of a pixel's
   // footprint), looking steeply down so that the whole frame is terrain. Camera motion then changes
   // each pixel a little; a pop is a change of the level of detail all at once: without transitions,

@@ -1,5 +1,5 @@
 // Helpers shared by the rendering tests of the runtime test program: the one headless GL context
-// of the whole program, the LeakSanitizer pause around Mesa, and the crack check of the watertight
+// of the whole program and the crack check of the watertight
 // tests (flat terrain colour on a black background: any background pixel in a frame that lies
 // wholly on the terrain is a crack).
 #pragma once
@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "render/leak_check.h"
 #include "render/renderer.h"
 
 namespace rendertest {
@@ -18,10 +19,6 @@ inline terrain::runtime::HeadlessGL& gl() {
   static terrain::runtime::HeadlessGL context;
   return context;
 }
-
-// LeakSanitizer is paused inside the rendering tests (Mesa's process-lifetime allocations, see
-// GlLeakCheckPause). The clipmap code they exercise is leak-checked by the [clipmap] tests.
-using LeakCheckPause = terrain::runtime::GlLeakCheckPause;
 
 // Render options of the crack check: every terrain pixel white, the background black.
 inline terrain::runtime::RenderOptions crack_check_options() {

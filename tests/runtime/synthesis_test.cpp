@@ -11,6 +11,7 @@
 #include "build/pyramid_build.h"
 #include "io/io_test_util.h"
 #include "readers/terrain_generator.h"
+#include "render/leak_check.h"
 #include "render/renderer.h"
 #include "render_test_util.h"
 #include "runtime/clipmap.h"
@@ -338,7 +339,7 @@ TEST_CASE("synthesis: the generator amplifies a coarse base deterministically fr
 }
 
 TEST_CASE("render: rings stay watertight where stored and synthesised levels meet", "[render][synthesis]") {
-  rendertest::LeakCheckPause pause;
+  GlLeakCheckPause pause;
   auto base = base_source();
   SynthesisSource source(base, detail_options(2, 1.5));  // 4 stored + 2 synthesised levels
   ClipmapOptions o;

@@ -23,7 +23,11 @@
 // losslessly; the encoder keeps the smaller one per tile and records the choice.
 //
 // Errors: functions return a Status for bad data; caller mistakes (null pointers, bad strides) assert.
+// Nothing throws except std::bad_alloc.
 // Threads: all functions are reentrant; give each thread its own Scratch.
+// Untrusted input: read_header, read_tile_index, Decoder and decode/decode_region are safe on any
+// bytes, forged checksums included (every size and offset is checked before use, the index
+// allocation is bounded by the stream's size; fuzz/fuzz_codec_decode.cpp): they return a Status.
 #pragma once
 
 #include <cstddef>
@@ -49,6 +53,8 @@ enum class Status {
   InvalidArgument,     // bad options or region (e.g. step < 1, rectangle outside the image)
   ValueOutOfRange,     // an input sample exceeds +-kMaxAbsSample
 };
+// A short lower-case description ("checksum mismatch"), static storage; "unknown status" for values
+// outside the enum.
 const char* status_name(Status status);
 
 struct EncodeOptions {
@@ -67,15 +73,15 @@ double predicted_rms(double step);
 
 // Everything the stream header records.
 struct HeaderInfo {
-  uint32_t version = 0;
-  int64_t width = 0, height = 0;
-  uint32_t tile_size = 0;
-  int64_t tiles_x = 0, tiles_y = 0;
-  double step = 1.0;  // as recorded (1/256 resolution)
-  bool bound_max_error = false;
-  uint32_t max_error = 0;
-  size_t index_offset = 0;  // byte offset of the tile index (it follows the payloads)
-  size_t data_offset = 0;   // byte offset of the first tile payload (end of the header)
+  uint32_t version = 0;              // kFormatVersion (read_header accepts no other)
+  int64_t width = 0, height = 0;     // samples, 1 .. 2^40
+  uint32_t tile_size = 0;            // tile side in samples
+  int64_t tiles_x = 0, tiles_y = 0;  // tiles per row and column (the last ones may be partial)
+  double step = 1.0;                 // as recorded (1/256 resolution)
+  bool bound_max_error = false;      // a max-error stream
+  uint32_t max_error = 0;            // its E (0 otherwise)
+  size_t index_offset = 0;           // byte offset of the tile index (it follows the payloads)
+  size_t data_offset = 0;            // byte offset of the first tile payload (end of the header)
   int64_t tile_count() const { return tiles_x * tiles_y; }
 };
 
@@ -85,11 +91,11 @@ struct TileEntry {
   uint32_t crc = 0;     // CRC32C of the tile's bytes
 };
 
-// A window of the image in samples (core/rect.h).
+// A rectangle of samples: columns x0 .. x0 + width - 1, rows y0 .. y0 + height - 1 (core/rect.h).
 using Rect = terrain::Rect;
 
 // Caller-owned working memory. Buffers grow on first use and are reused, so steady-state encode and
-// decode calls do not allocate. One per thread.
+// decode calls do not allocate. One per thread (not thread-safe); any Scratch serves any stream.
 class Scratch {
  public:
   Scratch();
@@ -103,32 +109,48 @@ class Scratch {
   std::unique_ptr<Impl> impl_;
 };
 
-// Upper bound of the encoded size of a width x height image with these options (0 if options invalid).
+// Upper bound of the encoded size in bytes of a width x height image with these options: a dst of this
+// capacity never gives BufferTooSmall. 0 when the size or the tile size is invalid (or the bound
+// exceeds size_t).
 size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options);
 
 // Encodes width x height samples (row r starts at src + r * src_stride; strides count samples) into
 // dst[0 .. dst_capacity). On Ok, *bytes_written holds the stream size. When recon is not null it
 // receives exactly what decode() will return (for closed-loop residual pyramids).
+// Returns InvalidArgument for a size outside 1 .. 2^40 a side, a bad tile size, step or max_error;
+// ValueOutOfRange for a sample beyond +-kMaxAbsSample; BufferTooSmall when dst_capacity is short
+// (size it with encode_bound). On any status but Ok, dst and recon hold unspecified data.
 Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
               const EncodeOptions& options, uint8_t* dst, size_t dst_capacity, size_t* bytes_written,
               Scratch& scratch, int32_t* recon = nullptr, ptrdiff_t recon_stride = 0);
 
-// Parses and checks the header (magic, version, header CRC, sizes) without decoding.
+// Parses and checks the header (magic, version, header CRC, sizes) without decoding: Ok and *header
+// filled, or Corrupt (wrong magic, inconsistent fields), Truncated, UnsupportedVersion,
+// ChecksumMismatch; InvalidArgument for a null data. *header is written only on Ok.
 Status read_header(const uint8_t* data, size_t size, HeaderInfo* header);
 // Reads the tile index (row-major tiles) into entries[0 .. header.tile_count()) and checks the
 // index CRC, the sizes, and that the payloads fill [data_offset, index_offset) back to back. Offsets
-// are running sums of the stored sizes.
+// are running sums of the stored sizes. `header` must come from read_header on the same bytes;
+// entries must hold header.tile_count() entries (the caller allocates them: check the count against
+// the stream's size first, as Decoder::open does). Returns Ok, Truncated, Corrupt or
+// ChecksumMismatch; on failure entries are partly written.
 Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries);
 
 // A parsed stream: header and index are validated once, then any number of regions decode from it.
-// The stream bytes must outlive the Decoder.
+// The stream bytes must outlive the Decoder. After open, the const members may be called from any
+// number of threads at once (each with its own Scratch).
 class Decoder {
  public:
+  // read_header + read_tile_index, with their statuses (Truncated also for a tile count the size
+  // cannot hold). A failed open leaves the decoder closed: decode_region then returns
+  // InvalidArgument.
   Status open(const uint8_t* data, size_t size);
   const HeaderInfo& header() const { return header_; }
   const std::vector<TileEntry>& index() const { return index_; }
   // Decodes rect into dst (dst[0] = sample (rect.x, rect.y); stride in samples). Touches only the
-  // tiles the rectangle intersects; each is decoded once and its checksum verified.
+  // tiles the rectangle intersects; each is decoded once and its checksum verified. Returns
+  // InvalidArgument for an empty rect or one outside the image, ChecksumMismatch or Corrupt for a
+  // damaged tile (dst then holds unspecified values).
   Status decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const;
 
  private:
@@ -138,7 +160,8 @@ class Decoder {
   std::vector<TileEntry> index_;
 };
 
-// Whole-image and one-shot region decodes (open + decode_region).
+// Whole-image and one-shot region decodes (open + decode_region), with their statuses. decode
+// writes header.width x header.height samples: the caller must know the size (read_header).
 Status decode(const uint8_t* data, size_t size, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch);
 Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t* dst, ptrdiff_t dst_stride,
                      Scratch& scratch);

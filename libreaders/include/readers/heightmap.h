@@ -5,8 +5,14 @@
 // vertical_offset. Doubles hold every supported sample type exactly, so integer inputs can be
 // coded losslessly downstream.
 //
-// Errors: every reader/writer throws terrain::Error whose message names the file and the
-// problem, and whose code() classifies it (tools map codes to documented exit statuses).
+// Errors: every reader/writer throws terrain::Error (core/error.h) whose message names the file and
+// the problem, and whose code() classifies it; beyond that only std::bad_alloc.
+// Threads: every function may be called from any thread at once (the image plugin is loaded once,
+// under std::call_once); a BandReader is used by one thread at a time.
+// Untrusted input: the readers are meant for files from anywhere. .hgt, raw and ESRI grids must
+// have exactly the bytes their dimensions need (else Truncated/Oversized) and are fuzzed
+// (fuzz/fuzz_read_*.cpp); images are decoded by OpenImageIO through the plugin, so an image
+// header claiming a huge size can make read_heightmap allocate up to its 2^34-sample limit.
 #pragma once
 
 #include <cstdint>
@@ -21,12 +27,14 @@
 namespace terrain {
 
 enum class SampleType { Int16, UInt16, Int32, Float32, TerrainRGB };
+// "int16", "uint16", "int32", "float32", "terrain-rgb"; static storage.
 const char* sample_type_name(SampleType t);
-// Parses "int16", "uint16", "int32", "float32" (also "i16", "u16", "i32", "f32"); nullopt if unknown.
+// Parses "int16", "uint16", "int32", "float32" (also "i16", "u16", "i32", "f32", "short", "float"; any
+// case); nullopt if unknown.
 std::optional<SampleType> sample_type_from_name(const std::string& name);
 
 enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage };
-const char* file_format_name(FileFormat f);
+const char* file_format_name(FileFormat f);  // e.g. "srtm-hgt", "raw"; static storage
 
 // Everything known about a grid except its samples.
 struct GridInfo {
@@ -46,7 +54,8 @@ struct GridInfo {
   bool integer_valued() const { return sample_type != SampleType::Float32; }
 };
 
-// A whole grid in memory. Row-major, row 0 is the northern edge.
+// A whole grid in memory. Row-major, row 0 is the northern edge. at/is_valid/metres do not check
+// their coordinates (0 <= x < width, 0 <= y < height).
 struct Heightmap {
   GridInfo info;
   std::vector<double> values;  // width*height native values (voids hold 0)
@@ -62,12 +71,12 @@ struct Heightmap {
 // How to interpret a file whose layout is not self-describing (raw grids), and overrides.
 // Fields left unset come from the file, its header or its JSON sidecar (<file>.json).
 struct ReadOptions {
-  std::optional<int64_t> width, height;
-  std::optional<SampleType> sample_type;
-  std::optional<bool> big_endian;
-  std::optional<double> spacing_x, spacing_y;
-  std::optional<double> vertical_scale, vertical_offset;
-  std::optional<double> nodata;
+  std::optional<int64_t> width, height;                   // samples (raw grids)
+  std::optional<SampleType> sample_type;                  // raw grids
+  std::optional<bool> big_endian;                         // raw grids; default little endian
+  std::optional<double> spacing_x, spacing_y;             // override, in the file's horizontal units
+  std::optional<double> vertical_scale, vertical_offset;  // override: metres = value * scale + offset
+  std::optional<double> nodata;                           // override: native value marking a void
   bool terrain_rgb = false;  // decode an RGB(A) 8-bit image as Mapbox Terrain-RGB
 };
 
@@ -75,11 +84,11 @@ struct ReadOptions {
 class BandReader {
  public:
   virtual ~BandReader() = default;
-  virtual const GridInfo& info() const = 0;
+  virtual const GridInfo& info() const = 0;  // known once opened, before any row is read
   // Reads up to `rows` further rows into values (rows*width) and valid (rows*width, 1 = data).
   // Returns the number of rows read: 0 at the end. Throws Error on bad data (e.g. NaN, truncation).
   virtual int64_t read_rows(int64_t rows, double* values, uint8_t* valid) = 0;
-  int64_t rows_read() const { return rows_read_; }
+  int64_t rows_read() const { return rows_read_; }  // rows returned so far
 
  protected:
   int64_t rows_read_ = 0;
@@ -89,12 +98,19 @@ class BandReader {
 // (+ .json sidecar or options), .png/.tif/.tiff/.exr via OpenImageIO. An 8-bit RGB(A) image is decoded
 // as Mapbox Terrain-RGB when options.terrain_rgb is set or when it is a PNG (auto-detected); an 8-bit
 // RGB TIFF without the option is an UnknownType error. See docs/io.md for the sidecar schema.
+// probe: the grid's description without its samples (reads headers and sidecars only). Throws
+// Error: NotFound, UnknownType (no format recognised), DimensionMismatch, MissingField, ...
 GridInfo probe(const std::string& path, const ReadOptions& options = {});
+// A reader positioned before row 0, never null; throws Error as probe does.
 std::unique_ptr<BandReader> open_band_reader(const std::string& path, const ReadOptions& options = {});
-// Reads the whole grid (through the band reader).
+// Reads the whole grid (through the band reader); valid comes back empty when there is no void.
+// Throws Error as open_band_reader and read_rows do, and DimensionMismatch beyond 2^34 samples.
 Heightmap read_heightmap(const std::string& path, const ReadOptions& options = {});
 
-// Writers. Each writes to a temporary name beside the target and renames it when complete.
+// Writers. Each writes to a temporary name beside the target and renames it when complete, so the
+// target is either the old file or the whole new one; on failure the temporary is removed. They throw
+// Error(WriteFailed, ...) when the samples do not fit the format (a void without a nodata value,
+// a value the sample type cannot hold) or the file cannot be written.
 // Raw: samples in info.sample_type (little endian unless big_endian), plus <path>.json sidecar.
 void write_raw(const std::string& path, const Heightmap& map, bool big_endian = false);
 // 16-bit grey PNG or TIFF (by extension): values must be integers within uint16 (or int16 for TIFF).
@@ -104,10 +120,10 @@ void write_exr(const std::string& path, const Heightmap& map);
 
 // Statistics over valid samples, in metres.
 struct GridStats {
-  double min_m = 0, max_m = 0, mean_m = 0;
-  int64_t valid_count = 0, nodata_count = 0;
+  double min_m = 0, max_m = 0, mean_m = 0;    // metres; all 0 when no sample is valid
+  int64_t valid_count = 0, nodata_count = 0;  // samples
 };
-GridStats compute_stats(const Heightmap& map);
+GridStats compute_stats(const Heightmap& map);  // no throw
 // Same statistics, streamed from a freshly opened band reader in bands of band_rows rows
 // (memory O(width * band_rows)). Throws Error like read_rows.
 GridStats stream_stats(BandReader& reader, int64_t band_rows = 256);

@@ -16,6 +16,9 @@
 //
 // World frame: x = column * spacing, y = row * spacing (metres), z up (metres). A viewer looking
 // along +y therefore looks "south" on a north-up map.
+//
+// Threads: OpenGL binds a context to one thread. HeadlessGL, every ClipmapRenderer and every call
+// on them belong to the thread that made the context current; none is thread-safe.
 #pragma once
 
 #include <cstdint>
@@ -24,18 +27,8 @@
 #include <vector>
 
 #include "runtime/clipmap.h"
-
-// AddressSanitizer builds: GCC defines __SANITIZE_ADDRESS__, Clang answers __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define TERRAIN_RUNTIME_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define TERRAIN_RUNTIME_ASAN 1
-#endif
-#endif
-#if defined(TERRAIN_RUNTIME_ASAN)
-#include <sanitizer/lsan_interface.h>
-#endif
+// Not needed here: kept while tools/clipmap-view.cpp still reaches GlLeakCheckPause through this header.
+#include "render/leak_check.h"
 
 namespace terrain::runtime {
 
@@ -43,51 +36,31 @@ struct Camera {
   double position[3] = {0, 0, 1000};  // metres
   double yaw = 0;                     // radians; 0 looks along +x, pi/2 along +y
   double pitch = -0.3;                // radians; negative looks down
-  double fov_y_deg = 60;              // vertical field of view
-  double near_m = 0;                  // 0: from the height above the terrain
-  double far_m = 0;                   // 0: the coarsest level's extent
+  double fov_y_deg = 60;              // vertical field of view, degrees
+  double near_m = 0;                  // near plane, metres; 0: from the height above the terrain
+  double far_m = 0;                   // far plane, metres; 0: the coarsest level's extent
 };
 
 struct RenderOptions {
-  bool transitions = true;     // geometry and normal morph near each ring's outer edge
-  bool culling = true;         // per-block view-frustum culling against the z bounds
-  bool stitch = true;          // zero-area triangles along each ring's outer edge
-  bool snap_perimeter = true;  // with transitions off, still put the ring's outer vertices on
-                               // the coarser level; false leaves cracks (tests show they are caught)
-  bool flat_colour = false;    // every terrain pixel gets `terrain_rgb` (crack tests)
-  float terrain_rgb[3] = {1, 1, 1};
-  float background_rgb[3] = {0.55f, 0.70f, 0.90f};
-  float light_dir[3] = {-0.4f, -0.3f, 0.87f};  // towards the light, world frame
+  bool transitions = true;           // geometry and normal morph near each ring's outer edge
+  bool culling = true;               // per-block view-frustum culling against the z bounds
+  bool stitch = true;                // zero-area triangles along each ring's outer edge
+  bool snap_perimeter = true;        // with transitions off, still put the ring's outer vertices on
+                                     // the coarser level; false leaves cracks (tests show they are caught)
+  bool flat_colour = false;          // every terrain pixel gets `terrain_rgb` (crack tests)
+  float terrain_rgb[3] = {1, 1, 1};  // linear 0..1
+  float background_rgb[3] = {0.55f, 0.70f, 0.90f};  // linear 0..1
+  float light_dir[3] = {-0.4f, -0.3f, 0.87f};       // towards the light, world frame
   float z_lo = 0, z_hi = 0;  // height colour ramp range, metres; z_hi <= z_lo: level 0's range
 };
 
 struct RenderStats {
   int64_t triangles = 0;  // submitted, zero-area stitching triangles included
-  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;
-  int levels_drawn = 0;
-  double seconds_upload = 0;  // texture uploads of the last upload()
-  double seconds_render = 0;  // draw + glFinish
-  int64_t samples_uploaded = 0;
-};
-
-// Pauses LeakSanitizer on the calling thread while it lives (nothing in builds without ASan). Mesa
-// keeps a few allocations for the life of the process (libgio at driver load, llvmpipe's JIT on the
-// first draws) that LeakSanitizer reports at exit; an ASan build wraps its GL calls (context, renderer
-// construction, upload, render, read-back) in one of these so its exit status speaks of its own leaks.
-class GlLeakCheckPause {
- public:
-  GlLeakCheckPause() {
-#if defined(TERRAIN_RUNTIME_ASAN)
-    __lsan_disable();
-#endif
-  }
-  ~GlLeakCheckPause() {
-#if defined(TERRAIN_RUNTIME_ASAN)
-    __lsan_enable();
-#endif
-  }
-  GlLeakCheckPause(const GlLeakCheckPause&) = delete;
-  GlLeakCheckPause& operator=(const GlLeakCheckPause&) = delete;
+  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;  // footprint pieces (blocks, fix-ups, trims)
+  int levels_drawn = 0;                                     // levels with a non-empty active region
+  double seconds_upload = 0;                                // texture uploads of the last upload()
+  double seconds_render = 0;                                // draw + glFinish
+  int64_t samples_uploaded = 0;                             // height samples of the last upload()
 };
 
 // An EGL display + OpenGL 4.5 core context, current on the calling thread. Throws
@@ -98,8 +71,8 @@ class HeadlessGL {
   ~HeadlessGL();
   HeadlessGL(const HeadlessGL&) = delete;
   HeadlessGL& operator=(const HeadlessGL&) = delete;
-  std::string renderer_name() const;  // GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
-  std::string platform() const { return platform_; }
+  std::string renderer_name() const;  // GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"; "?" if none
+  std::string platform() const { return platform_; }  // "surfaceless" or "default" (the EGL display used)
 
  private:
   void* display_ = nullptr;
@@ -109,8 +82,9 @@ class HeadlessGL {
 
 class ClipmapRenderer {
  public:
-  // Needs a current context (HeadlessGL); allocates textures for a clipmap of n x n x levels and a
-  // width x height framebuffer. Throws std::runtime_error on GL errors (shader log included).
+  // Needs a current context (HeadlessGL) that outlives the renderer; allocates textures for a
+  // clipmap of n x n x levels and a width x height framebuffer. Throws std::invalid_argument for a
+  // frame outside 1..16384 pixels a side, std::runtime_error on GL errors (shader log included).
   ClipmapRenderer(int n, int levels, int width, int height);
   ~ClipmapRenderer();
   ClipmapRenderer(const ClipmapRenderer&) = delete;
@@ -120,11 +94,14 @@ class ClipmapRenderer {
   // a level whose clip region moved by more than those rectangles cover since this renderer last
   // uploaded it (updates without upload, a first upload, another clipmap) is uploaded whole, so the
   // textures never keep heights that the culling bounds, taken from the clipmap, do not describe.
-  // `everything` uploads all levels with data.
+  // `everything` uploads all levels with data. Throws std::invalid_argument when the clipmap's n or
+  // level count differs from the renderer's, std::runtime_error on GL errors.
   void upload(const Clipmap& clipmap, bool everything = false);
-  // Draws the clipmap's active regions into the framebuffer and waits for the GPU.
+  // Draws the clipmap's active regions into the framebuffer and waits for the GPU (the textures are
+  // what the last upload() put there). Throws as upload().
   RenderStats render(const Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
-  // Frame as RGBA8, top row first (width*height*4).
+  // Frame as RGBA8, top row first (out resized to width*height*4). Throws std::runtime_error on GL
+  // errors.
   void read_rgba(std::vector<uint8_t>& out) const;
   int width() const { return width_; }
   int height() const { return height_; }
@@ -139,7 +116,8 @@ class ClipmapRenderer {
   int64_t upload_samples_ = 0;
 };
 
-// Writes RGBA8 (top row first) as a PNG; throws std::runtime_error naming the path on failure.
+// Writes RGBA8 (top row first) as a PNG (any thread: no GL). Throws std::invalid_argument naming the
+// path when rgba is not width * height * 4 bytes, std::runtime_error naming it when writing fails.
 void write_png_rgba(const std::string& path, int width, int height, const std::vector<uint8_t>& rgba);
 
 }  // namespace terrain::runtime

@@ -25,174 +25,22 @@
 // transition morph), a normal map at twice the geometry's resolution (paper §3: one normal per
 // vertex is too blurry) holding the slopes dz/dx, dz/dy of the level upsampled by the pyramid's
 // four-point U, and per 8 x 8 tile the z range of z and zc (for view-frustum culling).
+//
+// Threads: a Clipmap is not thread-safe (update() writes what the accessors read, and drives the
+// height source, which is not thread-safe either); the const accessors may be called from several
+// threads between updates.
 #pragma once
 
 #include <array>
 #include <cstdint>
-#include <functional>
-#include <memory>
-#include <string>
 #include <vector>
 
 #include "pyramid/pyramid.h"
-#include "readers/heightmap.h"
+#include "runtime/height_source.h"
+// Not needed here: kept while callers still reach the screen-space error through this header.
+#include "runtime/screen_error.h"
 
 namespace terrain::runtime {
-
-class RegionDecoder;
-
-// Integer units of one level held by the caller (the clipmap) in toroidal storage: sample (x, y) of
-// `region` lives at data[wrap(y) * n + wrap(x)], wrap(v) = v mod n in 0..n-1.
-struct HeldUnits {
-  const int32_t* data = nullptr;
-  int64_t n = 0;
-  Rect region;
-};
-
-// Where the time of a fill went, for sources that can say (seconds, added to).
-struct FillSplit {
-  double upsample = 0;  // U of the coarser level
-  double residual = 0;  // the residual: entropy decode (or tile cache) and the addition
-};
-
-// Where the clipmap gets its heights from: one grid per pyramid level, level 0 coarsest, level l
-// sample i on level l+1 sample 2i.
-class HeightSource {
- public:
-  virtual ~HeightSource() = default;
-  virtual int level_count() const = 0;
-  virtual GridSize level_size(int level) const = 0;
-  // Horizontal spacing of the finest level, metres.
-  virtual double spacing_m() const = 0;
-  // Heights (metres) of `level` on `rect`, which may reach beyond the level: such samples repeat
-  // the nearest edge sample (a bounded terrain seen from outside is a flat apron). Not thread-safe.
-  virtual void fill(int level, const Rect& rect, float* out, int64_t out_stride) = 0;
-
-  // Sources whose levels are integer grids related by level = U(coarser level) + residual (the
-  // compressed pyramid) say so here and implement fill_units; the clipmap then keeps each level's
-  // units and refines the finer level from them instead of having the source rebuild it.
-  virtual bool refines_units() const { return false; }
-  // fill(), also writing the level's integer units at the same positions (units_out, stride
-  // out_stride; edge samples repeat beyond the level like the heights). `coarser`, when not null,
-  // holds units of level - 1 as this source gives them; where it covers the window U needs, only
-  // the residual is decoded (split, when not null, receives the time of U and of the residual).
-  // Either way the output equals what fill() writes.
-  virtual void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out,
-                          int32_t* units_out, int64_t out_stride, FillSplit* split);
-};
-
-// A compressed pyramid file through the region decoder. Voids (NaN) come out as 0 m.
-class RegionDecoderSource final : public HeightSource {
- public:
-  // spacing_m: finest-level horizontal spacing in metres (arc-second data: the caller converts).
-  RegionDecoderSource(std::shared_ptr<const RegionDecoder> decoder, double spacing_m);
-  int level_count() const override;
-  GridSize level_size(int level) const override;
-  double spacing_m() const override { return spacing_m_; }
-  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
-  bool refines_units() const override { return true; }
-  void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
-                  int64_t out_stride, FillSplit* split) override;
-
- private:
-  std::shared_ptr<const RegionDecoder> decoder_;
-  double spacing_m_;
-  std::vector<int32_t> units_, window_;  // the decoded part of the level; the coarser window gathered for U
-  std::vector<uint8_t> valid_;           // void mask rows of the finest level
-};
-
-// Heights from a function of (level, x, y); `unbounded` lets the function be evaluated anywhere
-// (tests, synthetic worlds), otherwise samples outside level_size repeat the edge like any source.
-class FunctionHeightSource final : public HeightSource {
- public:
-  using Function = std::function<float(int level, int64_t x, int64_t y)>;
-  FunctionHeightSource(int levels, GridSize finest, double spacing_m, Function f, bool unbounded);
-  int level_count() const override { return levels_; }
-  GridSize level_size(int level) const override;
-  double spacing_m() const override { return spacing_m_; }
-  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
-  int64_t calls() const { return samples_; }  // samples evaluated so far
-
- private:
-  int levels_;
-  GridSize finest_;
-  double spacing_m_;
-  Function f_;
-  bool unbounded_;
-  int64_t samples_ = 0;
-};
-
-// Heights held in memory, one grid per level in metres, level 0 coarsest (sizes halve as in the
-// pyramid); outside a level the nearest edge sample repeats, like every source. The verification
-// reference: the original input's lossless pyramid (original_source), rendered beside the
-// compressed one.
-class GridHeightSource final : public HeightSource {
- public:
-  // levels[l] holds sizes[l].width * sizes[l].height samples, row-major. Throws
-  // std::invalid_argument on mismatched sizes or a non-positive spacing.
-  GridHeightSource(std::vector<GridSize> sizes, std::vector<std::vector<float>> levels, double spacing_m);
-  int level_count() const override { return int(sizes_.size()); }
-  GridSize level_size(int level) const override { return sizes_.at(size_t(level)); }
-  double spacing_m() const override { return spacing_m_; }
-  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
-  const std::vector<float>& level(int level) const { return levels_.at(size_t(level)); }
-  // Validity of the finest level's samples (1 = data); empty when all are valid.
-  std::vector<uint8_t> finest_valid;
-
- private:
-  std::vector<GridSize> sizes_;
-  std::vector<std::vector<float>> levels_;
-  double spacing_m_;
-};
-
-// The original (uncompressed) heightmap `input`, in any format libpyramid reads, as a lossless
-// pyramid with the level count and the D filter of a compressed pyramid: level l is then the
-// exact T_l that the compressed file approximates by T^_l. Voids come out as 0 m (as from
-// RegionDecoderSource) and are flagged in finest_valid. Throws Error naming the file, or
-// std::invalid_argument when the input's size differs from `finest` (not the pyramid's input).
-GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
-                                 int level_count, const std::vector<double>& filter_11x11, double spacing_m);
-
-// Screen-space geometric error of one rendered level against the finest original data (L&H 2004
-// §9, Table 2): e_l = PL(T^_l) - T_m at every finest-level sample (PL: the renderer's
-// triangulation), projected as e_l * s / g_l pixels, s = the screen-space size of a grid cell.
-struct LevelScreenError {
-  int level = 0;                // source level (0 coarsest)
-  double spacing_m = 0;         // g_l
-  double rms_m = 0, max_m = 0;  // |e_l| in metres
-  double rms_px = 0, p999_px = 0, max_px = 0;
-};
-// s (pixels per grid cell at the average ring depth 0.4 n g_l, L&H 2004 §4):
-// 1.25 W / (n tan(phi/2)), W the frame width and phi the horizontal field of view.
-double triangle_size_px(int width, int height, double fov_y_deg, int n);
-// Levels first_level..finest of `rendered` (the heights the clipmap draws) against `original`'s
-// finest level (same finest size); only samples valid in original.finest_valid count.
-std::vector<LevelScreenError> screen_space_error(HeightSource& rendered, const GridHeightSource& original,
-                                                 int first_level, double s_px);
-// The same analysis without the original: `source`'s own finest level stands in for the truth, so
-// the figures leave out the finest level's compression error (level l's error against the data is at
-// most this plus that). Over the whole finest level when it has at most max_samples samples,
-// otherwise over a grid of 256x256 windows spread evenly over it, max_samples in all.
-std::vector<LevelScreenError> estimate_screen_space_error(HeightSource& source, int first_level, double s_px,
-                                                          int64_t max_samples = int64_t(1) << 22);
-// Makes such an estimate an upper bound of the figures against the data, given how far the finest
-// level is from the data (rms and max |T^_m - T_m| in metres, e.g. the builder's figures the .pyr
-// records): the true error is the estimate's plus that difference, so on the same samples rms grows
-// by at most finest_rms_m (triangle inequality), p99.9 and max by at most finest_max_m; in pixels
-// each times s_px / g_l.
-void add_finest_error_bound(std::vector<LevelScreenError>& errors, double finest_rms_m, double finest_max_m,
-                            double s_px);
-
-// The smallest clipmap size n = 2^k - 1 (15..1023) whose worst level's p99.9 screen-space error is at
-// most tolerance_px, from `errors` computed at triangle size s_px (errors scale with s, s with 1/n;
-// L&H 2004 §9 suggest sizing the clipmap by the terrain's error). met = false: even n = 1023 exceeds it.
-struct ClipmapSizeChoice {
-  int n = 0;
-  double p999_px = 0;  // the worst level's p99.9 at that n
-  bool met = false;
-};
-ClipmapSizeChoice clipmap_size_for_screen_error(const std::vector<LevelScreenError>& errors, double s_px,
-                                                int width, int height, double fov_y_deg, double tolerance_px);
 
 // Inclusive vertex bounds on a level's grid; empty when x1 < x0 or y1 < y0.
 struct LevelRegion {
@@ -201,16 +49,17 @@ struct LevelRegion {
   bool operator==(const LevelRegion&) const = default;
 };
 
+// A range of heights, metres.
 struct ZRange {
   float lo = 0, hi = 0;
 };
 
 struct ClipmapOptions {
-  int n = 255;         // samples per level side, 2^k - 1, 15..1023
-  int levels = 0;      // 0: as many as the source has
-  int64_t budget = 0;  // samples refilled per update; 0: n * n
-  bool deactivate_by_height = true;
-  double height_factor = 0.4;  // level l off when viewer height above terrain > factor * n * spacing(l)
+  int n = 255;                       // samples per level side, 2^k - 1, 15..1023
+  int levels = 0;                    // 0: as many as the source has
+  int64_t budget = 0;                // samples refilled per update; 0: n * n
+  bool deactivate_by_height = true;  // switch off levels too fine for the viewer's height (paper §4)
+  double height_factor = 0.4;        // level l off when viewer height above terrain > factor * n * spacing(l)
 };
 // How many levels a clipmap with these options has over a source of source_levels levels (the
 // `levels = 0: all` rule, for callers that size things before constructing one); the Clipmap
@@ -251,24 +100,29 @@ class Clipmap {
   static constexpr int kTile = 8;  // z-range tiles are kTile x kTile samples, aligned to the level grid
 
   static constexpr int kMaxLevels = 32;
-  // Throws std::invalid_argument for an unusable n (not 2^k - 1 in 15..1023) or level count
-  // (1..min(source levels, kMaxLevels)).
+  // Allocates the levels (40 n^2 bytes each, 44 n^2 with units); no data until the first
+  // update. Throws std::invalid_argument for an unusable n (not 2^k - 1 in 15..1023), level count
+  // (1..min(source levels, kMaxLevels)) or source (no levels, spacing not positive).
   // The source must outlive the clipmap.
   Clipmap(HeightSource& source, const ClipmapOptions& options);
 
   // Moves the clipmap to a viewer at (x, y, z) metres: desired regions, budgeted coarse-to-fine
-  // refill, level switching by height, cropping of the active regions.
+  // refill, level switching by height, cropping of the active regions. Throws what the source's
+  // fill throws (RegionDecoderSource: Error on damaged data); the clipmap is then unusable
+  // (the level already records its new clip region, so later updates would not refill it): discard it.
   ClipmapUpdateStats update(double x_m, double y_m, double z_m);
 
+  // The accessors of a level's state (has_data .. dirty_rects, z_bounds) throw std::out_of_range
+  // for a level outside 0 .. level_count() - 1.
   int n() const { return n_; }
   int level_count() const { return int(levels_.size()); }
   int source_level(int level) const { return first_source_level_ + level; }
-  double spacing(int level) const;  // metres between samples of `level`
-  int64_t budget() const { return budget_; }
-  void set_budget(int64_t samples) { budget_ = samples > 0 ? samples : int64_t(n_) * n_; }
+  double spacing(int level) const;            // metres between samples of `level`
+  int64_t budget() const { return budget_; }  // samples refilled per update
+  void set_budget(int64_t samples) { budget_ = samples > 0 ? samples : int64_t(n_) * n_; }  // <= 0: n * n
 
-  bool has_data(int level) const { return lv(level).has_data; }
-  bool enabled(int level) const { return lv(level).enabled; }
+  bool has_data(int level) const { return lv(level).has_data; }  // filled by some update
+  bool enabled(int level) const { return lv(level).enabled; }    // not switched off by height
   Rect clip_region(int level) const { return Rect{lv(level).clip_x0, lv(level).clip_y0, n_, n_}; }
   LevelRegion desired_region(int level) const { return lv(level).desired; }
   LevelRegion active_region(int level) const { return lv(level).active; }
@@ -294,7 +148,7 @@ class Clipmap {
   const std::vector<Rect>& dirty_rects(int level) const { return lv(level).dirty; }
 
   // Range of z and zc over the vertices of `r` (within the clip region), from the tile ranges
-  // (conservative: whole tiles). Empty r gives {0, 0}.
+  // (conservative: whole tiles). An r outside the clip region, or a level without data, gives {0, 0}.
   ZRange z_bounds(int level, const LevelRegion& r) const;
   // Terrain height under (x, y) metres from the finest level with data there (bilinear); NaN when
   // no level holds the point.

@@ -11,7 +11,10 @@
 // share tiles (the thin L-shaped strips of a moving clipmap, neighbouring windows) decode each
 // tile once.
 //
-// Thread-safe: any number of threads may call the decode functions concurrently.
+// Thread-safe: any number of threads may call the decode functions (and stats, reset_stats,
+// clear_cache) concurrently.
+// Untrusted input: safe on any file PyramidFile::open accepts; damaged band streams are caught by
+// libcodec and thrown as Error, never read out of bounds.
 #pragma once
 
 #include <array>
@@ -40,31 +43,38 @@ class RegionDecoder {
   static constexpr int kMaxLevels = 64;
 
   // cache_bytes bounds the decoded-residual cache (0 disables it: each call decodes exactly the
-  // libcodec tiles its rectangles intersect, and nothing is kept).
+  // libcodec tiles its rectangles intersect, and nothing is kept); any other bound keeps at least the
+  // most recent tile. `file` must not be null. Throws Error(Corrupt) for a
+  // file of more than kMaxLevels levels. Band streams are opened on first use, not here.
   explicit RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes = size_t(256) << 20);
   ~RegionDecoder();
 
-  // T^_level on rect in level units (int32); rect must lie inside the level (else std::out_of_range).
-  // Throws Error naming the file, level, band and libcodec status when data is damaged.
+  // T^_level on rect in level units (int32) into out (row stride out_stride); rect must lie inside
+  // the level, and level inside 0 .. level_count() - 1 (else std::out_of_range; an empty rect
+  // writes nothing). Throws Error naming the file, level, band and libcodec status when data
+  // is damaged (out then holds unspecified values).
   void decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
   // T^_level on rect from the caller's own T^_{level-1}: U(coarser) + the decoded residual, no
   // recursion (the clipmap's update, paper §5: the coarser level is already in the clipmap).
   // coarser.rect must contain upsample_required_window(rect, level size) and hold exactly what
   // decode_units(level - 1, ...) gives there; then the result equals decode_units(level, rect).
   // When seconds_upsample / seconds_residual are given, the time of each half is added to them.
+  // Throws std::out_of_range for level 0 or beyond, or rect outside the level; std::invalid_argument
+  // when coarser does not hold the window U needs; Error as decode_units.
   void decode_refined(int level, const Rect& rect, const CoarseWindow& coarser, int32_t* out,
                       int64_t out_stride, double* seconds_upsample = nullptr,
                       double* seconds_residual = nullptr) const;
   // The same in metres; voids of the finest level (when the input had nodata) come out as NaN.
+  // Throws as decode_units.
   void decode_metres(int level, const Rect& rect, float* out, int64_t out_stride) const;
   // Metres per level unit and offset: metres = units * scale + offset.
   double metres_per_unit() const { return file_->info().vertical_scale; }
   double metres_offset() const { return file_->info().vertical_offset; }
 
   const PyramidFile& file() const { return *file_; }
-  RegionStats stats() const;
+  RegionStats stats() const;  // counts since construction or the last reset_stats
   void reset_stats();
-  void clear_cache();
+  void clear_cache();  // drops every cached tile (the next requests decode again)
 
  private:
   struct Band;             // a band's libcodec stream, opened (header + tile index parsed) on first use

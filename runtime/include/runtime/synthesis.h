@@ -9,6 +9,9 @@
 // x, y). fill() reconstructs the coarser window it needs recursively down to the base's finest
 // level and upsamples it with libpyramid's integer U (upsample_region), exactly as the region
 // decoder does for stored levels, so heights never depend on the order or the boundaries of fills.
+//
+// Threads: the free functions are pure (any thread); a SynthesisSource is not thread-safe, like
+// every HeightSource.
 #pragma once
 
 #include <cstdint>
@@ -16,7 +19,7 @@
 #include <vector>
 
 #include "pyramid/pyramid.h"
-#include "runtime/clipmap.h"
+#include "runtime/height_source.h"
 
 namespace terrain::runtime {
 
@@ -50,7 +53,7 @@ std::vector<double> extrapolate_residual_std(const std::vector<double>& stored_v
                                              ResidualFit* fit = nullptr);
 
 // The per-level residual variances (m^2) a pyramid file stores (container LevelStats, in level
-// units, times metres_per_unit^2).
+// units, times metres_per_unit^2), index = level. Reads the file's index only (no decoding).
 std::vector<double> stored_residual_variance_m2(const PyramidFile& file);
 
 // ---------------------------------------------------------------------------------------------
@@ -83,11 +86,13 @@ class SynthesisSource final : public HeightSource {
 
   // Synthesised levels in integer quanta (metres = units * quantum_m()); `rect` must lie inside
   // level `level` >= base_levels() - 1 (the base's finest comes out rounded to the quantum).
+  // Throws std::out_of_range otherwise, and what the base's fill throws.
   void fill_quanta(int level, const Rect& rect, int32_t* out, int64_t out_stride);
   // The noise added at sample (x, y) of synthesised level `level` (base_levels() ..
-  // level_count() - 1; any x, y), in quanta.
+  // level_count() - 1, asserted; any x, y), in quanta.
   int32_t noise_units(int level, int64_t x, int64_t y) const;
-  // Target noise standard deviation of `level` (metres; 0 for the base's levels).
+  // Target noise standard deviation of `level` (metres; 0 for the base's levels; std::out_of_range
+  // beyond level_count() - 1).
   double noise_std_m(int level) const;
   int base_levels() const { return base_levels_; }
   double quantum_m() const { return options_.quantum_m; }
@@ -113,10 +118,13 @@ class SynthesisSource final : public HeightSource {
 
 // The unit-variance Gaussian table (side 2^table_log2, row-major) the source draws from: Box-Muller
 // on a splitmix64 stream of `seed`, then shifted and scaled to mean 0 and variance 1 exactly.
+// Throws std::invalid_argument for table_log2 outside 5..10.
 std::vector<double> gaussian_noise_table(uint64_t seed, int table_log2);
 
 // SynthesisOptions for K levels below a pyramid file: std_m extrapolated from the file's stored
-// residual variances, times detail_scale (0: zero detail, U alone).
+// residual variances, times detail_scale (0: zero detail, U alone). Throws std::invalid_argument
+// for a detail_scale that is negative or not finite; `levels` is checked by the SynthesisSource
+// constructor, not here.
 SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint64_t seed,
                                        double detail_scale = 1.0, ResidualFit* fit = nullptr);
 
@@ -125,7 +133,8 @@ SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint
 std::vector<double> fractal_std(double std0_m, double hurst, int count);
 
 // Pure generator: a terrain from a coarse base and a seed. Fills the whole of level `level` of
-// `source` (metres, row-major) into out, resized to its size.
+// `source` (metres, row-major) into out, resized to its size (std::out_of_range for a level outside
+// the source). Memory: the whole level.
 void synthesize_level(SynthesisSource& source, int level, std::vector<float>& out);
 
 }  // namespace terrain::runtime

@@ -1,11 +1,12 @@
 // Height sources of the geometry clipmap: the compressed pyramid (through the region decoder) and
 // an analytic function. Both repeat the nearest edge sample outside a bounded level, so the clipmap
 // never needs to special-case the terrain's border.
+#include "runtime/height_source.h"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
-#include "runtime/clipmap.h"
 #include "runtime/internal/toroidal_rows.h"
 #include "runtime/region_decoder.h"
 
