@@ -29,7 +29,7 @@ const char* format_error_code_name(FormatErrorCode code) {
 
 const char* error_mode_name(ErrorMode mode) {
   switch (mode) {
-    case ErrorMode::RmsTarget:
+    case ErrorMode::Rms:
       return "rms";
     case ErrorMode::MaxError:
       return "max-error";

@@ -93,7 +93,7 @@ TEST_CASE("e2e: every shared DEM meets rms 1 m", "[e2e]") {
   for_each_heavy_dem([](const std::string& dem, const ReadOptions& ro, const Heightmap& map,
                         const std::string& name, const std::string& pyr) {
     BuildFileOptions rms;
-    rms.target = ErrorTarget::Rms;
+    rms.mode = ErrorMode::Rms;
     rms.target_metres = 1.0;
     const auto r = build_pyramid_file(dem, ro, pyr, rms);
     const Finest f = compare_finest(pyr, map);
@@ -113,7 +113,7 @@ TEST_CASE("e2e: every shared DEM meets max-error 2 m", "[e2e]") {
   for_each_heavy_dem([](const std::string& dem, const ReadOptions& ro, const Heightmap& map,
                         const std::string& name, const std::string& pyr) {
     BuildFileOptions maxe;
-    maxe.target = ErrorTarget::MaxError;
+    maxe.mode = ErrorMode::MaxError;
     maxe.target_metres = 2.0;
     const auto r = build_pyramid_file(dem, ro, pyr, maxe);
     const Finest f = compare_finest(pyr, map);
@@ -130,7 +130,7 @@ TEST_CASE("e2e: decode_region equals the same window of a full decode, any level
   const std::string src = dir.file("synth.raw");
   write_raw(src, map);
   BuildFileOptions o;
-  o.target = ErrorTarget::Step;
+  o.mode = ErrorMode::Step;
   o.target_metres = 6;
   build_pyramid_file(src, {}, dir.file("s.pyr"), o);
   auto file = PyramidFile::open(dir.file("s.pyr"));
@@ -162,7 +162,7 @@ TEST_CASE("e2e: a 255x255 window touches at most 1.3x its area at its level", "[
   const std::string src = dir.file("synth.raw");
   write_raw(src, map);
   BuildFileOptions o;  // default tile size
-  o.target = ErrorTarget::Step;
+  o.mode = ErrorMode::Step;
   o.target_metres = 4;
   build_pyramid_file(src, {}, dir.file("s.pyr"), o);
   auto file = PyramidFile::open(dir.file("s.pyr"));
@@ -199,7 +199,7 @@ TEST_CASE("e2e: corrupted pyramid files are rejected or the damaged tile reporte
   const std::string src = dir.file("synth.raw");
   write_raw(src, map);
   BuildFileOptions o;
-  o.target = ErrorTarget::Step;
+  o.mode = ErrorMode::Step;
   o.target_metres = 3;
   build_pyramid_file(src, {}, dir.file("good.pyr"), o);
   const std::vector<uint8_t> good = iotest::read_file(dir.file("good.pyr"));

@@ -23,12 +23,12 @@ namespace {
 
 void lossless_and_max_error(const std::string& src, iotest::TempDir& dir, double max_error,
                             const ReadOptions& ro = {}) {
-  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorTarget::Lossless), ro);
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorMode::Lossless), ro);
   STRESS_CHECK_SANE(l);
   // Lossless is exact in level units; metres are units * scale + offset in double, which rounds by
   // ~1e-10 m at 1e6 m.
   CHECK(l.max_err <= 1e-6);
-  const Outcome m = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, max_error), ro);
+  const Outcome m = build_and_measure(src, dir.file("m.pyr"), target(ErrorMode::MaxError, max_error), ro);
   STRESS_CHECK_SANE(m);
   CHECK(m.max_err <= max_error + 1e-9);
 }
@@ -39,7 +39,7 @@ TEST_CASE("stress: flat terrain codes to almost nothing, exactly", "[stress]") {
   iotest::TempDir dir;
   const std::string src = dir.file("flat.raw");
   write_raw(src, make_grid(300, 200, SampleType::Int16, 1234));
-  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorTarget::Lossless));
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorMode::Lossless));
   STRESS_CHECK_SANE(l);
   CHECK(l.max_err == 0);
   CHECK(l.bits_per_sample < 1.0);  // bound: a constant costs only headers (60000 samples)
@@ -53,7 +53,7 @@ TEST_CASE("stress: rms target on flat terrain is not overshot (calibration keeps
   write_raw(src, make_grid(300, 200, SampleType::Int16, 1234));
   for (double rms : {0.5, 4.0}) {
     INFO("rms target " << rms);
-    const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, rms));
+    const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorMode::Rms, rms));
     STRESS_CHECK_SANE(r);
     CHECK(r.rms <= 1.5 * rms);
   }
@@ -66,7 +66,7 @@ TEST_CASE("stress: one 8000 m needle on a plain", "[stress]") {
   const std::string src = dir.file("needle.raw");
   write_raw(src, m);
   lossless_and_max_error(src, dir, 2);
-  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, 1));
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorMode::Rms, 1));
   STRESS_CHECK_SANE(r);
   CHECK(r.rms <= 1.5);
 }
@@ -82,7 +82,7 @@ TEST_CASE("stress: 8000 m cliffs, straight and diagonal", "[stress]") {
   const std::string src = dir.file("cliff.raw");
   write_raw(src, m);
   lossless_and_max_error(src, dir, 1);
-  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, 2));
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorMode::Rms, 2));
   STRESS_CHECK_SANE(r);
   CHECK(r.rms <= 3.0);
 }
@@ -112,7 +112,7 @@ TEST_CASE("stress: maximum-frequency checkerboard", "[stress]") {
   const std::string src = dir.file("checker.raw");
   write_raw(src, m);
   lossless_and_max_error(src, dir, 2);
-  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, 4));
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorMode::Rms, 4));
   STRESS_CHECK_SANE(r);
   CHECK(r.rms <= 6.0);
 }
@@ -127,7 +127,7 @@ TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range"
         m.values[size_t(y * 150 + x)] = double(float(0.01 * double((x * 7 + y * 13) % 23)));
     const std::string src = dir.file("offset_f32b.raw");
     write_raw(src, m);
-    const Outcome out = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.01));
+    const Outcome out = build_and_measure(src, dir.file("m.pyr"), target(ErrorMode::MaxError, 0.01));
     STRESS_CHECK_SANE(out);
     CHECK(out.max_err <= 0.01 + 1e-6);  // + float32 representation of the centimetre values
   }
@@ -139,7 +139,7 @@ TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range"
             double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 5 * std::sin(0.1 * double(x))));
     const std::string src = dir.file("offset_f32.raw");
     write_raw(src, m);
-    BuildFileOptions o = target(ErrorTarget::MaxError, 2);
+    BuildFileOptions o = target(ErrorMode::MaxError, 2);
     o.quantum_metres = 1;
     const Outcome out = build_and_measure(src, dir.file("m.pyr"), o);
     STRESS_CHECK_SANE(out);
@@ -172,7 +172,7 @@ TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by t
             double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 0.5 * std::sin(0.1 * double(x))));
     const std::string src = dir.file("offset_f32.raw");
     write_raw(src, m);
-    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.1));
+    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorMode::MaxError, 0.1));
     STRESS_CHECK_SANE(o);
     CHECK(o.max_err <= 0.1 + 1e-9);
   }
@@ -182,7 +182,7 @@ TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by t
       m.values[size_t(i)] = double(float(-11000 + 50 * std::sin(double(i) / 300.0)));
     const std::string src = dir.file("trench.raw");
     write_raw(src, m);
-    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.5));
+    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorMode::MaxError, 0.5));
     STRESS_CHECK_SANE(o);
     CHECK(o.max_err <= 0.5 + 1e-9);
   }
@@ -215,7 +215,7 @@ TEST_CASE("stress: NaN and nodata regions stay voids, the rest within bounds", "
       }
     const std::string src = dir.file("nan.raw");
     write_raw(src, m);
-    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorTarget::MaxError, 0.5));
+    const Outcome o = build_and_measure(src, dir.file("m.pyr"), target(ErrorMode::MaxError, 0.5));
     STRESS_CHECK_SANE(o);
     CHECK(o.max_err <= 0.5 + 1e-9);
   }
@@ -265,13 +265,13 @@ TEST_CASE("stress: a 20-level pyramid", "[stress]") {
     m.values[size_t(x)] = std::round(2000 * std::sin(double(x) * 1e-4) + double(x % 13));
   const std::string src = dir.file("deep.raw");
   write_raw(src, m);
-  BuildFileOptions o = target(ErrorTarget::Lossless);
+  BuildFileOptions o = target(ErrorMode::Lossless);
   o.levels = 20;
   const Outcome l = build_and_measure(src, dir.file("l.pyr"), o);
   STRESS_CHECK_SANE(l);
   CHECK(l.levels == 20);
   CHECK(l.max_err == 0);
-  o = target(ErrorTarget::MaxError, 3);
+  o = target(ErrorMode::MaxError, 3);
   o.levels = 20;
   const Outcome e = build_and_measure(src, dir.file("e.pyr"), o);
   STRESS_CHECK_SANE(e);
@@ -307,7 +307,7 @@ TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
     INFO("generation " << gen);
     const std::string src = dir.file("gen.raw");
     write_raw(src, m);
-    const Outcome o = build_and_measure(src, dir.file("g.pyr"), target(ErrorTarget::MaxError, E));
+    const Outcome o = build_and_measure(src, dir.file("g.pyr"), target(ErrorMode::MaxError, E));
     STRESS_CHECK_SANE(o);
     CHECK(o.max_err <= E + 1e-9);
     double sq = 0, worst = 0;
@@ -333,7 +333,7 @@ TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
   for (int gen = 0; gen < 3; ++gen) {
     const std::string src = dir.file("lgen.raw");
     write_raw(src, m);
-    const Outcome o = build_and_measure(src, dir.file("lg.pyr"), target(ErrorTarget::Lossless));
+    const Outcome o = build_and_measure(src, dir.file("lg.pyr"), target(ErrorMode::Lossless));
     CHECK(o.max_err == 0);
     m.values = o.finest;
   }
@@ -345,7 +345,7 @@ TEST_CASE("stress: output is identical for 1 and 2 build threads on a pathologic
   for (int64_t i = 0; i < 300 * 280; ++i) m.values[size_t(i)] = (i % 3 == 0) ? 8000 : double(i % 101);
   const std::string src = dir.file("t.raw");
   write_raw(src, m);
-  BuildFileOptions a = target(ErrorTarget::MaxError, 2), b = a;
+  BuildFileOptions a = target(ErrorMode::MaxError, 2), b = a;
   a.threads = 1;
   b.threads = 2;
   const Outcome oa = build_and_measure(src, dir.file("a.pyr"), a);
