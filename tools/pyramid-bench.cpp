@@ -1,7 +1,6 @@
 // pyramid-bench: times the streamed pyramid build (filter fit, D cascade, U prediction, closed-loop
 // residuals with the uniform quantiser; no entropy coding) on a heightmap file.
 #include <sys/resource.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
@@ -13,24 +12,14 @@
 
 namespace {
 
-// Counts bytes only: the benchmark measures the pyramid, not a container.
-class CountingSink final : public terrain::PyramidSink {
- public:
-  void band(int, int64_t, int64_t, std::vector<uint8_t>&& bytes) override { total += bytes.size(); }
-  void mask_band(int64_t, int64_t, std::vector<uint8_t>&& bytes) override { total += bytes.size(); }
-  uint64_t total = 0;
-};
-
 int run(int argc, char** argv) {
   std::string input;
   cli::CommonFlags common;
   terrain::ReadOptions read_options;
   terrain::BuildOptions o;
-  o.temp_dir = "/tmp";
-  o.level_ordered_output = false;  // the counting sink takes bands in any order: no temp files
   int64_t step = 4, band_rows = 64;
   cli::ArgParser parser(
-      "pyramid-bench", "INPUT [--step S] [--levels N] [--threads T] [--temp-dir DIR] [options]",
+      "pyramid-bench", "INPUT [--step S] [--levels N] [--threads T] [options]",
       "Builds the residual pyramid of INPUT streamed (one pass over the input, no level spilled\n"
       "to disk), with the uniform quantiser as residual coder and a sink that only counts bytes,\n"
       "and reports throughput (finest samples per second of wall time), times, peak RSS, rows\n"
@@ -45,8 +34,6 @@ int run(int argc, char** argv) {
                 [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
   parser.option("--band-rows", "R", "coder band height (default 64)",
                 [&](const std::string& v) { band_rows = cli::parse_int("--band-rows", v, 1, 1 << 20); });
-  parser.option("--temp-dir", "DIR", "temp directory (unused with the counting sink; default /tmp)",
-                [&](const std::string& v) { o.temp_dir = v; });
   cli::add_read_options(parser, read_options);
   parser.add_common(common, true);
   if (auto status = parser.parse(argc, argv)) return *status;
@@ -56,8 +43,8 @@ int run(int argc, char** argv) {
   const terrain::GridInfo info = reader->info();
   if (!info.integer_valued()) o.value_scale = 100;  // float input: centimetre levels
   terrain::UniformQuantizerCoder coder(int32_t(step), band_rows);
-  CountingSink sink;
-  o.temp_name = "pyramid-bench." + std::to_string(::getpid());
+  // Counts bytes only: the benchmark measures the pyramid, not a container.
+  terrain::CountingSink sink;
   terrain::BuildResult r = terrain::build_pyramid(*reader, o, coder, sink);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   rusage ru{};
@@ -72,8 +59,8 @@ int run(int argc, char** argv) {
     j.field("input", input).field("width", info.width).field("height", info.height).field("step", step);
     j.field("threads", o.threads).field("seconds", seconds).field("msamples_per_s", msps);
     j.field("seconds_fit", r.seconds_pass_input).field("seconds_build", r.seconds_pass_residual);
-    j.field("seconds_replay", r.seconds_pass_filter).field("peak_rss_mib", rss_mib);
-    j.field("bytes", int64_t(sink.total)).field("voids", r.void_count);
+    j.field("peak_rss_mib", rss_mib);
+    j.field("bytes", int64_t(sink.band_bytes)).field("voids", r.void_count);
     j.field("filter", r.filter_report.summary());
     j.key("levels").begin_array();
     for (auto& l : r.levels) {
@@ -93,9 +80,9 @@ int run(int argc, char** argv) {
               << ", threads " << o.threads << "\n";
     for (auto& line : r.log) std::cout << "  " << line << "\n";
     std::cout << "  time " << seconds << " s (fitting D " << r.seconds_pass_input << " s, streaming build "
-              << r.seconds_pass_residual << " s, level-order replay " << r.seconds_pass_filter << " s)\n";
+              << r.seconds_pass_residual << " s)\n";
     std::cout << "  throughput " << msps << " Msamples/s, peak RSS " << rss_mib << " MiB, coded "
-              << double(sink.total) / (1 << 20) << " MiB\n";
+              << double(sink.band_bytes) / (1 << 20) << " MiB\n";
     std::cout << "  level  size          residual rms   max     error rms  max   MiB\n";
     for (size_t l = 0; l < r.levels.size(); ++l) {
       const auto& s = r.levels[l];

@@ -11,7 +11,7 @@
 
 namespace {
 
-using terrain::runtime::ErrorTarget;
+using terrain::runtime::ErrorMode;
 
 int run(int argc, char** argv) {
   std::string input, output, json_path;
@@ -19,8 +19,8 @@ int run(int argc, char** argv) {
   terrain::ReadOptions read_options;
   terrain::runtime::BuildFileOptions o;
   int targets = 0;
-  auto set_target = [&](ErrorTarget t, const std::string& name, const std::string& v) {
-    o.target = t;
+  auto set_target = [&](ErrorMode mode, const std::string& name, const std::string& v) {
+    o.mode = mode;
     o.target_metres = cli::parse_double(name, v);
     if (!(o.target_metres > 0) || !std::isfinite(o.target_metres) || o.target_metres > 1e6)
       throw cli::UsageError(name + " must be a positive number of metres (at most 1e6)");
@@ -39,11 +39,11 @@ int run(int argc, char** argv) {
   parser.option("-o,--output", "OUT", "pyramid file to write (required)",
                 [&](const std::string& v) { output = v; });
   parser.option("--rms", "M", "target rms error in metres",
-                [&](const std::string& v) { set_target(ErrorTarget::Rms, "--rms", v); });
+                [&](const std::string& v) { set_target(ErrorMode::Rms, "--rms", v); });
   parser.option("--max-error", "M", "guaranteed max |error| in metres",
-                [&](const std::string& v) { set_target(ErrorTarget::MaxError, "--max-error", v); });
+                [&](const std::string& v) { set_target(ErrorMode::MaxError, "--max-error", v); });
   parser.option("--step", "S", "quantiser step in metres",
-                [&](const std::string& v) { set_target(ErrorTarget::Step, "--step", v); });
+                [&](const std::string& v) { set_target(ErrorMode::Step, "--step", v); });
   bool lossless = false;
   parser.flag("--lossless", "exact reconstruction (integer input, or float at --quantum)", &lossless);
   parser.option("--quantum", "Q", "level unit in metres for float input (default 0.01)",
@@ -71,13 +71,8 @@ int run(int argc, char** argv) {
   if (targets > 1) throw cli::UsageError("give at most one of --rms, --max-error, --step, --lossless");
 
   std::ostringstream opts;
-  opts << "{\"target\":\""
-       << (o.target == ErrorTarget::Rms        ? "rms"
-           : o.target == ErrorTarget::MaxError ? "max-error"
-           : o.target == ErrorTarget::Step     ? "step"
-                                               : "lossless")
-       << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
-       << "}";
+  opts << "{\"target\":\"" << terrain::runtime::error_mode_name(o.mode) << "\",\"metres\":" << o.target_metres
+       << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size << "}";
 
   std::unique_ptr<cli::Progress> bar;
   std::string phase;
@@ -125,8 +120,7 @@ int run(int argc, char** argv) {
     j.field("input", input).field("output", output).field("bytes", int64_t(r.file_bytes));
     j.field("finest_samples", r.finest_samples).field("bits_per_sample", bits);
     j.field("metres_per_unit", mpu).field("step_metres", r.step_units * mpu);
-    j.field("max_error_bound_metres",
-            o.target == ErrorTarget::MaxError ? double(r.max_error_units) * mpu : -1.0);
+    j.field("max_error_bound_metres", o.mode == ErrorMode::MaxError ? double(r.max_error_units) * mpu : -1.0);
     j.field("filter", r.build.filter_report.summary())
         .field("filter_fallback", r.build.filter_report.fallback);
     j.field("seconds_calibrate", r.seconds_calibrate).field("seconds_build", r.seconds_build);

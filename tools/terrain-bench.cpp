@@ -677,19 +677,19 @@ int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
 // The pyramid end to end.
 
 struct PyramidTarget {
-  terrain::runtime::ErrorTarget target;
+  terrain::runtime::ErrorMode target;
   double metres;
 };
 
 std::vector<PyramidTarget> pyramid_sweep(bool quick) {
-  using terrain::runtime::ErrorTarget;
-  std::vector<PyramidTarget> t{{ErrorTarget::Lossless, 0}};
+  using terrain::runtime::ErrorMode;
+  std::vector<PyramidTarget> t{{ErrorMode::Lossless, 0}};
   const std::vector<double> rms =
       quick ? std::vector<double>{0.5, 1, 2, 4} : std::vector<double>{0.25, 0.5, 1, 1.4, 2, 2.8, 4, 8};
   const std::vector<double> max =
       quick ? std::vector<double>{1, 2, 5} : std::vector<double>{0.5, 1, 2, 3, 5, 8, 16};
-  for (double m : rms) t.push_back({ErrorTarget::Rms, m});
-  for (double m : max) t.push_back({ErrorTarget::MaxError, m});
+  for (double m : rms) t.push_back({ErrorMode::Rms, m});
+  for (double m : max) t.push_back({ErrorMode::MaxError, m});
   return t;
 }
 
@@ -740,15 +740,15 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   row.height = map.height();
   row.unit_m = 1;  // pyramid rows are measured in metres directly
   row.target_m = target.metres;
-  row.target_kind = target.target == ErrorTarget::Lossless ? "lossless"
-                    : target.target == ErrorTarget::Rms    ? "rms"
-                                                           : "max";
-  row.setting = target.target == ErrorTarget::Lossless
+  row.target_kind = target.target == ErrorMode::Lossless ? "lossless"
+                    : target.target == ErrorMode::Rms    ? "rms"
+                                                         : "max";
+  row.setting = target.target == ErrorMode::Lossless
                     ? "lossless"
                     : row.target_kind + "=" + fmt("%g", target.metres) + " m";
-  row.bound = target.target == ErrorTarget::Lossless   ? 0
-              : target.target == ErrorTarget::MaxError ? target.metres
-                                                       : -1;
+  row.bound = target.target == ErrorMode::Lossless   ? 0
+              : target.target == ErrorMode::MaxError ? target.metres
+                                                     : -1;
   row.threads = opt.threads ? opt.threads : int(std::max(1L, sysconf(_SC_NPROCESSORS_ONLN)));
   const std::string output =
       opt.work_dir + "/terrain-bench-" + std::to_string(getpid()) + "-" + file + ".pyr";
@@ -761,10 +761,9 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   } remove_output{output};
 
   BuildFileOptions bo;
-  bo.target = target.target;
+  bo.mode = target.target;
   bo.target_metres = target.metres;
   bo.threads = opt.threads;
-  bo.temp_dir = opt.work_dir;
   peers::Result& x = row.result;
   BuildFileResult built;
   try {

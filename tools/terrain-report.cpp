@@ -121,8 +121,6 @@ int run(int argc, char** argv) {
   bo.use_fixed_filter = true;
   std::copy(info.filter.begin(), info.filter.end(), bo.fixed_filter.taps.begin());
   bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
-  bo.temp_dir = std::filesystem::temp_directory_path().string();
-  bo.temp_name = "terrain-report";
   UniformQuantizerCoder lossless(1, 256);
   MemoryPyramid source;
   build_pyramid(map, bo, lossless, source);

@@ -23,11 +23,6 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-std::string directory_of(const std::string& path) {
-  const size_t slash = path.find_last_of('/');
-  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
-}
-
 // Forwards a BandReader and reports the fraction of rows read.
 class ProgressReader final : public BandReader {
  public:
@@ -61,8 +56,8 @@ class ProgressSink final : public PyramidSink {
     done_ += rows;
     if (progress_) progress_("coding levels", double(done_) / double(std::max<int64_t>(1, total_)));
   }
-  void mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
-    inner_.mask_band(y0, rows, std::move(bytes));
+  void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) override {
+    inner_.mask_rows(y0, rows, valid);
   }
 
  private:
@@ -115,12 +110,12 @@ struct Trial {
   uint64_t bytes = 0;
 };
 
+// Only the figures of a trial matter: it keeps no output and writes no file.
 Trial trial_build(const Heightmap& window, BuildOptions bo, const PtcCoderOptions& co) {
   PtcResidualCoder coder(co);
-  MemoryPyramid sink;
-  sink.keep_reconstruction = false;
+  CountingSink sink;
   const BuildResult r = build_pyramid(window, bo, coder, sink);
-  return Trial{co.step, r.levels.back().error_rms, r.levels.back().error_max_abs, sink.total_bytes()};
+  return Trial{co.step, r.levels.back().error_rms, r.levels.back().error_max_abs, sink.band_bytes};
 }
 
 }  // namespace
@@ -140,9 +135,6 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.level_count = o.levels;
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  bo.temp_dir = o.temp_dir.empty() ? directory_of(output) : o.temp_dir;
-  bo.temp_name =
-      output.substr(output.find_last_of('/') == std::string::npos ? 0 : output.find_last_of('/') + 1);
 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
   // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
@@ -154,24 +146,21 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
 
   PtcCoderOptions co;
   co.tile_size = o.tile_size;
-  ErrorMode mode = ErrorMode::Lossless;
   const auto t_cal = std::chrono::steady_clock::now();
-  switch (o.target) {
-    case ErrorTarget::Lossless:
+  switch (o.mode) {
+    case ErrorMode::Lossless:
       if (!g.integer_valued() && o.quantum_metres <= 0)
         throw std::invalid_argument(
             "lossless needs integer input; float input is quantised to --quantum (give one)");
       co.step = 1;
       break;
-    case ErrorTarget::Step:
-      mode = ErrorMode::Step;
+    case ErrorMode::Step:
       co.step = o.target_metres / mpu;
       if (!(co.step >= 1))
         throw std::invalid_argument("step " + std::to_string(o.target_metres) +
                                     " m is below the input's unit of " + std::to_string(mpu) + " m");
       break;
-    case ErrorTarget::Rms: {
-      mode = ErrorMode::RmsTarget;
+    case ErrorMode::Rms: {
       if (!(o.target_metres > 0)) throw std::invalid_argument("rms target must be positive");
       const double target = o.target_metres / mpu;
       if (progress) progress("calibrating step", 0);
@@ -210,8 +199,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       co.step = best.step;
       break;
     }
-    case ErrorTarget::MaxError: {
-      mode = ErrorMode::MaxError;
+    case ErrorMode::MaxError: {
       // Float input loses up to half a quantum when it is rounded to level units.
       const double budget =
           g.integer_valued() && o.quantum_metres <= 0 ? o.target_metres : o.target_metres - 0.5 * mpu;
@@ -263,8 +251,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                                      g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
   info.quantisation.step_units = co.step;
   info.quantisation.step_metres = co.step * mpu;
-  info.quantisation.mode = mode;
-  info.quantisation.target = o.target == ErrorTarget::Lossless ? 0 : o.target_metres;
+  info.quantisation.mode = o.mode;
+  info.quantisation.target = o.mode == ErrorMode::Lossless ? 0 : o.target_metres;
 
   // No timings or other run-dependent values in the file: the same input and options must give a
   // byte-identical file whatever the thread count or machine load (build times go to --json).

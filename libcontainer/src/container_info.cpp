@@ -9,7 +9,7 @@ namespace terrain::runtime {
 
 const char* error_mode_name(ErrorMode mode) {
   switch (mode) {
-    case ErrorMode::RmsTarget:
+    case ErrorMode::Rms:
       return "rms";
     case ErrorMode::MaxError:
       return "max-error";

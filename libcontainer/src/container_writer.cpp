@@ -1,6 +1,7 @@
-// Streaming container writer: blobs go to a temporary file in arrival order, the mask, metadata
-// and index follow, and the superblock (reserved as zeros at the start) is written last, so an
-// interrupted write never carries a valid magic + checksum. finish() renames onto the target.
+// Streaming container writer: blobs go to a temporary file in level order (a level that arrives
+// early waits in a HeldBytes), the mask, metadata and index follow, and the superblock (reserved
+// as zeros at the start) is written last, so an interrupted write never carries a valid magic +
+// checksum. finish() renames onto the target.
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -13,6 +14,7 @@
 #include "container/container.h"
 #include "container/internal/container_format.h"
 #include "container/internal/container_mask.h"
+#include "container/internal/held_bytes.h"
 
 namespace terrain::runtime {
 
@@ -29,7 +31,12 @@ std::string directory_of(const std::string& path) {
 
 }  // namespace
 
-ContainerWriter::ContainerWriter(std::string path) : path_(std::move(path)) {
+ContainerWriter::LevelRecord::LevelRecord() = default;
+ContainerWriter::LevelRecord::~LevelRecord() = default;
+ContainerWriter::LevelRecord::LevelRecord(LevelRecord&&) noexcept = default;
+ContainerWriter::LevelRecord& ContainerWriter::LevelRecord::operator=(LevelRecord&&) noexcept = default;
+
+ContainerWriter::ContainerWriter(std::string path) : path_(std::move(path)), directory_(directory_of(path_)) {
   const std::string base = path_ + ".tmp." + std::to_string(::getpid());
   // O_EXCL so two writers in one process aimed at the same target cannot share a temp file.
   for (int attempt = 0; attempt < 100 && fd_ < 0; ++attempt) {
@@ -84,41 +91,55 @@ void ContainerWriter::set_info(const ContainerInfo& info) {
 }
 
 void ContainerWriter::add_level(uint32_t level, const uint8_t* data, size_t size) {
-  begin_level(level);
-  append_level(data, size);
-  end_level();
+  append_level(level, data, size);
+  end_level(level);
 }
 
-void ContainerWriter::begin_level(uint32_t level) {
-  if (open_level_)
-    throw std::logic_error("begin_level: level " + std::to_string(*open_level_) + " is still open");
-  if (level >= kMaxLevels)
-    throw std::invalid_argument("begin_level: level index " + std::to_string(level) + " too large");
+ContainerWriter::LevelRecord& ContainerWriter::start_level(uint32_t level) {
+  if (level >= kMaxLevels) throw std::invalid_argument("level index " + std::to_string(level) + " too large");
   if (records_.size() <= level) records_.resize(level + 1);
-  if (records_[level].written)
-    throw std::invalid_argument("level " + std::to_string(level) + " written twice");
+  LevelRecord& r = records_[level];
+  if (r.ended) throw std::invalid_argument("level " + std::to_string(level) + " written twice");
+  if (!r.started) {
+    r.started = true;
+    r.has_crc = level_checksums_;
+  }
+  return r;
+}
+
+// Fixes the level's place at the end of the file so far and writes what it held.
+void ContainerWriter::place_level(uint32_t level) {
+  LevelRecord& r = records_[level];
+  if (r.placed) return;
   pad_to_alignment();
-  open_level_ = level;
-  open_level_start_ = position_;
-  open_level_crc_ = 0;
+  r.placed = true;
+  r.offset = position_;
+  if (r.held) {
+    r.held->drain([this](const uint8_t* data, size_t size) { write_bytes(data, size); });
+    r.held.reset();
+  }
 }
 
-void ContainerWriter::append_level(const uint8_t* data, size_t size) {
-  if (!open_level_) throw std::logic_error("append_level without begin_level");
+void ContainerWriter::append_level(uint32_t level, const uint8_t* data, size_t size) {
+  LevelRecord& r = start_level(level);
   if (size == 0) return;
-  if (level_checksums_) open_level_crc_ = crc32c(data, size, open_level_crc_);
-  write_bytes(data, size);
+  if (r.has_crc) r.crc = crc32c(data, size, r.crc);
+  r.size += size;
+  if (level == next_level_) {
+    place_level(level);
+    write_bytes(data, size);
+  } else {
+    if (!r.held) r.held = std::make_unique<detail::HeldBytes>(directory_, level_memory_limit_);
+    r.held->append(data, size);
+  }
 }
 
-void ContainerWriter::end_level() {
-  if (!open_level_) throw std::logic_error("end_level without begin_level");
-  LevelRecord& r = records_[*open_level_];
-  r.written = true;
-  r.offset = open_level_start_;
-  r.size = position_ - open_level_start_;
-  r.has_crc = level_checksums_;
-  r.crc = level_checksums_ ? open_level_crc_ : 0;
-  open_level_.reset();
+void ContainerWriter::end_level(uint32_t level) {
+  start_level(level).ended = true;
+  // Every ended level from the first gap on goes into the file; the level at the gap, if begun,
+  // now streams straight to the file.
+  while (next_level_ < records_.size() && records_[next_level_].ended) place_level(next_level_++);
+  if (next_level_ < records_.size() && records_[next_level_].started) place_level(next_level_);
 }
 
 void ContainerWriter::append_mask(const uint8_t* valid, size_t count) {
@@ -153,7 +174,6 @@ void ContainerWriter::set_metadata_json(std::string json) { metadata_json_ = std
 void ContainerWriter::finish() {
   if (finished_ || finish_started_)
     throw std::logic_error("finish() called again after it finished or failed");
-  if (open_level_) throw std::logic_error("finish: level " + std::to_string(*open_level_) + " is still open");
   if (!info_) throw std::invalid_argument("finish: set_info() was never called");
   const ContainerInfo& info = *info_;
   const size_t level_count = info.levels.size();
@@ -161,8 +181,11 @@ void ContainerWriter::finish() {
     throw std::invalid_argument("finish: level " + std::to_string(records_.size() - 1) +
                                 " written but info has " + std::to_string(level_count) + " levels");
   }
+  for (size_t l = 0; l < records_.size(); ++l)
+    if (records_[l].started && !records_[l].ended)
+      throw std::logic_error("finish: level " + std::to_string(l) + " is still open");
   for (size_t l = 0; l < level_count; ++l) {
-    if (l >= records_.size() || !records_[l].written) {
+    if (l >= records_.size() || !records_[l].ended) {
       throw std::invalid_argument("finish: level " + std::to_string(l) + " was never written");
     }
   }
@@ -275,7 +298,7 @@ void ContainerWriter::finish() {
   finished_ = true;
   // The rename is durable only once the directory entry is synced; failure here loses nothing
   // written, so it is not an error (some filesystems refuse fsync on directories).
-  const int dir = ::open(directory_of(path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  const int dir = ::open(directory_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dir >= 0) {
     ::fsync(dir);
     ::close(dir);

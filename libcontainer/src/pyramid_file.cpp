@@ -40,55 +40,60 @@ uint32_t get_u32(const uint8_t* p) {
 PyramidFileWriter::PyramidFileWriter(const std::string& path) : writer_(path) {}
 PyramidFileWriter::~PyramidFileWriter() = default;
 
-void PyramidFileWriter::begin(const PyramidHeader& header) { header_ = header; }
+void PyramidFileWriter::begin(const PyramidHeader& header) {
+  header_ = header;
+  levels_.assign(header.levels.size(), {});
+  next_mask_row_ = 0;
+}
 
-void PyramidFileWriter::close_level() {
-  if (open_level_ < 0) return;
-  std::vector<uint8_t> table(bands_.size() * kBandRecordSize + kFooterSize);
+void PyramidFileWriter::close_level(int level) {
+  LevelBands& lb = levels_[size_t(level)];
+  std::vector<uint8_t> table(lb.bands.size() * kBandRecordSize + kFooterSize);
   uint8_t* p = table.data();
-  for (const BandRecord& b : bands_) {
+  for (const BandRecord& b : lb.bands) {
     put_u64(p, b.offset), put_u64(p + 8, b.size), put_u64(p + 16, b.y0), put_u64(p + 24, b.rows);
     p += kBandRecordSize;
   }
-  const size_t table_bytes = bands_.size() * kBandRecordSize;
-  put_u64(p, bands_.size());
+  const size_t table_bytes = lb.bands.size() * kBandRecordSize;
+  put_u64(p, lb.bands.size());
   put_u32(p + 8, kBandMagic);
   put_u32(p + 12, crc32c(table.data(), table_bytes));
-  writer_.append_level(table.data(), table.size());
-  writer_.end_level();
+  writer_.append_level(uint32_t(level), table.data(), table.size());
+  writer_.end_level(uint32_t(level));
   bytes_ += table.size();
-  bands_.clear();
-  open_level_ = -1;
+  std::vector<BandRecord>().swap(lb.bands);
 }
 
 void PyramidFileWriter::band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
-  if (level != open_level_) {
-    close_level();
-    writer_.begin_level(uint32_t(level));
-    open_level_ = level;
-    level_bytes_ = 0;
-  }
-  bands_.push_back({level_bytes_, bytes.size(), uint64_t(y0), uint64_t(rows)});
+  if (level < 0 || size_t(level) >= levels_.size())
+    throw std::logic_error("pyramid writer: band of level " + std::to_string(level) +
+                           (levels_.empty() ? " before begin()" : ", which the header does not have"));
+  LevelBands& lb = levels_[size_t(level)];
+  const int64_t height = header_.levels[size_t(level)].height;
+  if (y0 != lb.next_row || rows < 1 || rows > height - y0)
+    throw std::logic_error("pyramid writer: level " + std::to_string(level) + " band at row " +
+                           std::to_string(y0) + " out of order (next row " + std::to_string(lb.next_row) +
+                           ")");
+  lb.bands.push_back({lb.blob_bytes, bytes.size(), uint64_t(y0), uint64_t(rows)});
   static const uint8_t zeros[8] = {};
   const size_t pad = (8 - bytes.size() % 8) % 8;
-  writer_.append_level(bytes.data(), bytes.size());
-  if (pad) writer_.append_level(zeros, pad);
-  level_bytes_ += bytes.size() + pad;
+  writer_.append_level(uint32_t(level), bytes.data(), bytes.size());
+  if (pad) writer_.append_level(uint32_t(level), zeros, pad);
+  lb.blob_bytes += bytes.size() + pad;
   bytes_ += bytes.size() + pad;
+  lb.next_row = y0 + rows;
+  if (lb.next_row == height) close_level(level);
 }
 
-void PyramidFileWriter::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
-  (void)y0;
-  const int64_t w = header_.levels.back().width;
-  mask_scratch_.resize(size_t(w * rows));
-  if (!decode_mask_rows(bytes.data(), bytes.size(), w, rows, mask_scratch_.data()))
-    throw std::logic_error("pyramid writer: builder produced an undecodable mask band");
-  writer_.append_mask(mask_scratch_.data(), mask_scratch_.size());
+void PyramidFileWriter::mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) {
+  if (y0 != next_mask_row_ || header_.levels.empty())
+    throw std::logic_error("pyramid writer: mask rows at " + std::to_string(y0) + " out of order");
+  writer_.append_mask(valid, size_t(rows * header_.levels.back().width));
+  next_mask_row_ = y0 + rows;
 }
 
 void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
                                const std::string& metadata_json) {
-  close_level();
   const auto& levels = result.header.levels;
   info.width = uint64_t(levels.back().width);
   info.height = uint64_t(levels.back().height);
@@ -97,7 +102,7 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
     LevelInfo li;
     li.width = uint64_t(levels[l].width);
     li.height = uint64_t(levels[l].height);
-    const terrain::LevelStats& s = result.levels[l];
+    const LevelBuildStats& s = result.levels[l];
     // The builder measures residuals about zero: rms and the largest magnitude.
     li.stats.rms = s.residual_rms;
     li.stats.variance = s.residual_rms * s.residual_rms;

@@ -11,6 +11,10 @@
 // depends only on T_m rows near 2^m j: each level lags the input by a bounded number of rows
 // (about 8 * 2^l rows of level l), and every level holds only that lag in a ring of rows. Memory is
 // therefore independent of the input height, O(width * 2^m) for m+1 levels.
+//
+// Bands go to the sink as they are coded, levels interleaved: arranging them for a file (levels
+// contiguous, coarsest first) is the container writer's job, so builds into memory or into a
+// counting sink write nothing.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -27,8 +31,6 @@
 #include "pyramid/internal/filter_downsample.h"
 #include "pyramid/internal/pyramid_fill.h"
 #include "pyramid/internal/pyramid_parallel.h"
-#include "pyramid/internal/pyramid_spill.h"
-#include "pyramid/internal/pyramid_varint.h"
 #include "pyramid/pyramid.h"
 
 namespace terrain {
@@ -184,7 +186,8 @@ class LevelRows {
   RowRing<int32_t> r32_;
 };
 
-// Validity rows held run-length coded (all-valid rows cost nothing).
+// Validity rows held one bit per sample, rows without voids not at all (the held finest rows are
+// most of the builder's memory).
 class MaskRows {
  public:
   void reset(int64_t width) {
@@ -195,17 +198,23 @@ class MaskRows {
   void append(const uint8_t* valid, int64_t n) {
     for (int64_t k = 0; k < n; ++k) {
       const uint8_t* row = valid + k * width_;
-      const bool all = std::all_of(row, row + width_, [](uint8_t v) { return v != 0; });
-      rows_.push_back(all ? std::vector<uint8_t>{} : encode_mask_rows(row, width_, 1));
+      std::vector<uint64_t> bits;
+      if (std::find(row, row + width_, uint8_t(0)) != row + width_) {
+        bits.assign(size_t((width_ + 63) / 64), 0);
+        for (int64_t x = 0; x < width_; ++x)
+          if (row[x]) bits[size_t(x / 64)] |= uint64_t(1) << (x % 64);
+      }
+      rows_.push_back(std::move(bits));
     }
   }
   void copy_rows(int64_t r0, int64_t n, uint8_t* out) const {
     for (int64_t k = 0; k < n; ++k) {
-      const std::vector<uint8_t>& rle = rows_[size_t(r0 + k - first_)];
-      if (rle.empty())
-        std::fill(out + k * width_, out + (k + 1) * width_, uint8_t(1));
-      else if (!decode_mask_rows(rle.data(), rle.size(), width_, 1, out + k * width_))
-        throw std::logic_error("pyramid: mask row store corrupt");
+      const std::vector<uint64_t>& bits = rows_[size_t(r0 + k - first_)];
+      uint8_t* row = out + k * width_;
+      if (bits.empty())
+        std::fill(row, row + width_, uint8_t(1));
+      else
+        for (int64_t x = 0; x < width_; ++x) row[x] = uint8_t((bits[size_t(x / 64)] >> (x % 64)) & 1);
     }
   }
   void drop_before(int64_t r) {
@@ -217,73 +226,7 @@ class MaskRows {
 
  private:
   int64_t width_ = 0, first_ = 0;
-  std::deque<std::vector<uint8_t>> rows_;
-};
-
-// Coded bands held back so the sink sees levels coarsest first (bands of different levels are
-// produced interleaved). Spilled to temp files: they are compressed, hence small.
-class LevelOrderBuffer {
- public:
-  LevelOrderBuffer(const std::string& base, int levels) {
-    for (int l = 0; l < levels; ++l)
-      files_.push_back(std::make_unique<detail::SpillFile>(base + "bands" + std::to_string(l)));
-    mask_ = std::make_unique<detail::SpillFile>(base + "maskbands");
-  }
-  void band(int level, int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
-    record(*files_[size_t(level)], y0, rows, bytes);
-  }
-  void mask_band(int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
-    record(*mask_, y0, rows, bytes);
-  }
-  void replay(PyramidSink& sink, const PyramidHeader& header, const std::vector<int64_t>& band_counts) {
-    sink.begin(header);
-    mask_->rewind_for_reading();
-    const int finest = int(files_.size()) - 1;
-    for (int l = 0; l <= finest; ++l) {
-      detail::SpillFile& f = *files_[size_t(l)];
-      f.rewind_for_reading();
-      for (int64_t b = 0; b < band_counts[size_t(l)]; ++b) {
-        int64_t y0, rows;
-        std::vector<uint8_t> bytes = read_record(f, &y0, &rows);
-        if (l == finest) {
-          int64_t my0, mrows;
-          std::vector<uint8_t> mask = read_record(*mask_, &my0, &mrows);
-          if (header.has_voids) sink.mask_band(my0, mrows, std::move(mask));
-        }
-        sink.band(l, y0, rows, std::move(bytes));
-      }
-      files_[size_t(l)].reset();
-    }
-  }
-
- private:
-  static void record(detail::SpillFile& f, int64_t y0, int64_t rows, const std::vector<uint8_t>& bytes) {
-    uint8_t head[30];
-    uint8_t* p = detail::put_varint(head, uint64_t(y0));
-    p = detail::put_varint(p, uint64_t(rows));
-    p = detail::put_varint(p, bytes.size());
-    f.write(head, size_t(p - head));
-    f.write(bytes.data(), bytes.size());
-  }
-  static uint64_t read_varint(detail::SpillFile& f) {
-    uint64_t v = 0;
-    uint8_t b;
-    for (int shift = 0;; shift += 7) {
-      if (shift > 63 || !f.read_byte(&b))
-        throw Error(ErrorCode::Truncated, f.path() + ": band spill truncated");
-      v |= uint64_t(b & 0x7f) << shift;
-      if (!(b & 0x80)) return v;
-    }
-  }
-  static std::vector<uint8_t> read_record(detail::SpillFile& f, int64_t* y0, int64_t* rows) {
-    *y0 = int64_t(read_varint(f));
-    *rows = int64_t(read_varint(f));
-    std::vector<uint8_t> bytes(size_t(read_varint(f)));
-    f.read(bytes.data(), bytes.size());
-    return bytes;
-  }
-  std::vector<std::unique_ptr<detail::SpillFile>> files_;
-  std::unique_ptr<detail::SpillFile> mask_;
+  std::deque<std::vector<uint64_t>> rows_;
 };
 
 class StreamingBuilder {
@@ -292,38 +235,35 @@ class StreamingBuilder {
       : info_(info), opt_(opt), coder_(coder), sink_(sink) {
     validate(opt, info);
     sizes_ = pyramid_level_sizes({info.width, info.height}, opt.level_count, opt.min_coarsest_side);
-    L_ = int(sizes_.size());
-    m_ = L_ - 1;
-    S_ = coder.band_rows();
-    if (S_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
+    level_count_ = int(sizes_.size());
+    finest_ = level_count_ - 1;
+    finest_band_rows_ = coder.band_rows();
+    if (finest_band_rows_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
     // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
     // until it is: halving the band height per coarser level keeps every level's lag near band_rows
     // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)).
-    level_band_rows_.resize(size_t(L_));
-    for (int l = 0; l < L_; ++l)
-      level_band_rows_[size_t(l)] = std::max<int64_t>(1, S_ >> std::min(62, m_ - l));
-    T_.resize(size_t(L_));
-    That_.resize(size_t(L_));
-    for (int l = 0; l < L_; ++l) {
-      const bool narrow = l == m_ && info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
-      T_[size_t(l)].reset(sizes_[size_t(l)].width, narrow);
-      That_[size_t(l)].reset(sizes_[size_t(l)].width);
+    level_band_rows_.resize(size_t(level_count_));
+    for (int l = 0; l < level_count_; ++l)
+      level_band_rows_[size_t(l)] = std::max<int64_t>(1, finest_band_rows_ >> std::min(62, finest_ - l));
+    levels_.resize(size_t(level_count_));
+    reconstructed_.resize(size_t(level_count_));
+    for (int l = 0; l < level_count_; ++l) {
+      const bool narrow = l == finest_ && info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
+      levels_[size_t(l)].reset(sizes_[size_t(l)].width, narrow);
+      reconstructed_[size_t(l)].reset(sizes_[size_t(l)].width);
     }
     mask_.reset(info.width);
     row_scratch_.resize(size_t(info.width));
-    next_band_.assign(size_t(L_), 0);
-    band_count_.assign(size_t(L_), 0);
-    acc_.resize(size_t(L_));
+    next_band_.assign(size_t(level_count_), 0);
+    acc_.resize(size_t(level_count_));
     work_.resize(size_t(opt.threads));
-    const std::string base = opt.temp_dir + "/" + opt.temp_name + ".pyr.tmp.";
-    if (opt.level_ordered_output) ordered_ = std::make_unique<LevelOrderBuffer>(base, L_);
-    result_.levels.resize(size_t(L_));
+    result_.levels.resize(size_t(level_count_));
     header_.levels = sizes_;
-    header_.band_rows = S_;
+    header_.band_rows = finest_band_rows_;
     header_.value_scale = opt.value_scale;
     header_.input = info;
     std::ostringstream s;
-    s << "levels " << L_ << ":";
+    s << "levels " << level_count_ << ":";
     for (auto& g : sizes_) s << " " << g.width << "x" << g.height;
     result_.log.push_back(s.str());
   }
@@ -387,12 +327,12 @@ class StreamingBuilder {
         }
       } joiner{producer};
       result_.void_count += cur.voids;
-      T_[size_t(m_)].append(cur.ints.data(), cur.rows);
+      levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
       mask_.append(cur.valid.data(), cur.rows);
       if (!filter_ready_) {
-        if (T_[size_t(m_)].end() >= fit_rows_) start_cascade();
-      } else if (m_ > 0) {
-        engines_[size_t(m_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(m_)]);
+        if (levels_[size_t(finest_)].end() >= fit_rows_) start_cascade();
+      } else if (finest_ > 0) {
+        engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
       }
       if (filter_ready_) pump(false);
       if (producer.joinable()) producer.join();
@@ -400,34 +340,29 @@ class StreamingBuilder {
       if (next_y >= H) break;
     }
     if (!filter_ready_) start_cascade();
-    for (int l = m_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
+    for (int l = finest_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
     pump(true);
-    for (int l = 0; l < L_; ++l)
+    for (int l = 0; l < level_count_; ++l)
       if (next_band_[size_t(l)] != sizes_[size_t(l)].height)
         throw std::logic_error("pyramid: level not completed");
 
-    for (int l = 0; l < L_; ++l) {
-      LevelStats& st = result_.levels[size_t(l)];
+    for (int l = 0; l < level_count_; ++l) {
+      LevelBuildStats& st = result_.levels[size_t(l)];
       const Acc& a = acc_[size_t(l)];
       st.size = sizes_[size_t(l)];
       st.residual_rms = a.counted ? std::sqrt(a.res_sq / double(a.counted)) : 0.0;
       st.error_rms = a.counted ? std::sqrt(a.err_sq / double(a.counted)) : 0.0;
     }
-    header_.has_voids = result_.void_count > 0;
     result_.header = header_;
     std::ostringstream held;
     held << "rows held at most (level rows / decoded rows), coarsest first:";
-    for (int l = 0; l < L_; ++l) held << " " << T_[size_t(l)].peak() << "/" << That_[size_t(l)].peak();
+    for (int l = 0; l < level_count_; ++l)
+      held << " " << levels_[size_t(l)].peak() << "/" << reconstructed_[size_t(l)].peak();
     result_.log.push_back(held.str());
     if (result_.void_count)
       result_.log.push_back("nodata: " + std::to_string(result_.void_count) +
                             " void samples filled by push-pull");
     result_.seconds_pass_residual = seconds_since(t_start) - result_.seconds_pass_input;
-    if (ordered_) {
-      const auto t = Clock::now();
-      ordered_->replay(sink_, header_, band_count_);
-      result_.seconds_pass_filter = seconds_since(t);
-    }
     return std::move(result_);
   }
 
@@ -436,16 +371,6 @@ class StreamingBuilder {
     double res_sq = 0, err_sq = 0;
     int64_t counted = 0;
   };
-
-  void begin_sink(bool has_voids) {
-    header_.levels = sizes_;
-    header_.filter = filter_;
-    header_.band_rows = S_;
-    header_.has_voids = has_voids;
-    header_.value_scale = opt_.value_scale;
-    header_.input = info_;
-    sink_.begin(header_);
-  }
 
   // Fits D on the top fit_rows rows (all still held: nothing is coded before the filter exists),
   // then starts the D cascade with every row received so far.
@@ -462,7 +387,7 @@ class StreamingBuilder {
       for (const Rect& r : windows) {
         std::vector<int32_t> d(size_t(r.width * r.height));
         for (int64_t yy = 0; yy < r.height; ++yy) {
-          T_[size_t(m_)].copy_rows(r.y0 + yy, 1, row_scratch_.data());
+          levels_[size_t(finest_)].copy_rows(r.y0 + yy, 1, row_scratch_.data());
           std::copy(row_scratch_.data() + r.x0, row_scratch_.data() + r.x0 + r.width,
                     d.begin() + yy * r.width);
         }
@@ -473,15 +398,14 @@ class StreamingBuilder {
                             std::to_string(fit_rows_) + " rows)");
     }
     header_.filter = filter_;
-    // Interleaved output starts now: nothing is coded before the filter exists, and voids further
-    // down are not known yet, so every finest band will carry its mask.
-    if (!opt_.level_ordered_output) begin_sink(/*has_voids=*/true);
-    engines_.resize(size_t(L_));
-    emit_.resize(size_t(L_));
-    emitted_.resize(size_t(L_));
-    for (int l = m_; l >= 1; --l) {
+    // Output starts now: nothing is coded before the filter exists.
+    sink_.begin(header_);
+    engines_.resize(size_t(level_count_));
+    emit_.resize(size_t(level_count_));
+    emitted_.resize(size_t(level_count_));
+    for (int l = finest_; l >= 1; --l) {
       // Coarse engines emit in small batches for the same reason as the band heights.
-      const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, m_ - l));
+      const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, finest_ - l));
       engines_[size_t(l)] =
           std::make_unique<detail::DownsampleEngine>(filter_, sizes_[size_t(l)], opt_.threads, batch);
       emit_[size_t(l)] = [this, l](int64_t, int64_t n, const double* rows) {
@@ -489,17 +413,17 @@ class StreamingBuilder {
         std::vector<int32_t>& out = emitted_[size_t(l - 1)];
         out.resize(size_t(n * cw));
         for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = detail::round_to_int32(rows[k]);
-        T_[size_t(l - 1)].append(out.data(), n);
+        levels_[size_t(l - 1)].append(out.data(), n);
         if (l - 1 >= 1) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
       };
     }
     filter_ready_ = true;
     result_.seconds_pass_input += seconds_since(t);
-    if (m_ > 0) {
-      const LevelRows& tm = T_[size_t(m_)];
+    if (finest_ > 0) {
+      const LevelRows& tm = levels_[size_t(finest_)];
       for (int64_t r = tm.first(); r < tm.end(); ++r) {
         tm.copy_rows(r, 1, row_scratch_.data());
-        engines_[size_t(m_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(m_)]);
+        engines_[size_t(finest_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(finest_)]);
       }
     }
   }
@@ -512,17 +436,17 @@ class StreamingBuilder {
   }
 
   bool band_ready(int l, int64_t y0, int64_t rows) const {
-    if (T_[size_t(l)].end() < y0 + rows) return false;
-    return l == 0 || That_[size_t(l - 1)].end() >= coarse_rows_needed(l, y0, y0 + rows);
+    if (levels_[size_t(l)].end() < y0 + rows) return false;
+    return l == 0 || reconstructed_[size_t(l - 1)].end() >= coarse_rows_needed(l, y0, y0 + rows);
   }
 
   // Codes every band that can be coded now, coarse levels first (they unlock the finer ones). Bands
   // go in groups of `threads`; before the end a partial group waits for more rows.
   void pump(bool final) {
-    for (int l = 0; l < L_; ++l) {
+    for (int l = 0; l < level_count_; ++l) {
       const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
       // Only the finest level waits to fill a group: waiting at coarse levels would delay all finer ones.
-      const int group = l == m_ ? opt_.threads : 1;
+      const int group = l == finest_ ? opt_.threads : 1;
       for (;;) {
         const int64_t y0 = next_band_[size_t(l)];
         if (y0 >= h) break;
@@ -539,7 +463,7 @@ class StreamingBuilder {
   void code_group(int l, int64_t gy0, int64_t gy1) {
     const GridSize fs = sizes_[size_t(l)];
     const int64_t fw = fs.width;
-    const bool finest = l == m_;
+    const bool finest = l == finest_;
     const int64_t S = level_band_rows_[size_t(l)];
     const int64_t nb = (gy1 - gy0 + S - 1) / S;
     GridSize cs{0, 0};
@@ -548,10 +472,10 @@ class StreamingBuilder {
       cs = sizes_[size_t(l - 1)];
       need = upsample_required_window(Rect{0, gy0, fw, gy1 - gy0}, fs);
       coarse_window_.resize(size_t(need.height * cs.width));
-      That_[size_t(l - 1)].copy_rows(need.y0, need.height, coarse_window_.data());
+      reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, coarse_window_.data());
     }
     const CoarseWindow cwin{coarse_window_.data(), cs.width, need, cs};
-    const LevelRows& tin = T_[size_t(l)];
+    const LevelRows& tin = levels_[size_t(l)];
     detail::parallel_chunks(opt_.threads, nb, [&](int, int64_t b0, int64_t b1) {
       for (int64_t b = b0; b < b1; ++b) {
         BandWork& bw = work_[size_t(b)];
@@ -568,43 +492,32 @@ class StreamingBuilder {
     });
     for (int64_t b = 0; b < nb; ++b) {
       BandWork& bw = work_[size_t(b)];
-      if (finest) {
-        std::vector<uint8_t> mb = encode_mask_rows(bw.valid.data(), fw, bw.rows);
-        result_.mask_bytes += mb.size();
-        if (ordered_)
-          ordered_->mask_band(bw.y0, bw.rows, mb);
-        else
-          sink_.mask_band(bw.y0, bw.rows, std::move(mb));
-      }
-      LevelStats& st = result_.levels[size_t(l)];
+      if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
+      LevelBuildStats& st = result_.levels[size_t(l)];
       st.bytes += bw.bytes.size();
       st.residual_max_abs = std::max(st.residual_max_abs, bw.res_max);
       st.error_max_abs = std::max(st.error_max_abs, bw.err_max);
       Acc& a = acc_[size_t(l)];
       a.res_sq += bw.res_sq, a.err_sq += bw.err_sq, a.counted += bw.counted;
-      if (ordered_)
-        ordered_->band(l, bw.y0, bw.rows, bw.bytes);
-      else
-        sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
+      sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
       bw.bytes = {};
-      ++band_count_[size_t(l)];
       if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
-      if (!finest) That_[size_t(l)].append(bw.rhat.data(), bw.rows);
+      if (!finest) reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
     }
     next_band_[size_t(l)] = gy1;
-    T_[size_t(l)].drop_before(gy1);
+    levels_[size_t(l)].drop_before(gy1);
     if (finest) mask_.drop_before(gy1);
     if (l > 0) {
-      const int64_t keep =
-          gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0 : That_[size_t(l - 1)].end();
-      That_[size_t(l - 1)].drop_before(keep);
+      const int64_t keep = gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0
+                                           : reconstructed_[size_t(l - 1)].end();
+      reconstructed_[size_t(l - 1)].drop_before(keep);
     }
   }
 
   void code_band(int l, const CoarseWindow& cwin, BandWork& bw) {
     const GridSize fs = sizes_[size_t(l)];
     const int64_t n = bw.rows * fs.width;
-    const bool with_mask = l == m_;
+    const bool with_mask = l == finest_;
     if (l > 0)
       upsample_region(cwin, fs, Rect{0, bw.y0, fs.width, bw.rows}, bw.pred.data(), fs.width, bw.scratch);
     else
@@ -647,24 +560,25 @@ class StreamingBuilder {
   ResidualCoder& coder_;
   PyramidSink& sink_;
   std::vector<GridSize> sizes_;
-  int L_ = 0, m_ = 0;
-  int64_t S_ = 0, fit_rows_ = 0;
+  int level_count_ = 0;           // L = m + 1
+  int finest_ = 0;                // m, the index of the finest level (the input)
+  int64_t finest_band_rows_ = 0;  // S, the coder's band height at the finest level
+  int64_t fit_rows_ = 0;
   std::vector<int64_t> level_band_rows_;
   DownsampleFilter filter_;
   bool filter_ready_ = false;
   PyramidHeader header_;
-  std::vector<LevelRows> T_;
-  std::vector<RowRing<int32_t>> That_;
+  std::vector<LevelRows> levels_;                // T_l: rows of each level not yet coded
+  std::vector<RowRing<int32_t>> reconstructed_;  // T^_l: decoded rows U still needs for level l+1
   MaskRows mask_;
   std::vector<int32_t> row_scratch_;
   std::vector<std::unique_ptr<detail::DownsampleEngine>> engines_;
   std::vector<detail::DownsampleEngine::Emit> emit_;
   std::vector<std::vector<int32_t>> emitted_;
-  std::vector<int64_t> next_band_, band_count_;
+  std::vector<int64_t> next_band_;  // per level: first row not yet coded
   std::vector<Acc> acc_;
   std::vector<BandWork> work_;
   std::vector<int32_t> coarse_window_;
-  std::unique_ptr<LevelOrderBuffer> ordered_;
   BuildResult result_;
 };
 

@@ -1,5 +1,4 @@
-// UniformQuantizerCoder: the stand-in residual coder (one absolute step, zigzag varints), and the
-// run-length validity mask format.
+// UniformQuantizerCoder: the stand-in residual coder (one absolute step, zigzag varints).
 #include <algorithm>
 #include <cstdlib>
 #include <limits>
@@ -63,43 +62,6 @@ bool UniformQuantizerCoder::decode(const uint8_t* data, size_t n, int64_t w, int
     const int64_t q = detail::unzigzag(uint32_t(v));
     out[k] = int32_t(
         std::clamp<int64_t>(q * s, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));
-  }
-  return p == end;
-}
-
-std::vector<uint8_t> encode_mask_rows(const uint8_t* valid, int64_t w, int64_t rows) {
-  std::vector<uint8_t> out;
-  uint8_t buf[10];
-  for (int64_t y = 0; y < rows; ++y) {
-    const uint8_t* row = valid + y * w;
-    int64_t x = 0;
-    bool want_valid = true;
-    while (x < w) {
-      int64_t run = 0;
-      while (x + run < w && (row[x + run] != 0) == want_valid) ++run;
-      out.insert(out.end(), buf, detail::put_varint(buf, uint64_t(run)));
-      x += run;
-      want_valid = !want_valid;
-    }
-    if (w == 0) out.push_back(0);
-  }
-  return out;
-}
-
-bool decode_mask_rows(const uint8_t* data, size_t n, int64_t w, int64_t rows, uint8_t* valid) {
-  const uint8_t* p = data;
-  const uint8_t* end = data + n;
-  for (int64_t y = 0; y < rows; ++y) {
-    uint8_t* row = valid + y * w;
-    int64_t x = 0;
-    bool is_valid = true;
-    do {
-      uint64_t run;
-      if (!detail::get_varint(&p, end, &run) || run > uint64_t(w - x)) return false;
-      std::fill(row + x, row + x + int64_t(run), uint8_t(is_valid ? 1 : 0));
-      x += int64_t(run);
-      is_valid = !is_valid;
-    } while (x < w);
   }
   return p == end;
 }

@@ -2,6 +2,7 @@
 // regions from the container with the same upsample_region and coder).
 #include <algorithm>
 #include <limits>
+#include <stdexcept>
 
 #include "pyramid/pyramid.h"
 
@@ -18,8 +19,16 @@ void MemoryPyramid::band(int level, int64_t y0, int64_t rows, std::vector<uint8_
   bands[size_t(level)].push_back({y0, rows, std::move(bytes)});
 }
 
-void MemoryPyramid::mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
-  mask.push_back({y0, rows, std::move(bytes)});
+void MemoryPyramid::mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) {
+  const size_t width = size_t(header.levels.back().width), n = size_t(rows) * width;
+  if (!mask.empty() && mask.size() != size_t(y0) * width)
+    throw std::logic_error("MemoryPyramid: mask rows out of order");
+  // Rows before the first void are not stored: an input without voids keeps an empty mask.
+  if (mask.empty()) {
+    if (std::find(valid, valid + n, uint8_t(0)) == valid + n) return;
+    mask.assign(size_t(y0) * width, uint8_t(1));
+  }
+  mask.insert(mask.end(), valid, valid + n);
 }
 
 void MemoryPyramid::reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width,
@@ -34,7 +43,6 @@ uint64_t MemoryPyramid::total_bytes() const {
   uint64_t n = 0;
   for (auto& level : bands)
     for (auto& b : level) n += b.bytes.size();
-  for (auto& b : mask) n += b.bytes.size();
   return n;
 }
 
@@ -73,19 +81,13 @@ std::vector<int32_t> decode_pyramid(const MemoryPyramid& p, ResidualCoder& coder
   }
   if (valid) {
     const GridSize fs = levels[size_t(up_to_level)];
-    valid->assign(size_t(fs.width * fs.height), 1);
-    if (up_to_level == int(levels.size()) - 1 && p.header.has_voids) {
-      int64_t covered = 0;
-      for (const auto& b : p.mask) {
-        if (b.y0 != covered || b.y0 + b.rows > fs.height ||
-            !decode_mask_rows(b.bytes.data(), b.bytes.size(), fs.width, b.rows,
-                              valid->data() + b.y0 * fs.width))
-          throw Error(ErrorCode::CorruptData,
-                      "pyramid: bad validity mask band at row " + std::to_string(b.y0));
-        covered += b.rows;
-      }
-      if (covered != fs.height) throw Error(ErrorCode::CorruptData, "pyramid: validity mask incomplete");
-    }
+    const bool finest = up_to_level == int(levels.size()) - 1;
+    if (finest && !p.mask.empty() && p.mask.size() != size_t(fs.width * fs.height))
+      throw Error(ErrorCode::CorruptData, "pyramid: validity mask incomplete");
+    if (finest && !p.mask.empty())
+      *valid = p.mask;
+    else
+      valid->assign(size_t(fs.width * fs.height), 1);
   }
   return prev;
 }

@@ -48,7 +48,6 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
   bo.level_count = level_count;
   bo.value_scale = units.value_scale;
   bo.threads = 1;
-  bo.level_ordered_output = false;  // no temp files: the bands go straight to memory
   if (filter_11x11.size() == size_t(DownsampleFilter::kSize * DownsampleFilter::kSize)) {
     // The compressed file's D, so that the reference's coarse levels are the T_l it approximates.
     bo.use_fixed_filter = true;

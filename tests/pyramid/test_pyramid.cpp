@@ -1,9 +1,7 @@
 // The closed-loop residual pyramid: coding, decoding, streaming, nodata, tiny grids.
-#include <unistd.h>
-
+#include <array>
 #include <catch2/catch.hpp>
 #include <cmath>
-#include <filesystem>
 #include <iostream>
 #include <random>
 
@@ -14,14 +12,10 @@ using namespace terrain;
 
 namespace {
 
-std::string temp_dir() { return std::filesystem::temp_directory_path().string(); }
-
 BuildOptions options(int levels = 0, int threads = 2) {
   BuildOptions o;
   o.level_count = levels;
   o.threads = threads;
-  o.temp_dir = temp_dir();
-  o.temp_name = "test_pyramid_" + std::to_string(::getpid());
   return o;
 }
 
@@ -79,8 +73,7 @@ void require_same_output(const MemoryPyramid& a, const MemoryPyramid& b) {
     REQUIRE(a.bands[l].size() == b.bands[l].size());
     for (size_t k = 0; k < a.bands[l].size(); ++k) REQUIRE(a.bands[l][k].bytes == b.bands[l][k].bytes);
   }
-  REQUIRE(a.mask.size() == b.mask.size());
-  for (size_t k = 0; k < a.mask.size(); ++k) REQUIRE(a.mask[k].bytes == b.mask[k].bytes);
+  REQUIRE(a.mask == b.mask);
   REQUIRE(a.recon == b.recon);
 }
 
@@ -105,20 +98,6 @@ TEST_CASE("uniform quantiser: error within step/2, exact at step 1, rejects bad 
     CHECK_FALSE(coder.decode(longer.data(), longer.size(), int64_t(r.size()), 1, dec.data()));
   }
   CHECK_THROWS_AS(UniformQuantizerCoder(0), std::invalid_argument);
-}
-
-TEST_CASE("validity mask run-length rows round trip") {
-  std::mt19937 rng(3);
-  for (int64_t w : {1, 2, 5, 64}) {
-    std::vector<uint8_t> m(size_t(w * 9));
-    for (auto& v : m) v = uint8_t(rng() % 3 != 0);
-    std::fill(m.begin(), m.begin() + w, uint8_t(0));  // a fully void row
-    auto bytes = encode_mask_rows(m.data(), w, 9);
-    std::vector<uint8_t> back(m.size(), 7);
-    REQUIRE(decode_mask_rows(bytes.data(), bytes.size(), w, 9, back.data()));
-    CHECK(back == m);
-    CHECK_FALSE(decode_mask_rows(bytes.data(), bytes.size() - 1, w, 9, back.data()));
-  }
 }
 
 TEST_CASE("closed loop: decoder output equals the builder's reconstruction; step 1 is lossless") {
@@ -151,7 +130,7 @@ TEST_CASE("closed loop: finest-level error does not grow with the number of leve
       MemoryPyramid out;
       out.keep_reconstruction = false;
       BuildResult res = build_pyramid(map, options(levels), coder, out);
-      const LevelStats& fin = res.levels.back();
+      const LevelBuildStats& fin = res.levels.back();
       std::cout << "[closed loop] " << name << " step " << step << ", " << levels
                 << " levels: finest error rms " << fin.error_rms << ", max " << fin.error_max_abs
                 << ", residual rms " << fin.residual_rms << ", bytes " << out.total_bytes() << "\n";
@@ -181,22 +160,39 @@ TEST_CASE("streamed == in-memory, bit-exact, whatever the chunking and thread co
     build_pyramid(map, o, coder, one_thread);
     require_same_output(mem, one_thread);
   }
-  SECTION("level-ordered and interleaved output carry the same bands") {
-    Heightmap map = synthetic(150, 420, 4);
+  SECTION("bands come as produced: levels interleaved, each level top to bottom") {
+    // Taller than fit_rows plus the levels' lag, so that coding starts before the input ends.
+    Heightmap map = synthetic(150, 1400, 4);
     UniformQuantizerCoder coder(2, 16);
-    BuildOptions o = options(5, 2);
-    MemoryPyramid ordered, interleaved;
-    build_pyramid(map, o, coder, ordered);
-    o.level_ordered_output = false;
-    build_pyramid(map, o, coder, interleaved);
-    CHECK_FALSE(ordered.header.has_voids);  // known at the end in ordered mode
-    CHECK(interleaved.header.has_voids);    // announced up front: a mask band with every finest band
-    interleaved.mask = ordered.mask;
-    interleaved.header.has_voids = false;
-    require_same_output(ordered, interleaved);
+    // Records the order of the sink calls.
+    struct OrderSink final : PyramidSink {
+      std::vector<std::array<int64_t, 3>> bands;  // level, y0, rows
+      std::vector<int64_t> mask_y0;
+      void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&&) override {
+        bands.push_back({level, y0, rows});
+      }
+      void mask_rows(int64_t y0, int64_t, const uint8_t*) override { mask_y0.push_back(y0); }
+    } order;
+    build_pyramid(map, options(5, 2), coder, order);
+    std::vector<int64_t> next_row(5, 0);
+    std::vector<int64_t> finest_y0;
+    bool interleaved = false;
+    int previous = 0;
+    for (auto [level, y0, rows] : order.bands) {
+      REQUIRE(y0 == next_row[size_t(level)]);
+      next_row[size_t(level)] = y0 + rows;
+      if (level < previous) interleaved = true;  // a coarser level's band after a finer one's
+      previous = int(level);
+      if (level == 4) finest_y0.push_back(y0);
+    }
+    CHECK(interleaved);
+    CHECK(order.mask_y0 == finest_y0);  // a mask call for every finest band, voids or not
+    MemoryPyramid mem;
+    build_pyramid(map, options(5, 2), coder, mem);
+    CHECK(mem.mask.empty());  // no voids: nothing kept
     // Coarser levels use shorter bands (band_rows >> (m - l)), so they do not hold back finer ones.
-    CHECK(ordered.bands[4].front().rows == 16);
-    CHECK(ordered.bands[0].front().rows == 1);
+    CHECK(mem.bands[4].front().rows == 16);
+    CHECK(mem.bands[0].front().rows == 1);
   }
   SECTION("shared tiles read through open_band_reader") {
     for (const char* name : {"srtm3_N44E033_crimea_coast_mountains.hgt", "pugetsound_ps_height_1k.png"}) {
@@ -233,7 +229,7 @@ TEST_CASE("nodata: voids survive a round trip, valid samples stay within step/2"
   UniformQuantizerCoder coder(step);
   MemoryPyramid out;
   BuildResult res = build_pyramid(map, options(3), coder, out);
-  REQUIRE(res.header.has_voids);
+  REQUIRE(out.mask.size() == map.valid.size());
   CHECK(res.void_count == std::count(map.valid.begin(), map.valid.end(), uint8_t(0)));
   std::vector<uint8_t> valid;
   auto dec = decode_pyramid(out, coder, 2, &valid);
@@ -297,7 +293,4 @@ TEST_CASE("bad input gives clear errors") {
   CHECK_THROWS_WITH(build_pyramid(huge, options(), coder, out), Catch::Contains("int32"));
   Heightmap empty;
   CHECK_THROWS_AS(build_pyramid(empty, options(), coder, out), std::invalid_argument);
-  BuildOptions bad = options();
-  bad.temp_dir = "/nonexistent/dir";
-  CHECK_THROWS_AS(build_pyramid(grid_from({1}, 1, 1), bad, coder, out), Error);
 }

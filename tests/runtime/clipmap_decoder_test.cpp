@@ -42,7 +42,7 @@ TEST_CASE("clipmap: a decoded pyramid fills the levels with the decoder's sample
   iotest::TempDir dir;
   write_terrain(dir, 300, 260, 5);
   BuildFileOptions bo = build_options(4);
-  bo.target = ErrorTarget::Step;
+  bo.mode = ErrorMode::Step;
   bo.target_metres = 4.0;
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("t.pyr"), bo);
   auto file = PyramidFile::open(dir.file("t.pyr"));
@@ -87,7 +87,7 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   const Heightmap map = write_terrain(dir, 200, 170, 11);
   BuildFileOptions bo = build_options(3);
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossless.pyr"), bo);
-  bo.target = ErrorTarget::Step;
+  bo.mode = ErrorMode::Step;
   bo.target_metres = 8.0;
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossy.pyr"), bo);
 
@@ -190,7 +190,7 @@ TEST_CASE("clipmap: the screen-space error estimate from the pyramid alone, and 
   // A lossy pyramid: its finest level is not the original any more, and the estimate plus the
   // finest level's recorded error must bound the true figures on every level.
   BuildFileOptions bo = build_options(3);
-  bo.target = ErrorTarget::Step;
+  bo.mode = ErrorMode::Step;
   bo.target_metres = 16.0;
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossy.pyr"), bo);
   auto lossy_file = PyramidFile::open(dir.file("lossy.pyr"));
@@ -227,7 +227,7 @@ TEST_CASE("clipmap: levels refined from the coarser clipmap level equal the deco
     for (int64_t x = 300; x < 330; ++x) map.values[size_t(y * map.width() + x)] = -32768;
   write_raw(dir.file("t.raw"), map);
   BuildFileOptions bo = build_options(4);
-  bo.target = ErrorTarget::Step;
+  bo.mode = ErrorMode::Step;
   bo.target_metres = 4.0;
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("t.pyr"), bo);
   auto file = PyramidFile::open(dir.file("t.pyr"));

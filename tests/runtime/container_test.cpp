@@ -164,13 +164,12 @@ void write_sample(const std::string& path, const Sample& s, std::mt19937_64& rng
     if (rng() % 2) {
       w.add_level(l, blob.data(), blob.size());
     } else {
-      w.begin_level(l);
       for (size_t pos = 0; pos < blob.size();) {
         const size_t n = std::min<size_t>(blob.size() - pos, 1 + rng() % 100);
-        w.append_level(blob.data() + pos, n);
+        w.append_level(l, blob.data() + pos, n);
         pos += n;
       }
-      w.end_level();
+      w.end_level(l);
     }
   }
   for (size_t pos = 0; pos < s.mask.size();) {
@@ -407,8 +406,7 @@ TEST_CASE("container file appears only on finish and temp files never linger", "
       temp = w.temp_path();
       w.set_info(s.info);
       w.add_level(1, s.blobs[1].data(), s.blobs[1].size());
-      w.begin_level(2);
-      w.append_level(s.blobs[2].data(), 10);
+      w.append_level(2, s.blobs[2].data(), 10);
       CHECK(fs::exists(temp));
     }
     CHECK_FALSE(fs::exists(temp));
@@ -484,10 +482,14 @@ TEST_CASE("container writer rejects inconsistent input", "[runtime][container]")
   }
   SECTION("finish without info") { CHECK_THROWS_AS(w.finish(), std::invalid_argument); }
   SECTION("unbalanced streaming calls") {
-    CHECK_THROWS_AS(w.end_level(), std::logic_error);
-    CHECK_THROWS_AS(w.append_level(nullptr, 0), std::logic_error);
-    w.begin_level(1);
-    CHECK_THROWS_AS(w.begin_level(2), std::logic_error);
+    w.set_info(s.info);
+    w.end_level(0);
+    CHECK_THROWS_AS(w.append_level(0, nullptr, 0), std::invalid_argument);  // after its end
+    CHECK_THROWS_AS(w.end_level(0), std::invalid_argument);
+    CHECK_THROWS_AS(w.append_level(kMaxLevels, nullptr, 0), std::invalid_argument);
+    w.append_level(2, s.blobs[2].data(), 3);
+    w.end_level(1);
+    CHECK_THROWS_AS(w.finish(), std::logic_error);  // level 2 still open
   }
   CHECK_FALSE(fs::exists(path));
 }
@@ -819,13 +821,12 @@ TEST_CASE("container with a blob larger than 4 GiB", "[.][large][runtime][contai
     ContainerWriter w(path);
     w.set_info(info);
     w.add_level(0, data.data(), 5);
-    w.begin_level(1);
     for (uint64_t pos = 0; pos < total;) {
       const size_t n = size_t(std::min<uint64_t>(chunk, total - pos));
-      w.append_level(data.data(), n);
+      w.append_level(1, data.data(), n);
       pos += n;
     }
-    w.end_level();
+    w.end_level(1);
     w.finish();
   }
   const Container c = Container::open(path);

@@ -63,9 +63,9 @@ double bits_per_sample(uint64_t file_bytes, const Heightmap& map) {
   return 8.0 * double(file_bytes) / double(map.width() * map.height());
 }
 
-BuildFileOptions target(ErrorTarget t, double metres) {
+BuildFileOptions target(ErrorMode t, double metres) {
   BuildFileOptions o;
-  o.target = t;
+  o.mode = t;
   o.target_metres = metres;
   return o;
 }
@@ -77,7 +77,7 @@ std::string synthetic_pyramid(iotest::TempDir& dir, uint64_t seed, int64_t width
   const std::string src = dir.file("synth.raw");
   write_raw(src, synthesize_terrain(SynthOptions{.seed = seed, .width = width, .height = height}));
   const std::string pyr = dir.file(name);
-  build_pyramid_file(src, {}, pyr, target(ErrorTarget::Step, step_m));  // default tile size
+  build_pyramid_file(src, {}, pyr, target(ErrorMode::Step, step_m));  // default tile size
   return pyr;
 }
 
@@ -110,7 +110,7 @@ TEST_CASE("e2e: every shared DEM codes losslessly", "[e2e]") {
 TEST_CASE("e2e: every shared DEM meets rms 1 m", "[e2e]") {
   for_each_heavy_dem([](const std::string& dem, const ReadOptions& ro, const Heightmap& map,
                         const std::string& name, const std::string& pyr) {
-    const auto r = build_pyramid_file(dem, ro, pyr, target(ErrorTarget::Rms, 1.0));
+    const auto r = build_pyramid_file(dem, ro, pyr, target(ErrorMode::Rms, 1.0));
     const Finest f = compare_finest(pyr, map);
     // Integer-metre inputs that code losslessly at step 1 cannot reach 1 m rms from below; the
     // target is then met as closely as the quantum allows (the check states it).
@@ -127,7 +127,7 @@ TEST_CASE("e2e: every shared DEM meets rms 1 m", "[e2e]") {
 TEST_CASE("e2e: every shared DEM meets max-error 2 m", "[e2e]") {
   for_each_heavy_dem([](const std::string& dem, const ReadOptions& ro, const Heightmap& map,
                         const std::string& name, const std::string& pyr) {
-    const auto r = build_pyramid_file(dem, ro, pyr, target(ErrorTarget::MaxError, 2.0));
+    const auto r = build_pyramid_file(dem, ro, pyr, target(ErrorMode::MaxError, 2.0));
     const Finest f = compare_finest(pyr, map);
     CHECK(f.max <= 2.0 + 1e-6);
     CHECK(f.nan_mismatch == 0);

@@ -277,7 +277,7 @@ TEST_CASE("synthesis: below a pyramid file the variance comes from its stored re
   so.seed = 9;
   write_raw(dir.file("t.raw"), synthesize_terrain(so));
   BuildFileOptions bo;
-  bo.target = ErrorTarget::Step;
+  bo.mode = ErrorMode::Step;
   bo.target_metres = 2.0;
   bo.levels = 5;
   bo.threads = 1;

@@ -48,19 +48,19 @@ Outcome check_max_error(const std::string& src, iotest::TempDir& dir, const Buil
 
 // Builds src at --rms rms and checks that it stays sane and within `bound` metres rms.
 void check_rms(const std::string& src, iotest::TempDir& dir, double rms, double bound) {
-  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorTarget::Rms, rms));
+  const Outcome r = build_and_measure(src, dir.file("r.pyr"), target(ErrorMode::Rms, rms));
   STRESS_CHECK_SANE(r);
   CHECK(r.rms <= bound);
 }
 
 void lossless_and_max_error(const std::string& src, iotest::TempDir& dir, double max_error,
                             const ReadOptions& ro = {}) {
-  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorTarget::Lossless), ro);
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorMode::Lossless), ro);
   STRESS_CHECK_SANE(l);
   // Lossless is exact in level units; metres are units * scale + offset in double, which rounds by
   // ~1e-10 m at 1e6 m.
   CHECK(l.max_err <= 1e-6);
-  check_max_error(src, dir, target(ErrorTarget::MaxError, max_error), 1e-9, ro);
+  check_max_error(src, dir, target(ErrorMode::MaxError, max_error), 1e-9, ro);
 }
 
 }  // namespace
@@ -68,7 +68,7 @@ void lossless_and_max_error(const std::string& src, iotest::TempDir& dir, double
 TEST_CASE("stress: flat terrain codes to almost nothing, exactly", "[stress]") {
   iotest::TempDir dir;
   const std::string src = write_input(dir, "flat.raw", make_grid(300, 200, SampleType::Int16, 1234));
-  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorTarget::Lossless));
+  const Outcome l = build_and_measure(src, dir.file("l.pyr"), target(ErrorMode::Lossless));
   STRESS_CHECK_SANE(l);
   CHECK(l.max_err == 0);
   CHECK(l.bits_per_sample < 1.0);  // bound: a constant costs only headers (60000 samples)
@@ -137,13 +137,13 @@ TEST_CASE("stress: 1e6 m offset plus centimetre detail, within libcodec's range"
     });
     m.info.vertical_offset = 1e6;
     // + 1e-6: float32 representation of the centimetre values.
-    check_max_error(write_input(dir, "offset_f32b.raw", m), dir, target(ErrorTarget::MaxError, 0.01), 1e-6);
+    check_max_error(write_input(dir, "offset_f32b.raw", m), dir, target(ErrorMode::MaxError, 0.01), 1e-6);
   }
   SECTION("float32 at 1e6 m (input ulp 0.0625 m), quantum 1 m: max error 2 m holds") {
     const Heightmap m = grid_from(150, 120, SampleType::Float32, [](int64_t x, int64_t y) {
       return double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 5 * std::sin(0.1 * double(x))));
     });
-    BuildFileOptions o = target(ErrorTarget::MaxError, 2);
+    BuildFileOptions o = target(ErrorMode::MaxError, 2);
     o.quantum_metres = 1;
     check_max_error(write_input(dir, "offset_f32.raw", m), dir, o);
   }
@@ -166,13 +166,13 @@ TEST_CASE("stress: level units beyond +-2^20 (libcodec's range) are centred by t
     const Heightmap m = grid_from(150, 120, SampleType::Float32, [](int64_t x, int64_t y) {
       return double(float(1e6 + 0.01 * double((x * 7 + y * 13) % 23) + 0.5 * std::sin(0.1 * double(x))));
     });
-    check_max_error(write_input(dir, "offset_f32.raw", m), dir, target(ErrorTarget::MaxError, 0.1));
+    check_max_error(write_input(dir, "offset_f32.raw", m), dir, target(ErrorMode::MaxError, 0.1));
   }
   SECTION("float32 bathymetry near -11000 m, default 0.01 m quantum: max error 0.5 m") {
     Heightmap m = make_grid(200, 150, SampleType::Float32);
     for (int64_t i = 0; i < 200 * 150; ++i)
       m.values[size_t(i)] = double(float(-11000 + 50 * std::sin(double(i) / 300.0)));
-    check_max_error(write_input(dir, "trench.raw", m), dir, target(ErrorTarget::MaxError, 0.5));
+    check_max_error(write_input(dir, "trench.raw", m), dir, target(ErrorMode::MaxError, 0.5));
   }
 }
 
@@ -193,7 +193,7 @@ TEST_CASE("stress: NaN and nodata regions stay voids, the rest within bounds", "
       return 100.25 * std::sin(0.03 * double(x + y));
     });
     m.info.nodata = std::numeric_limits<double>::quiet_NaN();
-    check_max_error(write_input(dir, "nan.raw", m), dir, target(ErrorTarget::MaxError, 0.5));
+    check_max_error(write_input(dir, "nan.raw", m), dir, target(ErrorMode::MaxError, 0.5));
   }
   SECTION("everything void but one sample") {
     Heightmap m = make_grid(40, 30, SampleType::Int16, -32768);
@@ -234,13 +234,13 @@ TEST_CASE("stress: a 20-level pyramid", "[stress]") {
   for (int64_t x = 0; x < w; ++x)
     m.values[size_t(x)] = std::round(2000 * std::sin(double(x) * 1e-4) + double(x % 13));
   const std::string src = write_input(dir, "deep.raw", m);
-  BuildFileOptions o = target(ErrorTarget::Lossless);
+  BuildFileOptions o = target(ErrorMode::Lossless);
   o.levels = 20;
   const Outcome l = build_and_measure(src, dir.file("l.pyr"), o);
   STRESS_CHECK_SANE(l);
   CHECK(l.levels == 20);
   CHECK(l.max_err == 0);
-  o = target(ErrorTarget::MaxError, 3);
+  o = target(ErrorMode::MaxError, 3);
   o.levels = 20;
   CHECK(check_max_error(src, dir, o).levels == 20);
 }
@@ -271,7 +271,7 @@ TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
   double first_rms = 0, previous_rms = 0;
   for (int gen = 0; gen < generations; ++gen) {
     INFO("generation " << gen);
-    const Outcome o = check_max_error(write_input(dir, "gen.raw", m), dir, target(ErrorTarget::MaxError, E));
+    const Outcome o = check_max_error(write_input(dir, "gen.raw", m), dir, target(ErrorMode::MaxError, E));
     double sq = 0, worst = 0;
     int64_t changed = 0;
     for (size_t i = 0; i < original.size(); ++i) {
@@ -294,7 +294,7 @@ TEST_CASE("stress: repeated build/decode cycles do not drift", "[stress]") {
   }
   for (int gen = 0; gen < 3; ++gen) {
     const Outcome o =
-        build_and_measure(write_input(dir, "lgen.raw", m), dir.file("lg.pyr"), target(ErrorTarget::Lossless));
+        build_and_measure(write_input(dir, "lgen.raw", m), dir.file("lg.pyr"), target(ErrorMode::Lossless));
     CHECK(o.max_err == 0);
     m.values = o.finest;
   }
@@ -305,7 +305,7 @@ TEST_CASE("stress: output is identical for 1 and 2 build threads on a pathologic
   Heightmap m = make_grid(300, 280, SampleType::Int16);
   for (int64_t i = 0; i < 300 * 280; ++i) m.values[size_t(i)] = (i % 3 == 0) ? 8000 : double(i % 101);
   const std::string src = write_input(dir, "t.raw", m);
-  BuildFileOptions a = target(ErrorTarget::MaxError, 2), b = a;
+  BuildFileOptions a = target(ErrorMode::MaxError, 2), b = a;
   a.threads = 1;
   b.threads = 2;
   const Outcome oa = build_and_measure(src, dir.file("a.pyr"), a);

@@ -41,9 +41,9 @@ struct Outcome {
   std::vector<double> finest;  // decoded finest level in metres (NaN at voids)
 };
 
-inline BuildFileOptions target(ErrorTarget t, double metres = 0) {
+inline BuildFileOptions target(ErrorMode t, double metres = 0) {
   BuildFileOptions o;
-  o.target = t;
+  o.mode = t;
   o.target_metres = metres;
   return o;
 }

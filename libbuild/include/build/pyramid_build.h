@@ -15,16 +15,13 @@
 
 namespace terrain::runtime {
 
-enum class ErrorTarget { Lossless, Step, Rms, MaxError };
-
 struct BuildFileOptions {
-  ErrorTarget target = ErrorTarget::Lossless;
-  double target_metres = 0;         // the step, rms or max error asked for, in metres
+  ErrorMode mode = ErrorMode::Lossless;  // what target_metres is (stored in the file as given)
+  double target_metres = 0;              // the step, rms or max error asked for, in metres
   double quantum_metres = 0;        // level unit for float input (0: 0.01 m); integer input uses its own unit
   int levels = 0;                   // 0: automatic
   uint32_t tile_size = 32;          // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
   int threads = 0;                  // 0: all cores
-  std::string temp_dir;             // spill files; empty: the output's directory
   int64_t calibration_rows = 1024;  // rms/max-error calibration window (rows x columns of the input)
   int64_t calibration_cols = 2048;
 };

@@ -45,12 +45,13 @@ inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
 
 enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1 };
-enum class ErrorMode : uint32_t { RmsTarget = 0, MaxError = 1, Step = 2, Lossless = 3 };
+// What the quantiser step was chosen for; stored as a u32. Also the build's option (BuildFileOptions).
+enum class ErrorMode : uint32_t { Rms = 0, MaxError = 1, Step = 2, Lossless = 3 };
 // "rms", "max-error", "step" or "lossless" (the pyramid-build option that chose it).
 const char* error_mode_name(ErrorMode mode);
 
 // Statistics of one level's residual image, in quantisation units (used later for synthesis).
-struct LevelStats {
+struct ResidualStats {
   double mean = 0, variance = 0, rms = 0, min = 0, max = 0;
 };
 
@@ -65,7 +66,7 @@ struct LevelError {
 struct LevelInfo {
   uint64_t width = 0;
   uint64_t height = 0;
-  LevelStats stats;
+  ResidualStats stats;
   std::optional<LevelError> error;  // absent in version 1.0 files
   // Filled in by the reader only.
   uint64_t blob_offset = 0;
@@ -117,9 +118,17 @@ void validate_info(const ContainerInfo& info);
 // ---------------------------------------------------------------------------------------------
 // Writer
 
+namespace detail {
+class HeldBytes;
+}
+
 // Not thread-safe: one producer thread drives a writer.
 class ContainerWriter {
  public:
+  // A held level keeps this many bytes in memory before it spills (see append_level): enough for
+  // the coarse levels of any pyramid, while a level that big is cheap to copy through a file.
+  static constexpr size_t kDefaultLevelMemoryLimit = size_t(4) << 20;
+
   // Creates `path + ".tmp.<pid>"` (with a further ".N" if another writer of this process holds
   // that name); throws Error(WriteFailed) if it cannot.
   explicit ContainerWriter(std::string path);
@@ -131,49 +140,67 @@ class ContainerWriter {
   // Sets the description; may be called any time before finish(). info.levels gives the level
   // count and each level's dimensions and stats; reader-only fields are ignored.
   void set_info(const ContainerInfo& info);
-  // Keep (default) or omit the whole-blob CRC of each level written from now on.
+  // Keep (default) or omit the whole-blob CRC of each level first written from now on.
   void set_level_checksums(bool enabled) { level_checksums_ = enabled; }
+  // Memory a level held back may use before it spills (levels held from now on; 0: spill at once).
+  void set_level_memory_limit(size_t bytes) { level_memory_limit_ = bytes; }
 
-  // Writes level `level`'s blob in one piece. Levels may come in any order, each exactly once.
+  // Streams level `level`'s blob in pieces: any number of append_level, then end_level, once per
+  // level. Levels may be streamed interleaved and in any order, each level's pieces in its own
+  // order; the file holds the blobs contiguous, level 0 first, whatever the arrival order. The
+  // lowest level not yet ended goes straight to the file; later ones are held until it ends: in
+  // memory up to the level memory limit, the rest in an unnamed spill file in the target's
+  // directory (O_TMPFILE, else a random name unlinked at once, so none outlives the writer).
+  // Throws std::invalid_argument for a level index >= kMaxLevels or a level already ended, and
+  // Error(WriteFailed) when the file or a spill file cannot be written or read back.
+  void append_level(uint32_t level, const uint8_t* data, size_t size);
+  void end_level(uint32_t level);
+  // A whole blob in one piece: append_level then end_level.
   void add_level(uint32_t level, const uint8_t* data, size_t size);
-  // Streams a blob in pieces: begin_level, any number of append_level, end_level.
-  void begin_level(uint32_t level);
-  void append_level(const uint8_t* data, size_t size);
-  void end_level();
 
   // Appends `count` further mask samples in row-major order (non-zero = data, 0 = void). Call it for all
-  // width*height samples or not at all (no call: no voids). Encoded on the fly, O(runs) memory.
+  // width*height samples or not at all (no call: no voids). Encoded on the fly, O(runs) memory;
+  // a mask without voids is not stored.
   void append_mask(const uint8_t* valid, size_t count);
   // Opaque UTF-8 string (tool version, options, source file, timings ...).
   void set_metadata_json(std::string json);
 
   // Writes mask, metadata and index, fsyncs, renames onto the target path and fsyncs the directory.
-  // Throws std::invalid_argument if info/levels/mask are incomplete or inconsistent.
+  // Throws std::invalid_argument if info/levels/mask are incomplete or inconsistent, and
+  // std::logic_error for a level appended to but never ended.
   void finish();
   const std::string& path() const { return path_; }
   const std::string& temp_path() const { return temp_path_; }
 
  private:
   struct LevelRecord {
-    bool written = false;
+    LevelRecord();
+    ~LevelRecord();
+    LevelRecord(LevelRecord&&) noexcept;
+    LevelRecord& operator=(LevelRecord&&) noexcept;
+    bool started = false;  // appended to or ended: has_crc is fixed
+    bool ended = false;
+    bool placed = false;  // its offset is fixed and its bytes go straight to the file
     uint64_t offset = 0, size = 0;
     uint32_t crc = 0;
     bool has_crc = false;
+    std::unique_ptr<detail::HeldBytes> held;  // bytes waiting for the levels before it
   };
+  LevelRecord& start_level(uint32_t level);
+  void place_level(uint32_t level);
   void write_bytes(const void* data, size_t size);
   void pad_to_alignment();
   void fail(const std::string& what);
 
-  std::string path_, temp_path_;
+  std::string path_, temp_path_, directory_;
   int fd_ = -1;
   bool finished_ = false, finish_started_ = false;
   uint64_t position_ = 0;  // bytes written so far (the file is written sequentially)
   std::optional<ContainerInfo> info_;
   std::vector<LevelRecord> records_;  // indexed by level
+  uint32_t next_level_ = 0;           // levels before it are complete in the file
   bool level_checksums_ = true;
-  std::optional<uint32_t> open_level_;
-  uint64_t open_level_start_ = 0;
-  uint32_t open_level_crc_ = 0;
+  size_t level_memory_limit_ = kDefaultLevelMemoryLimit;
   // Mask as alternating run lengths (valid, void, valid, ...), LEB128 varints.
   std::vector<uint8_t> mask_runs_;
   uint64_t mask_samples_ = 0, mask_voids_ = 0, current_run_ = 0;

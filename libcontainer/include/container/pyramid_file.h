@@ -16,32 +16,45 @@
 
 namespace terrain::runtime {
 
-// Streams the builder's output into a ContainerWriter (temporary file until finish()).
+// Streams the builder's output into a ContainerWriter (temporary file until finish()). Bands may
+// arrive with levels interleaved, each level top to bottom; each level's blob is complete once its
+// last band arrives, and the ContainerWriter puts the blobs in level order. Not thread-safe.
 class PyramidFileWriter final : public PyramidSink {
  public:
+  // Throws Error(WriteFailed) if the temporary file cannot be created.
   explicit PyramidFileWriter(const std::string& path);
   ~PyramidFileWriter() override;
 
   void begin(const PyramidHeader& header) override;
+  // Throws std::logic_error for a band before begin(), of an unknown level or out of row order;
+  // Error(WriteFailed) when writing fails.
   void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
-  void mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
+  // Throws std::logic_error for rows out of order.
+  void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) override;
 
   // Completes the file: `info` supplies what the builder does not know (quantisation, units,
   // georeference); levels, filter and stats are taken from `result`. Renames onto the target.
+  // Throws as ContainerWriter::finish (std::invalid_argument when a level is incomplete).
   void finish(const BuildResult& result, ContainerInfo info, const std::string& metadata_json);
   uint64_t bytes_written() const { return bytes_; }
+  // See ContainerWriter::set_level_memory_limit.
+  void set_level_memory_limit(size_t bytes) { writer_.set_level_memory_limit(bytes); }
 
  private:
-  void close_level();
-  ContainerWriter writer_;
-  PyramidHeader header_;
-  int open_level_ = -1;
   struct BandRecord {
     uint64_t offset, size, y0, rows;
   };
-  std::vector<BandRecord> bands_;
-  uint64_t level_bytes_ = 0, bytes_ = 0;
-  std::vector<uint8_t> mask_scratch_;
+  struct LevelBands {
+    std::vector<BandRecord> bands;  // the band table, written after the level's last band
+    uint64_t blob_bytes = 0;
+    int64_t next_row = 0;
+  };
+  void close_level(int level);
+  ContainerWriter writer_;
+  PyramidHeader header_;
+  std::vector<LevelBands> levels_;
+  int64_t next_mask_row_ = 0;
+  uint64_t bytes_ = 0;
 };
 
 struct BandView {

@@ -216,15 +216,9 @@ struct BuildOptions {
   bool use_fixed_filter = false;    // true: use `fixed_filter` instead of fitting D
   DownsampleFilter fixed_filter = DownsampleFilter::default_filter();
   FilterFitOptions fit;
-  int threads = 2;             // results are bit-identical for every thread count
-  std::string temp_dir = ".";  // temp files (<temp_dir>/<name>.pyr.tmp.*), removed afterwards
-  std::string temp_name = "pyramid";
+  int threads = 2;              // results are bit-identical for every thread count
   int64_t fill_band_rows = 64;  // nodata push-pull works on bands of this many input rows
   int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
-  // true: the sink sees begin(), then level 0's bands, level 1's, ... (coded bands are held in temp
-  // files until the input ends). false: begin() first (has_voids = true: a mask band precedes every
-  // finest band), then bands as produced, levels interleaved (each level top to bottom).
-  bool level_ordered_output = true;
 };
 
 // Everything a decoder needs besides the per-band bytes.
@@ -232,12 +226,12 @@ struct PyramidHeader {
   std::vector<GridSize> levels;  // coarsest first
   DownsampleFilter filter;       // the D used (informative: decoding needs only U)
   int64_t band_rows = 0;         // coder band height at the finest level (halved per coarser level)
-  bool has_voids = false;        // finest level carries a validity mask
   double value_scale = 1.0;
   GridInfo input;  // the input's description
 };
 
-struct LevelStats {
+// What the builder measured on one level while coding it.
+struct LevelBuildStats {
   GridSize size;
   double residual_rms = 0;  // of R_l = T_l - U(T^_{l-1}) (T_0 - 0 for the coarsest)
   int64_t residual_max_abs = 0;
@@ -249,27 +243,28 @@ struct LevelStats {
 struct BuildResult {
   PyramidHeader header;
   FilterFitReport filter_report;
-  std::vector<LevelStats> levels;  // coarsest first
+  std::vector<LevelBuildStats> levels;  // coarsest first
   int64_t void_count = 0;
-  uint64_t mask_bytes = 0;
   // Wall time: seconds_pass_input = fitting D; seconds_pass_residual = the rest of the streaming build
-  // (read, D cascade, closed loop); seconds_pass_filter = replaying coded bands in level order.
-  double seconds_pass_input = 0, seconds_pass_residual = 0, seconds_pass_filter = 0;
+  // (read, D cascade, closed loop).
+  double seconds_pass_input = 0, seconds_pass_residual = 0;
   std::vector<std::string> log;  // human-readable build log (filter choice, fallbacks)
 };
 
-// Receives the output: begin(), then the bands of each level top to bottom (with the finest level,
-// mask_band() before each band when has_voids). With BuildOptions::level_ordered_output (default)
-// levels come coarsest first; otherwise they interleave. reconstructed_rows() calls may come at any
-// time (before begin() in ordered mode), each level top to bottom.
+// Receives the output as it is produced: begin() once the filter is known, then the coded bands,
+// levels interleaved, each level top to bottom. Before each finest-level band, mask_rows() gives
+// the validity of its rows; whether the input has voids at all is known only at the end, so a
+// sink that stores a mask decides what to keep once every row has arrived. reconstructed_rows()
+// calls may come at any time (even before begin()), each level top to bottom. Ordering levels for
+// a file is the sink's business (PyramidFileWriter does it).
 class PyramidSink {
  public:
   virtual ~PyramidSink() = default;
   virtual void begin(const PyramidHeader& header) { (void)header; }
   virtual void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) = 0;
-  // Validity of finest-level rows y0..y0+rows-1, run-length coded (see decode_mask_rows).
-  virtual void mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
-    (void)y0, (void)rows, (void)bytes;
+  // Validity of finest-level rows y0..y0+rows-1, rows x width bytes (1 = data, 0 = void).
+  virtual void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) {
+    (void)y0, (void)rows, (void)valid;
   }
   // The decoder-exact reconstruction T^_level of rows y0.. (only called when wants_reconstruction()).
   virtual bool wants_reconstruction(int level) const {
@@ -281,8 +276,16 @@ class PyramidSink {
   }
 };
 
-// Builds the pyramid from the input streamed through `input`: one pass, nothing spilled but the coded
-// bands (ordered output). Level l lags the input by about 8 * 2^l of its rows, so memory is
+// Keeps nothing but the number of coded bytes: for trial builds and benchmarks, which need the
+// figures of a build and not its output. Not thread-safe (the builder calls its sink from one thread).
+class CountingSink final : public PyramidSink {
+ public:
+  void band(int, int64_t, int64_t, std::vector<uint8_t>&& bytes) override { band_bytes += bytes.size(); }
+  uint64_t band_bytes = 0;  // coded residual bytes of every level
+};
+
+// Builds the pyramid from the input streamed through `input`: one pass, nothing written but what
+// the sink writes. Level l lags the input by about 8 * 2^l of its rows, so memory is
 // O(width * 2^levels), independent of the input height. Throws Error for I/O problems
 // (naming the file) and std::invalid_argument for unusable input or options.
 BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder,
@@ -301,11 +304,6 @@ std::vector<int32_t> to_level_grid(const Heightmap& map, const BuildOptions& opt
 std::unique_ptr<BandReader> make_memory_band_reader(const Heightmap& map,
                                                     int64_t max_rows_per_call = 1 << 30);
 
-// Run-length validity mask rows: for each row, alternating run lengths (varint) starting with a
-// valid run (possibly 0) until the row is covered.
-std::vector<uint8_t> encode_mask_rows(const uint8_t* valid, int64_t w, int64_t rows);
-bool decode_mask_rows(const uint8_t* data, size_t n, int64_t w, int64_t rows, uint8_t* valid);
-
 // An in-memory sink (tests, small inputs) and a decoder over it.
 class MemoryPyramid final : public PyramidSink {
  public:
@@ -315,16 +313,16 @@ class MemoryPyramid final : public PyramidSink {
   };
   PyramidHeader header;
   std::vector<std::vector<Band>> bands;     // [level][band]
-  std::vector<Band> mask;                   // finest level
+  std::vector<uint8_t> mask;                // finest level, row-major (1 = data); empty: no voids
   std::vector<std::vector<int32_t>> recon;  // [level] when keep_reconstruction
   bool keep_reconstruction = true;
 
   void begin(const PyramidHeader& h) override;
   void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
-  void mask_band(int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
+  void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) override;
   bool wants_reconstruction(int) const override { return keep_reconstruction; }
   void reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) override;
-  uint64_t total_bytes() const;
+  uint64_t total_bytes() const;  // coded residual bytes
 };
 
 // Decodes levels 0..up_to_level coarse to fine (U + decoded residual) and returns level

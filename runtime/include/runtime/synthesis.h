@@ -52,7 +52,7 @@ struct ResidualFit {
 std::vector<double> extrapolate_residual_std(const std::vector<double>& stored_variance_m2, int count,
                                              ResidualFit* fit = nullptr);
 
-// The per-level residual variances (m^2) a pyramid file stores (container LevelStats, in level
+// The per-level residual variances (m^2) a pyramid file stores (container ResidualStats, in level
 // units, times metres_per_unit^2), index = level. Reads the file's index only (no decoding).
 std::vector<double> stored_residual_variance_m2(const PyramidFile& file);
 

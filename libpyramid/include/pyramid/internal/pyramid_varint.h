@@ -1,5 +1,4 @@
-// LEB128 varints and zigzag mapping for the simple byte formats of the pyramid (quantised residuals,
-// validity masks, spill files).
+// LEB128 varints and zigzag mapping for the uniform quantiser's bytes.
 #pragma once
 
 #include <cstddef>
