@@ -806,8 +806,8 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   std::vector<double> decoded(units.size());
   const double scale = decoder.metres_per_unit(), offset = decoder.metres_offset();
   for (size_t i = 0; i < units.size(); ++i) decoded[i] = double(units[i]) * scale + offset;
-  x.error = peers::error_stats(reference.data(), decoded.data(),
-                               map.valid.empty() ? nullptr : map.valid.data(), units.size());
+  x.error = terrain::error_stats(reference.data(), decoded.data(),
+                                 map.valid.empty() ? nullptr : map.valid.data(), units.size());
   if (row.bound >= 0 && x.error.max_abs > row.bound * (1 + 1e-9))
     row.error = "max error " + fmt("%g", x.error.max_abs) + " m exceeds the requested bound " +
                 fmt("%g", row.bound) + " m";
