@@ -46,7 +46,7 @@ int run(int argc, char** argv) {
   parser.option("--band-rows", "R", "coder band height (default 64)",
                 [&](const std::string& v) { band_rows = cli::parse_int("--band-rows", v, 1, 1 << 20); });
   parser.option("--temp-dir", "DIR", "temp directory (unused with the counting sink; default /tmp)",
-                [&](const std::string& v) { o.temp_dir = v; });
+                &o.temp_dir);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, true);
   if (auto status = parser.parse(argc, argv)) return *status;

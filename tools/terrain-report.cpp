@@ -74,10 +74,8 @@ int run(int argc, char** argv) {
       "Holds the input in memory (8 bytes per sample).");
   parser.positional("INPUT", "the heightmap the pyramid was built from", &input);
   parser.positional("PYRAMID", "the .pyr file", &pyr_path);
-  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)",
-                [&](const std::string& v) { json_path = v; });
-  parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)",
-                [&](const std::string& v) { heatmap = v; });
+  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)", &json_path);
+  parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)", &heatmap);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
   if (auto status = parser.parse(argc, argv)) return *status;
