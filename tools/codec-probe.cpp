@@ -1,15 +1,13 @@
 // codec-probe: single-threaded speed and rate probe of libcodec on DEM files.
 //
 // For each file and step: bits/sample, rms and max error, encode and decode Msamples/s (best of
-// --repeat runs, one core). Usage: codec-probe [--steps 1,2,4,...] [--tile N] [--repeat N]
-//   [--max-error E] FILE...
-// Exit codes (project-wide): 0 success; 1 usage error; 2 input not found or unreadable;
-// 3..8 input format problems (see terrain::ErrorCode); 10 codec error; 70 internal error.
+// --repeat runs, one core). Exit statuses as every tool's (codec-probe --help).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -18,16 +16,6 @@
 #include "readers/heightmap.h"
 
 namespace {
-
-void usage(FILE* to) {
-  std::fprintf(to,
-               "usage: codec-probe [--steps S1,S2,...] [--tile N] [--repeat N] [--max-error E] FILE...\n"
-               "  --steps: quantiser steps >= 1 (1 = lossless); 0 = automatic (2E) with --max-error\n"
-               "  Encodes each DEM (integer samples; Terrain-RGB PNGs in 0.1 m units) with libcodec on one\n"
-               "  core and prints bits/sample, rms/max error and encode/decode Msamples/s.\n"
-               "exit codes: 0 ok, 1 usage, 2 input not found/unreadable, 3-8 input format errors,\n"
-               "  10 codec error, 70 internal error\n");
-}
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -41,48 +29,32 @@ int main(int argc, char** argv) {
   int repeat = 3;
   long max_error = -1;
   std::vector<std::string> files;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--help" || a == "-h") {
-      usage(stdout);
-      return 0;
-    } else if (a == "--steps" && has_value) {
-      steps.clear();
-      std::string list = argv[++i];
-      size_t p = 0;
-      while (p <= list.size()) {
-        const size_t q = std::min(list.find(',', p), list.size());
-        const double s = std::atof(list.substr(p, q - p).c_str());
-        if (!(s >= 1.0 || s == 0.0)) {  // 0 = automatic step in max-error mode
-          std::fprintf(stderr, "codec-probe: bad step in --steps %s\n", list.c_str());
-          return 1;
-        }
-        steps.push_back(s);
-        p = q + 1;
-      }
-    } else if (a == "--tile" && has_value) {
-      tile = uint32_t(std::atoi(argv[++i]));
-    } else if (a == "--repeat" && has_value) {
-      repeat = std::max(1, std::atoi(argv[++i]));
-    } else if (a == "--max-error" && has_value) {
-      max_error = std::atol(argv[++i]);
-      if (max_error < 0) {
-        std::fprintf(stderr, "codec-probe: --max-error must be >= 0\n");
-        return 1;
-      }
-    } else if (!a.empty() && a[0] == '-') {
-      std::fprintf(stderr, "codec-probe: unknown option %s\n", a.c_str());
-      usage(stderr);
-      return 1;
-    } else {
-      files.push_back(a);
-    }
-  }
-  if (files.empty()) {
-    usage(stderr);
-    return 1;
-  }
+  cli::CommonFlags common;
+  cli::ArgParser p(
+      "codec-probe", "[--steps S1,S2,...] [--tile N] [--repeat N] [--max-error E] FILE...",
+      "Encodes each DEM (integer samples; Terrain-RGB PNGs in 0.1 m units) with libcodec on one\n"
+      "core and prints bits/sample, rms/max error and encode/decode Msamples/s (best of --repeat).");
+  p.rest("FILE", "DEM files (a name containing \"terrainrgb\" is read as Terrain-RGB)", &files, 1);
+  p.option("--steps", "S1,S2,...",
+           "quantiser steps >= 1 (1 = lossless); 0 = automatic (2E) with --max-error (default 1,2,4,8,16,32)",
+           [&](const std::string& list) {
+             steps.clear();
+             std::stringstream ss(list);
+             for (std::string item; std::getline(ss, item, ',');) {
+               const double s = cli::parse_double("--steps", item, 0, 1e9);
+               if (s > 0 && s < 1) throw cli::UsageError("--steps: step " + item + " is neither 0 nor >= 1");
+               steps.push_back(s);
+             }
+             if (steps.empty()) throw cli::UsageError("--steps needs at least one step");
+           });
+  p.option("--tile", "N", "libcodec tile size (default 64)",
+           [&](const std::string& v) { tile = uint32_t(cli::parse_int("--tile", v, 1, 1 << 20)); });
+  p.option("--repeat", "N", "runs of each encode and decode; the fastest counts (default 3)",
+           [&](const std::string& v) { repeat = int(cli::parse_int("--repeat", v, 1, 1000000)); });
+  p.option("--max-error", "E", "bound the max |error| to E sample units (encoder's max-error mode)",
+           [&](const std::string& v) { max_error = long(cli::parse_int("--max-error", v, 0, INT32_MAX)); });
+  p.add_common(common, false);
+  if (auto status = p.parse(argc, argv)) return *status;
   std::printf("%-48s %6s %5s %8s %8s %7s %9s %9s\n", "file", "step", "E", "bits/smp", "rms", "maxerr",
               "enc Ms/s", "dec Ms/s");
   codec::Scratch scratch;
@@ -105,6 +77,9 @@ int main(int argc, char** argv) {
     const double n = double(src.size());
     std::vector<int32_t> out(src.size());
     const std::string name = path.substr(path.find_last_of('/') + 1);
+    if (common.verbose)
+      std::fprintf(stderr, "codec-probe: %s: %lldx%lld, %s\n", name.c_str(), (long long)w, (long long)h,
+                   integral ? "integer samples" : "coded in 0.1 m units");
     for (double step : steps) {
       codec::EncodeOptions o;
       o.step = step;

@@ -36,8 +36,7 @@ int run(int argc, char** argv) {
       "W x H little-endian int16 raw grid OUT.raw with an OUT.raw.json sidecar. Rows are\n"
       "streamed to disk; memory is the tile plus one output row. Voids stay voids (-32768).");
   parser.positional("TILE", "heightmap tile to repeat (any format terrain-info reads)", &input);
-  parser.option("-o,--output", "OUT", "raw grid to write (required)",
-                [&](const std::string& v) { output = v; });
+  parser.option("-o,--output", "OUT", "raw grid to write (required)", &output);
   parser.option("--out-width", "W", "output width in samples",
                 [&](const std::string& v) { width = cli::parse_int("--out-width", v, 1, int64_t(1) << 31); });
   parser.option("--out-height", "H", "output height in samples", [&](const std::string& v) {

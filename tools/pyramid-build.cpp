@@ -36,8 +36,7 @@ int run(int argc, char** argv) {
       "input).\n"
       "The output is written to OUT.pyr.tmp.<pid> and renamed when complete.");
   parser.positional("INPUT", "heightmap to read", &input);
-  parser.option("-o,--output", "OUT", "pyramid file to write (required)",
-                [&](const std::string& v) { output = v; });
+  parser.option("-o,--output", "OUT", "pyramid file to write (required)", &output);
   parser.option("--rms", "M", "target rms error in metres",
                 [&](const std::string& v) { set_target(ErrorMode::Rms, "--rms", v); });
   parser.option("--max-error", "M", "guaranteed max |error| in metres",
@@ -61,8 +60,7 @@ int run(int argc, char** argv) {
                 });
   parser.option("--threads", "N", "worker threads (default: all cores; output is identical for any N)",
                 [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
-  parser.option("--json", "FILE", "write a JSON build report to FILE ('-' for stdout)",
-                [&](const std::string& v) { json_path = v; });
+  parser.option("--json", "FILE", "write a JSON build report to FILE ('-' for stdout)", &json_path);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
   if (auto status = parser.parse(argc, argv)) return *status;

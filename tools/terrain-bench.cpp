@@ -8,6 +8,7 @@
 // the native quantum minus a mid-range offset for 16-bit data such as Puget Sound's 0.1 m units),
 // one thread, codec time only. Writes a CSV and, with --markdown, the generated BENCHMARKS.md.
 #include <build/pyramid_build.h>
+#include <cli.h>
 #include <container/pyramid_file.h>
 #include <peers.h>
 #include <readers/heightmap.h>
@@ -34,46 +35,11 @@
 
 namespace {
 
-constexpr int kExitOk = 0, kExitUsage = 1, kExitNotFound = 2, kExitWriteFailed = 9, kExitInternal = 70;
-
-const char* const kUsage =
-    "usage: terrain-bench [options] [FILE...]\n"
-    "Run time against error. For each height grid: this project's whole pyramid (build_pyramid_file,\n"
-    "then the region decoder) at a sweep of rms and max-error targets and lossless; and the peer\n"
-    "codecs (OpenJPEG JPEG 2000, jxrlib JPEG XR, CharLS JPEG-LS, LERC, ZFP, zstd, and libcodec alone as\n"
-    "one level) over each codec's parameter sweep, one thread, codec time only.\n"
-    "Writes a markdown summary to stdout (or BENCHMARKS.md with --markdown).\n"
-    "FILE defaults to every .hgt and .png in the shared data directory ($TERRAIN_DATA_DIR,\n"
-    "../shared/data or /work/shared/data).\n"
-    "options:\n"
-    "  --csv PATH        also write one CSV row per (file, codec, setting)\n"
-    "  --markdown PATH   write the generated benchmark report (BENCHMARKS.md) to PATH\n"
-    "  --command TEXT    the command line quoted in the report as the way to reproduce it\n"
-    "  --provenance TEXT a line for the report: commit, machine, date\n"
-    "  --plot-dir DIR    where the report's plots (rms.png, max.png, speed.png) are, relative to it\n"
-    "  --json            print the rows as JSON to stdout instead of the markdown summary\n"
-    "  --peers a,b,...   only these peer codecs (see --list); 'none' for the pyramid only\n"
-    "  --no-pyramid      peers only (the former codec-bench)\n"
-    "  --threads N       pyramid build threads (default: all cores); decoding is single-threaded\n"
-    "  --work-dir DIR    where the pyramid files are built (default $TMPDIR or /tmp); removed after\n"
-    "  --quick           short sweeps and one repetition (smoke runs)\n"
-    "  --vertical-scale S metres per stored unit for every FILE (default: the file's own; the shared\n"
-    "                    Puget Sound PNG is known to be 0.1)\n"
-    "  --min-time S      repeat encode and decode until each totals S seconds, keep the best (default 0.2)\n"
-    "  --region-speed PYR  only time cold 256x256 region decodes of an existing pyramid file's\n"
-    "                    finest level (scale runs): 64 windows, one thread, prints Msamples/s\n"
-    "  --list            print each codec's exact configuration and exit\n"
-    "  --self-test       round-trip a synthetic 97x61 int16 grid through every setting of every codec,\n"
-    "                    checking the size and each declared error bound; exit 0 if all pass\n"
-    "  --help            this text\n"
-    "exit status: 0 success; 1 usage error; 2 input not found or unreadable; 3 truncated input;\n"
-    "  4 oversized input; 5 dimensions don't match; 6 unknown sample type or format; 7 NaN/Inf in input;\n"
-    "  8 missing or malformed header/sidecar field; 9 cannot write output; 10 corrupted data;\n"
-    "  70 internal error (a codec failed, a bound was exceeded, or a self-test check failed).\n";
+constexpr int kExitNotFound = 2, kExitWriteFailed = 9;
 
 struct Options {
   std::string csv_path, markdown_path, command, provenance, work_dir, plot_dir = ".", region_speed;
-  bool json = false;
+  cli::CommonFlags common;
   bool quick = false;
   bool list = false;
   bool self_test = false;
@@ -85,10 +51,6 @@ struct Options {
   std::vector<std::string> files;
 };
 
-struct UsageError {
-  std::string message;
-};
-
 std::vector<std::string> split_commas(const std::string& text) {
   std::vector<std::string> parts;
   std::stringstream ss(text);
@@ -98,72 +60,67 @@ std::vector<std::string> split_commas(const std::string& text) {
   return parts;
 }
 
-double parse_number(const std::string& option, const std::string& v, double lo, double hi) {
-  char* end = nullptr;
-  const double x = std::strtod(v.c_str(), &end);
-  if (end == v.c_str() || *end || !(x >= lo && x <= hi))
-    throw UsageError{option + " must be a number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                     "], got '" + v + "'"};
-  return x;
-}
-
-Options parse_args(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw UsageError{a + " needs a value"};
-      return argv[++i];
-    };
-    if (a == "--help" || a == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(kExitOk);
-    } else if (a == "--csv") {
-      o.csv_path = value();
-    } else if (a == "--markdown") {
-      o.markdown_path = value();
-    } else if (a == "--command") {
-      o.command = value();
-    } else if (a == "--provenance") {
-      o.provenance = value();
-    } else if (a == "--region-speed") {
-      o.region_speed = value();
-    } else if (a == "--plot-dir") {
-      o.plot_dir = value();
-    } else if (a == "--work-dir") {
-      o.work_dir = value();
-    } else if (a == "--json") {
-      o.json = true;
-    } else if (a == "--quick") {
-      o.quick = true;
-    } else if (a == "--no-pyramid") {
-      o.pyramid = false;
-    } else if (a == "--list") {
-      o.list = true;
-    } else if (a == "--self-test") {
-      o.self_test = true;
-    } else if (a == "--peers") {
-      o.peer_names = split_commas(value());
-    } else if (a == "--threads") {
-      o.threads = int(parse_number("--threads", value(), 1, 256));
-    } else if (a == "--min-time") {
-      o.min_time = parse_number("--min-time", value(), 0, 60);
-    } else if (a == "--vertical-scale") {
-      const std::string v = value();
-      const double scale = parse_number("--vertical-scale", v, 1e-12, 1e12);
-      o.vertical_scale = scale;
-    } else if (a.size() > 1 && a[0] == '-') {
-      throw UsageError{"unknown option " + a};
-    } else {
-      o.files.push_back(a);
-    }
-  }
+// Fills o; returns the status to exit with now (after --help, or a usage error it has reported).
+std::optional<int> parse_args(int argc, char** argv, Options& o) {
+  cli::ArgParser p(
+      "terrain-bench", "[options] [FILE...]",
+      "Run time against error. For each height grid: this project's whole pyramid (build_pyramid_file,\n"
+      "then the region decoder) at a sweep of rms and max-error targets and lossless; and the peer\n"
+      "codecs (OpenJPEG JPEG 2000, jxrlib JPEG XR, CharLS JPEG-LS, LERC, ZFP, zstd, and libcodec alone as\n"
+      "one level) over each codec's parameter sweep, one thread, codec time only.\n"
+      "Writes a markdown summary to stdout (or BENCHMARKS.md with --markdown).");
+  p.rest("FILE",
+         "height grids; default: every .hgt and .png in the shared data directory ($TERRAIN_DATA_DIR,\n"
+         "../shared/data or /work/shared/data)",
+         &o.files);
+  p.option("--csv", "PATH", "also write one CSV row per (file, codec, setting)", &o.csv_path);
+  p.option("--markdown", "PATH", "write the generated benchmark report (BENCHMARKS.md) to PATH",
+           &o.markdown_path);
+  p.option("--command", "TEXT", "the command line quoted in the report as the way to reproduce it",
+           &o.command);
+  p.option("--provenance", "TEXT", "a line for the report: commit, machine, date", &o.provenance);
+  p.option("--plot-dir", "DIR", "where the report's plots (rms.png, max.png, speed.png) are, relative to it",
+           &o.plot_dir);
+  p.option("--peers", "a,b,...", "only these peer codecs (see --list); 'none' for the pyramid only",
+           [&](const std::string& v) { o.peer_names = split_commas(v); });
+  bool no_pyramid = false;
+  p.flag("--no-pyramid", "peers only (the former codec-bench)", &no_pyramid);
+  p.option("--threads", "N", "pyramid build threads (default: all cores); decoding is single-threaded",
+           [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
+  p.option("--work-dir", "DIR", "where the pyramid files are built (default $TMPDIR or /tmp); removed after",
+           &o.work_dir);
+  p.flag("--quick", "short sweeps and one repetition (smoke runs)", &o.quick);
+  p.option("--vertical-scale", "S",
+           "metres per stored unit for every FILE (default: the file's own; the shared Puget Sound PNG is\n"
+           "known to be 0.1)",
+           [&](const std::string& v) {
+             o.vertical_scale = cli::parse_double("--vertical-scale", v, 1e-12, 1e12);
+           });
+  p.option("--min-time", "S",
+           "repeat encode and decode until each totals S seconds, keep the best (default 0.2)",
+           [&](const std::string& v) { o.min_time = cli::parse_double("--min-time", v, 0, 60); });
+  p.option("--region-speed", "PYR",
+           "only time cold 256x256 region decodes of an existing pyramid file's finest level (scale runs):\n"
+           "64 windows, one thread, prints Msamples/s",
+           &o.region_speed);
+  p.flag("--list", "print each codec's exact configuration and exit", &o.list);
+  p.flag("--self-test",
+         "round-trip a synthetic 97x61 int16 grid through every setting of every codec, checking the size\n"
+         "and each declared error bound; exit 0 if all pass",
+         &o.self_test);
+  p.flag("--json", "print the rows as a JSON array on stdout instead of the markdown summary",
+         &o.common.json);
+  p.add_common(o.common, false);
+  p.epilog(
+      "Exit status 70 also reports a codec failure, an exceeded error bound or a failed self-test check.");
+  if (auto status = p.parse(argc, argv)) return status;
+  o.pyramid = !no_pyramid;
   if (o.quick) o.min_time = 0;
   if (o.work_dir.empty()) {
     const char* tmp = std::getenv("TMPDIR");
     o.work_dir = tmp && *tmp ? tmp : "/tmp";
   }
-  return o;
+  return std::nullopt;
 }
 
 std::vector<std::string> default_files() {
@@ -609,7 +566,7 @@ std::vector<std::unique_ptr<peers::Peer>> select_peers(const std::vector<std::st
   for (const std::string& name : names) {
     if (name == "none") continue;
     auto it = std::find_if(all.begin(), all.end(), [&](const auto& p) { return p && p->name() == name; });
-    if (it == all.end()) throw UsageError{"unknown codec '" + name + "' (see --list)"};
+    if (it == all.end()) throw cli::UsageError("unknown codec '" + name + "' (see --list)");
     chosen.push_back(std::move(*it));
   }
   return chosen;
@@ -670,7 +627,7 @@ int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
   }
   std::printf("self-test: %s (%d failure%s)\n", failures ? "FAILED" : "passed", failures,
               failures == 1 ? "" : "s");
-  return failures ? kExitInternal : kExitOk;
+  return failures ? cli::kExitInternal : cli::kExitOk;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -797,8 +754,8 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
   std::vector<double> decoded(units.size());
   const double scale = decoder.metres_per_unit(), offset = decoder.metres_offset();
   for (size_t i = 0; i < units.size(); ++i) decoded[i] = double(units[i]) * scale + offset;
-  x.error = peers::error_stats(reference.data(), decoded.data(),
-                               map.valid.empty() ? nullptr : map.valid.data(), units.size());
+  x.error = terrain::error_stats(reference.data(), decoded.data(),
+                                 map.valid.empty() ? nullptr : map.valid.data(), units.size());
   if (row.bound >= 0 && x.error.max_abs > row.bound * (1 + 1e-9))
     row.error = "max error " + fmt("%g", x.error.max_abs) + " m exceeds the requested bound " +
                 fmt("%g", row.bound) + " m";
@@ -832,19 +789,19 @@ int main(int argc, char** argv) {
   Options opt;
   std::vector<std::unique_ptr<peers::Peer>> peer_list;
   try {
-    opt = parse_args(argc, argv);
+    if (auto status = parse_args(argc, argv, opt)) return *status;
     peer_list = select_peers(opt.peer_names);
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "terrain-bench: %s\n%s", e.message.c_str(), kUsage);
-    return kExitUsage;
+  } catch (const cli::UsageError& e) {
+    std::fprintf(stderr, "terrain-bench: %s\nTry 'terrain-bench --help'.\n", e.what());
+    return cli::kExitUsage;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "terrain-bench: %s\n", e.what());
-    return kExitInternal;
+    return cli::kExitInternal;
   }
 
   if (opt.list) {
     for (const auto& p : peer_list) std::printf("%s: %s\n", p->name().c_str(), p->configuration().c_str());
-    return kExitOk;
+    return cli::kExitOk;
   }
   if (opt.self_test) return run_self_test(peer_list);
   if (!opt.region_speed.empty()) {
@@ -859,7 +816,7 @@ int main(int argc, char** argv) {
           opt.region_speed.c_str(), file->level_count(), (long long)file->level_size(finest).width,
           (long long)file->level_size(finest).height, msps(double(t.samples), t.seconds),
           msps(double(t.samples), t.cpu_seconds));
-      return kExitOk;
+      return cli::kExitOk;
     } catch (const terrain::Error& e) {
       std::fprintf(stderr, "terrain-bench: %s\n", e.what());
       return cli::exit_status(e.code());
@@ -903,6 +860,16 @@ int main(int argc, char** argv) {
     }
     rows.push_back(std::move(row));
   };
+  // One line per measured setting on stderr: the pyramid's always (they are slow), the peers' with -v.
+  // Peer rows are in sample units, pyramid rows in metres (unit_m 1).
+  auto print_progress = [](const Row& row) {
+    std::fprintf(stderr, "  %s %-40s %s\n", row.codec.c_str(), row.setting.c_str(),
+                 row.error.empty() ? (fmt("%.3f bits/sample", row.result.bits_per_sample) +
+                                      fmt(", rms %.3f m", row.result.error.rms * row.unit_m) +
+                                      fmt(", max %.3f m", row.result.error.max_abs * row.unit_m))
+                                         .c_str()
+                                   : row.error.c_str());
+  };
   for (const std::string& path : opt.files) {
     terrain::Heightmap map;
     terrain::ReadOptions read_options;
@@ -920,8 +887,9 @@ int main(int argc, char** argv) {
     const peers::Image16 img = to_image16(map, &note);
     const std::string file = short_name(path);
     file_order.push_back(file);
-    std::fprintf(stderr, "%s: %lldx%lld, %s\n", file.c_str(), (long long)img.width, (long long)img.height,
-                 note.c_str());
+    if (!opt.common.quiet)
+      std::fprintf(stderr, "%s: %lldx%lld, %s\n", file.c_str(), (long long)img.width, (long long)img.height,
+                   note.c_str());
     if (opt.pyramid) {
       std::vector<double> reference(map.values.size());
       for (int64_t y = 0; y < map.height(); ++y)
@@ -947,13 +915,7 @@ int main(int argc, char** argv) {
                   e.what()};
           add_row(std::move(row));
         }
-        std::fprintf(stderr, "  pyramid %-40s %s\n", rows.back().setting.c_str(),
-                     rows.back().error.empty()
-                         ? (fmt("%.3f bits/sample", rows.back().result.bits_per_sample) +
-                            fmt(", rms %.3f m", rows.back().result.error.rms) +
-                            fmt(", max %.3f m", rows.back().result.error.max_abs))
-                               .c_str()
-                         : rows.back().error.c_str());
+        if (!opt.common.quiet) print_progress(rows.back());
       }
     }
     for (auto& peer : peer_list) {
@@ -970,6 +932,7 @@ int main(int argc, char** argv) {
           row.error = e.what();
         }
         add_row(std::move(row));
+        if (opt.common.verbose) print_progress(rows.back());
       }
     }
   }
@@ -989,10 +952,10 @@ int main(int argc, char** argv) {
       return kExitWriteFailed;
     }
   }
-  if (opt.json)
+  if (opt.common.json)
     write_json(std::cout, rows);
   else
     write_summary(std::cout, rows, file_order, codec_order);
   std::cout.flush();
-  return codec_failed ? kExitInternal : kExitOk;
+  return codec_failed ? cli::kExitInternal : cli::kExitOk;
 }

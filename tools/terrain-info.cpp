@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -181,40 +182,25 @@ int run(int argc, char** argv) {
     j.field("sample_type", terrain::sample_type_name(g.sample_type))
         .field("integer_valued", g.integer_valued());
     j.field("vertical_scale", g.vertical_scale).field("vertical_offset", g.vertical_offset);
-    j.key("nodata_value");
-    if (g.nodata)
-      j.value(*g.nodata);
-    else
-      j.null();
-    j.key("min_m");
-    if (valid_count)
-      j.value(min_m);
-    else
-      j.null();
-    j.key("max_m");
-    if (valid_count)
-      j.value(max_m);
-    else
-      j.null();
-    j.key("mean_m");
-    if (valid_count)
-      j.value(mean_m);
-    else
-      j.null();
+    // Values a grid may lack are written as null.
+    auto field_or_null = [&j](const char* key, std::optional<double> v) {
+      j.key(key);
+      if (v)
+        j.value(*v);
+      else
+        j.null();
+    };
+    const auto if_valid = [valid_count](double v) { return valid_count ? std::optional(v) : std::nullopt; };
+    field_or_null("nodata_value", g.nodata);
+    field_or_null("min_m", if_valid(min_m));
+    field_or_null("max_m", if_valid(max_m));
+    field_or_null("mean_m", if_valid(mean_m));
     j.field("valid_count", valid_count).field("nodata_count", nodata_count);
     j.field("spacing_x", g.spacing_x)
         .field("spacing_y", g.spacing_y)
         .field("horizontal_units", g.horizontal_units);
-    j.key("origin_x");
-    if (g.origin_x)
-      j.value(*g.origin_x);
-    else
-      j.null();
-    j.key("origin_y");
-    if (g.origin_y)
-      j.value(*g.origin_y);
-    else
-      j.null();
+    field_or_null("origin_x", g.origin_x);
+    field_or_null("origin_y", g.origin_y);
     j.end_object();
     j.finish();
     return cli::kExitOk;

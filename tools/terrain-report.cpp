@@ -8,10 +8,10 @@
 #include <fstream>
 #include <iostream>
 
-#include "build/pyramid_build.h"
 #include "cli.h"
 #include "json_writer.h"
-#include "pyramid/pyramid.h"
+#include "pyramid/error_stats.h"
+#include "pyramid/reference.h"
 #include "readers/image8.h"
 #include "runtime/region_decoder.h"
 
@@ -19,26 +19,6 @@ namespace {
 
 using namespace terrain;
 using namespace terrain::runtime;
-
-struct ErrorStats {
-  int64_t count = 0;
-  double rms = 0, max = 0, p999 = 0, psnr = 0;
-};
-
-// |errors| in metres (reordered in place); range = zmax - zmin of the reference in metres.
-ErrorStats error_stats(std::vector<double>& abs_err, double range) {
-  ErrorStats s;
-  s.count = int64_t(abs_err.size());
-  if (abs_err.empty()) return s;
-  double sq = 0;
-  for (double e : abs_err) sq += e * e, s.max = std::max(s.max, e);
-  s.rms = std::sqrt(sq / double(abs_err.size()));
-  const size_t k = std::min(abs_err.size() - 1, size_t(std::ceil(0.999 * double(abs_err.size()))) - 1);
-  std::nth_element(abs_err.begin(), abs_err.begin() + std::ptrdiff_t(k), abs_err.end());
-  s.p999 = abs_err[k];
-  s.psnr = s.rms > 0 ? 20 * std::log10(range / s.rms) : INFINITY;
-  return s;
-}
 
 // Linear ramp black -> blue -> magenta -> orange -> yellow, for e in [0, 1].
 void heat_colour(double e, uint8_t* rgb) {
@@ -94,10 +74,8 @@ int run(int argc, char** argv) {
       "Holds the input in memory (8 bytes per sample).");
   parser.positional("INPUT", "the heightmap the pyramid was built from", &input);
   parser.positional("PYRAMID", "the .pyr file", &pyr_path);
-  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)",
-                [&](const std::string& v) { json_path = v; });
-  parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)",
-                [&](const std::string& v) { heatmap = v; });
+  parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)", &json_path);
+  parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)", &heatmap);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
   if (auto status = parser.parse(argc, argv)) return *status;
@@ -114,16 +92,14 @@ int run(int argc, char** argv) {
   // with the input's own offset.
   const double mpu = info.vertical_scale, off = map.info.vertical_offset;
 
-  // The source levels exactly as the builder formed them: a lossless build with the stored filter.
+  // The source levels exactly as the builder formed them, with the stored filter.
   BuildOptions bo;
   bo.level_count = file->level_count();
   bo.value_scale = map.info.vertical_scale / mpu;
   bo.use_fixed_filter = true;
   std::copy(info.filter.begin(), info.filter.end(), bo.fixed_filter.taps.begin());
   bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
-  UniformQuantizerCoder lossless(1, 256);
-  MemoryPyramid source;
-  build_pyramid(map, bo, lossless, source);
+  const ReferenceLevels source = reference_levels(map, bo);
 
   double zmin = INFINITY, zmax = -INFINITY;
   for (int64_t i = 0; i < map.width() * map.height(); ++i)
@@ -147,7 +123,7 @@ int run(int argc, char** argv) {
     decoder.decode_metres(l, terrain::Rect{0, 0, s.width, s.height}, dec.data(), s.width);
     if (l == levels - 1)
       decode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const std::vector<int32_t>& ref = source.recon[size_t(l)];
+    const std::vector<int32_t>& ref = source.levels[size_t(l)];
     std::vector<double> err;
     err.reserve(dec.size());
     if (l == levels - 1) finest_err.assign(dec.size(), NAN);
@@ -176,7 +152,7 @@ int run(int argc, char** argv) {
       : map.info.sample_type == SampleType::TerrainRGB                                        ? 24
                                                                                               : 32;
 
-  if (!heatmap.empty()) write_heatmap(heatmap, finest_err, map.width(), map.height(), finest.max);
+  if (!heatmap.empty()) write_heatmap(heatmap, finest_err, map.width(), map.height(), finest.max_abs);
 
   if (!common.quiet) {
     std::printf("%s vs %s: %dx%d, %d levels, %s\n", pyr_path.c_str(), input.c_str(), int(map.width()),
@@ -186,10 +162,10 @@ int run(int argc, char** argv) {
       const GridSize s = file->level_size(l);
       const ErrorStats& e = per_level[size_t(l)];
       std::printf("%-6d %5lldx%-5lld %10.4f %10.4f %10.4f %8.2f\n", l, (long long)s.width,
-                  (long long)s.height, e.rms, e.max, e.p999, e.psnr);
+                  (long long)s.height, e.rms, e.max_abs, e.p999_abs, e.psnr_db);
     }
-    std::printf("%-6s %11s %10.4f %10.4f %10.4f %8.2f\n", "all", "", overall.rms, overall.max, overall.p999,
-                overall.psnr);
+    std::printf("%-6s %11s %10.4f %10.4f %10.4f %8.2f\n", "all", "", overall.rms, overall.max_abs,
+                overall.p999_abs, overall.psnr_db);
     std::printf(
         "size %llu bytes, %.4f bits per finest sample, compression factor %.2f (vs %d-bit source samples)\n",
         (unsigned long long)bytes, bits, double(source_bits) / bits, source_bits);
@@ -207,9 +183,9 @@ int run(int argc, char** argv) {
     auto put = [&](const ErrorStats& e) {
       j.field("samples", e.count)
           .field("rms_m", e.rms)
-          .field("max_m", e.max)
-          .field("p999_m", e.p999)
-          .field("psnr_db", e.psnr);
+          .field("max_m", e.max_abs)
+          .field("p999_m", e.p999_abs)
+          .field("psnr_db", e.psnr_db);
     };
     j.begin_object();
     j.field("input", input)

@@ -57,7 +57,7 @@ int run(int argc, char** argv) {
       "seed and size give the same bytes on every machine) and writes it by OUT's extension:\n"
       ".raw (+ OUT.json sidecar, int16), .png (16-bit grey), .tif/.tiff (16-bit), .exr (float32).");
   bool have_width = false, have_height = false;
-  parser.option("-o,--output", "OUT", "output file", [&](const std::string& v) { out = v; });
+  parser.option("-o,--output", "OUT", "output file", &out);
   parser.option("--width", "W", "samples per row (1..65536)", [&](const std::string& v) {
     synth.width = cli::parse_int("--width", v, 1, 65536);
     have_width = true;

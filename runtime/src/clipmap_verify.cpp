@@ -1,5 +1,5 @@
-// Verification of the clipmap against the original data: the original input as an in-memory
-// lossless pyramid (the reference flight's height source) and the screen-space geometric error of
+// Verification of the clipmap against the original data: the original input's levels T_l in
+// memory (the reference flight's height source) and the screen-space geometric error of
 // the rendered levels (L&H 2004 §9, Table 2).
 #include <algorithm>
 #include <cassert>
@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "pyramid/level_units.h"
+#include "pyramid/reference.h"
 #include "runtime/clipmap.h"
 
 namespace terrain::runtime {
@@ -54,17 +55,16 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
     bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
     std::copy(filter_11x11.begin(), filter_11x11.end(), bo.fixed_filter.taps.begin());
   }
-  UniformQuantizerCoder lossless(1);
-  MemoryPyramid pyramid;
-  build_pyramid(map, bo, lossless, pyramid);
-  if (int(pyramid.recon.size()) != level_count)
-    throw std::invalid_argument(input + ": the lossless pyramid has " + std::to_string(pyramid.recon.size()) +
-                                " levels, expected " + std::to_string(level_count));
+  const ReferenceLevels reference = reference_levels(map, bo);
+  if (int(reference.levels.size()) != level_count)
+    throw std::invalid_argument(input + ": the reference pyramid has " +
+                                std::to_string(reference.levels.size()) + " levels, expected " +
+                                std::to_string(level_count));
   const double metres_per_unit = map.info.vertical_scale / units.value_scale,
                offset = map.info.vertical_offset;
   std::vector<std::vector<float>> levels(static_cast<size_t>(level_count));
   for (int l = 0; l < level_count; ++l) {
-    const std::vector<int32_t>& r = pyramid.recon[size_t(l)];
+    const std::vector<int32_t>& r = reference.levels[size_t(l)];
     levels[size_t(l)].resize(r.size());
     for (size_t i = 0; i < r.size(); ++i) levels[size_t(l)][i] = float(r[i] * metres_per_unit + offset);
   }
@@ -74,7 +74,7 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
     for (size_t i = 0; i < f.size(); ++i)
       if (!valid[i]) f[i] = 0.0f;
   }
-  GridHeightSource src(pyramid.header.levels, std::move(levels), spacing_m);
+  GridHeightSource src(reference.sizes, std::move(levels), spacing_m);
   src.finest_valid = std::move(valid);
   return src;
 }

@@ -82,6 +82,16 @@ void ArgParser::option(const std::string& names, const std::string& metavar, con
   options_.push_back({split_names(names), metavar, help, std::move(set), true});
 }
 
+void ArgParser::option(const std::string& names, const std::string& metavar, const std::string& help,
+                       std::string* target) {
+  option(names, metavar, help, [target](const std::string& v) { *target = v; });
+}
+
+void ArgParser::rest(const std::string& name, const std::string& help, std::vector<std::string>* target,
+                     size_t min) {
+  rest_ = Rest{name, help, target, min};
+}
+
 void ArgParser::positional(const std::string& name, const std::string& help, std::string* target,
                            bool required) {
   positionals_.push_back({name, help, target, required});
@@ -103,9 +113,10 @@ const ArgParser::Option* ArgParser::find(const std::string& name) const {
 std::string ArgParser::help() const {
   std::ostringstream out;
   out << "Usage: " << program_ << " " << synopsis_ << "\n\n" << description_ << "\n\n";
-  if (!positionals_.empty()) {
+  if (!positionals_.empty() || rest_) {
     out << "Arguments:\n";
     for (const auto& p : positionals_) out << "  " << p.name << "\n      " << p.help << "\n";
+    if (rest_) out << "  " << rest_->name << "...\n      " << rest_->help << "\n";
     out << "\n";
   }
   out << "Options:\n";
@@ -158,11 +169,16 @@ std::optional<int> ArgParser::parse(int argc, char** argv) {
         o->set(inline_value);
         continue;
       }
-      if (next_positional >= positionals_.size()) throw UsageError("unexpected argument " + arg);
-      *positionals_[next_positional++].target = arg;
+      if (next_positional < positionals_.size())
+        *positionals_[next_positional++].target = arg;
+      else if (rest_)
+        rest_->target->push_back(arg);
+      else
+        throw UsageError("unexpected argument " + arg);
     }
     for (size_t p = next_positional; p < positionals_.size(); ++p)
       if (positionals_[p].required) throw UsageError("missing argument " + positionals_[p].name);
+    if (rest_ && rest_->target->size() < rest_->min) throw UsageError("missing argument " + rest_->name);
   } catch (const UsageError& e) {
     std::cerr << program_ << ": " << e.what() << "\n"
               << "Try '" << program_ << " --help'.\n";
@@ -182,13 +198,17 @@ int64_t parse_int(const std::string& option, const std::string& text, int64_t mi
   return v;
 }
 
-double parse_double(const std::string& option, const std::string& text) {
+double parse_double(const std::string& option, const std::string& text, double min, double max) {
   double v = 0;
   const char* begin = text.data();
   if (!text.empty() && text[0] == '+') ++begin;
   auto res = std::from_chars(begin, text.data() + text.size(), v);
   if (res.ec != std::errc() || res.ptr != text.data() + text.size() || text.empty())
     throw UsageError("option " + option + ": \"" + text + "\" is not a number");
+  const bool bounded = std::isfinite(min) || std::isfinite(max);  // unbounded callers check NaN themselves
+  if (bounded && !(v >= min && v <= max))
+    throw UsageError("option " + option + ": " + text + " is out of range [" + shortest(min) + ", " +
+                     shortest(max) + "]");
   return v;
 }
 

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -44,8 +45,14 @@ class ArgParser {
   void flag(const std::string& names, const std::string& help, bool* target);
   void option(const std::string& names, const std::string& metavar, const std::string& help,
               std::function<void(const std::string&)> set);
+  // An option whose value is kept as given.
+  void option(const std::string& names, const std::string& metavar, const std::string& help,
+              std::string* target);
   void positional(const std::string& name, const std::string& help, std::string* target,
                   bool required = true);
+  // Every argument after the positionals (e.g. FILE...), in order; fewer than `min` is a usage error.
+  void rest(const std::string& name, const std::string& help, std::vector<std::string>* target,
+            size_t min = 0);
   // Adds -q/--quiet, -v/--verbose and (if with_json) --json.
   void add_common(CommonFlags& flags, bool with_json = true);
   // Text printed after the option list in --help (the exit-code table is always appended).
@@ -71,12 +78,21 @@ class ArgParser {
   std::string program_, synopsis_, description_, epilog_;
   std::vector<Option> options_;
   std::vector<Positional> positionals_;
+  struct Rest {
+    std::string name, help;
+    std::vector<std::string>* target;
+    size_t min;
+  };
+  std::optional<Rest> rest_;
   const Option* find(const std::string& name) const;
 };
 
 // Value parsers for option setters; they throw UsageError naming the option.
 int64_t parse_int(const std::string& option, const std::string& text, int64_t min, int64_t max);
-double parse_double(const std::string& option, const std::string& text);
+// parse_double with a bound (min or max finite) also rejects NaN and values outside [min, max].
+double parse_double(const std::string& option, const std::string& text,
+                    double min = -std::numeric_limits<double>::infinity(),
+                    double max = std::numeric_limits<double>::infinity());
 
 // Adds --vscale --voffset --spacing --width --height --type --endian --nodata --terrain-rgb.
 void add_read_options(ArgParser& parser, terrain::ReadOptions& options);

@@ -1,5 +1,5 @@
-// Measurement shared by all peers: timing loop, error statistics and rate interpolation. Keeping it
-// outside the peers guarantees every codec is timed and judged the same way.
+// Measurement shared by all peers: timing loop, error statistics (terrain::error_stats) and rate
+// interpolation. Keeping it outside the peers guarantees every codec is timed and judged the same way.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,40 +10,13 @@
 
 namespace peers {
 
-ErrorStats error_stats(const double* reference, const double* decoded, const uint8_t* valid, size_t n) {
-  std::vector<double> abs_err;
-  abs_err.reserve(n);
-  double sum_sq = 0;
-  double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
-  for (size_t i = 0; i < n; ++i) {
-    if (valid && !valid[i]) continue;
-    const double z = reference[i];
-    zmin = std::min(zmin, z);
-    zmax = std::max(zmax, z);
-    const double e = decoded[i] - z;
-    sum_sq += e * e;
-    abs_err.push_back(std::fabs(e));
-  }
-  ErrorStats s;
-  if (abs_err.empty()) return s;
-  s.rms = std::sqrt(sum_sq / double(abs_err.size()));
-  s.max_abs = *std::max_element(abs_err.begin(), abs_err.end());
-  // Nearest-rank percentile: the smallest error that at least 99.9 % of samples do not exceed.
-  const size_t rank = size_t(std::ceil(0.999 * double(abs_err.size()))) - 1;
-  std::nth_element(abs_err.begin(), abs_err.begin() + ptrdiff_t(rank), abs_err.end());
-  s.p999_abs = abs_err[rank];
-  const double range = zmax - zmin;
-  s.psnr_db = s.rms > 0 ? 20.0 * std::log10(std::max(range, 1e-300) / s.rms)
-                        : std::numeric_limits<double>::infinity();
-  return s;
-}
-
 ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded) {
   const size_t n = size_t(img.sample_count());
   if (decoded.size() != n) throw PeerError("decoded sample count does not match the image");
   const std::vector<double> reference(img.samples.begin(), img.samples.end());
   const std::vector<double> out(decoded.begin(), decoded.end());
-  return error_stats(reference.data(), out.data(), img.valid.empty() ? nullptr : img.valid.data(), n);
+  return terrain::error_stats(reference.data(), out.data(), img.valid.empty() ? nullptr : img.valid.data(),
+                              n);
 }
 
 double process_cpu_seconds() {

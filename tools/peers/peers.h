@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "pyramid/error_stats.h"
+
 namespace peers {
 
 class PeerError : public std::runtime_error {
@@ -68,15 +70,8 @@ class Peer {
 std::vector<std::unique_ptr<Peer>> all_peers();
 
 // Error figures of decoded against img over valid samples, in sample units.
-struct ErrorStats {
-  double rms = 0;
-  double max_abs = 0;
-  double p999_abs = 0;  // 99.9th percentile of |error|
-  double psnr_db = 0;   // 20 log10((zmax - zmin) / rms); +inf when lossless
-};
+using ErrorStats = terrain::ErrorStats;
 ErrorStats error_stats(const Image16& img, const std::vector<int32_t>& decoded);
-// The same over n doubles (any unit; valid may be null = all valid). PSNR uses the reference's range.
-ErrorStats error_stats(const double* reference, const double* decoded, const uint8_t* valid, size_t n);
 
 struct Result {
   size_t bytes = 0;

@@ -1,0 +1,70 @@
+// clipmap-view's parts: main.cpp (options, dispatch), flight.cpp (the camera flight, its frames and
+// statistics), verify.cpp (the reference flight and the screen-space error against the original),
+// bench.cpp (--bench: refill and region-decode timing).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "runtime/clipmap.h"
+#include "runtime/region_decoder.h"
+
+namespace clipmap_view {
+
+using Clock = std::chrono::steady_clock;
+inline double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// p-quantile of v by nearest rank (0 for an empty v); p = 0.5 is the median, 0 the minimum.
+double percentile(std::vector<double> v, double p);
+
+// The command line, as far as the flight needs it (clipmap options go in ClipmapOptions).
+struct ViewOptions {
+  std::string pyramid, out_dir = "clipmap-frames", path_file, reference, original;
+  std::optional<double> original_vscale;
+  int width = 640, height = 480, frames = 300, png_every = 1;
+  double fov = 60;
+  std::optional<double> max_screen_error;
+  bool no_transitions = false, no_culling = false;
+  bool quiet = false;
+};
+
+// What a flight flies over.
+struct Flight {
+  const ViewOptions& options;
+  std::shared_ptr<const terrain::runtime::PyramidFile> file, ref_file;  // ref_file: --reference, or null
+  std::shared_ptr<const terrain::runtime::RegionDecoder> decoder;       // source's (per-frame counts)
+  terrain::runtime::RegionDecoderSource& source;  // the pyramid's levels (ground height, default path)
+  terrain::runtime::HeightSource& heights;        // what the clipmap shows: source or its synthesis
+  terrain::runtime::ClipmapOptions clipmap;
+  double spacing;  // metres between finest samples
+};
+
+// Plays the flight: PNG frames, stats.csv and stats.json in options.out_dir, a summary on stdout.
+// Returns the exit status; throws Error when an output cannot be written.
+int run_flight(const Flight& flight);
+
+// The reference flight's height source: --reference's pyramid or --original's levels (then also
+// `original`, for the screen-space error); source stays null without either.
+struct Reference {
+  std::unique_ptr<terrain::runtime::HeightSource> source;
+  const terrain::runtime::GridHeightSource* original = nullptr;
+};
+// Fills `out`; when the reference does not match the pyramid, prints why and returns the exit status.
+std::optional<int> open_reference(const Flight& flight, Reference& out);
+// Screen-space geometric error (L&H 2004 Table 2) of the pyramid's levels from first_level on against
+// the original, for triangles of s_px pixels; printed as a table on stdout and returned.
+std::vector<terrain::runtime::LevelScreenError> report_screen_space_error(
+    const Flight& flight, const terrain::runtime::GridHeightSource& original, int first_level, double s_px);
+// Image PSNR of two RGBA frames of equal size over the colour channels; 99 dB when identical.
+double image_psnr(const std::vector<uint8_t>& pixels, const std::vector<uint8_t>& reference);
+
+// --bench: `reps` full refills of every clipmap level, then one n x n window of the finest level
+// split into U and residual. Prints the tables on stdout; returns the exit status.
+int run_bench(const std::shared_ptr<const terrain::runtime::PyramidFile>& file, double spacing,
+              terrain::runtime::ClipmapOptions options, int reps, bool quiet);
+
+}  // namespace clipmap_view

@@ -1,0 +1,342 @@
+// clipmap-view's camera flight: keyframes (a --path file or the built-in pass), the clipmap update
+// and render of every frame (and of the reference flight beside it), PNG frames, stats.csv and
+// stats.json.
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "clipmap_view.h"
+#include "json_writer.h"
+#include "render/renderer.h"
+
+namespace clipmap_view {
+
+using namespace terrain;
+using namespace terrain::runtime;
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const double k = std::clamp(std::ceil(p * double(v.size())) - 1, 0.0, double(v.size() - 1));
+  return v[size_t(k)];
+}
+
+namespace {
+
+// One keyframe: position in metres (x east along columns, y along rows), height above the ground,
+// heading and pitch in degrees.
+struct Key {
+  double frame, x, y, above, yaw_deg, pitch_deg;
+};
+
+std::vector<Key> read_path(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error(ErrorCode::NotFound, "cannot open camera path " + path);
+  std::vector<Key> keys;
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream s(line);
+    Key k{};
+    if (!(s >> k.frame)) continue;  // blank or comment line
+    if (!(s >> k.x >> k.y >> k.above >> k.yaw_deg >> k.pitch_deg) ||
+        !std::isfinite(k.x + k.y + k.above + k.yaw_deg + k.pitch_deg))
+      throw Error(ErrorCode::MissingField, path + ":" + std::to_string(number) +
+                                               ": expected 'frame x_m y_m above_m yaw_deg pitch_deg'");
+    if (!keys.empty() && k.frame <= keys.back().frame)
+      throw Error(ErrorCode::MissingField,
+                  path + ":" + std::to_string(number) + ": frame numbers must increase");
+    keys.push_back(k);
+  }
+  if (keys.empty()) throw Error(ErrorCode::MissingField, path + ": no keyframes");
+  return keys;
+}
+
+// The built-in flight: towards the highest point of the coarsest level (so the default shows relief
+// rather than sea), past it, then a climbing turn. Distances scale with the terrain's extent.
+std::vector<Key> default_path(HeightSource& source, double spacing, int frames) {
+  const GridSize c = source.level_size(0);
+  std::vector<float> coarse(size_t(c.width * c.height));
+  source.fill(0, Rect{0, 0, c.width, c.height}, coarse.data(), c.width);
+  const size_t peak = size_t(std::max_element(coarse.begin(), coarse.end()) - coarse.begin());
+  const double cs = std::ldexp(spacing, source.level_count() - 1);  // metres per coarsest sample
+  // Kept in the middle of the terrain: beyond its edges the clipmap shows the repeated edge samples.
+  const double wm = double(c.width) * cs, hm = double(c.height) * cs;
+  const double px = std::clamp(double(int64_t(peak) % c.width) * cs, 0.45 * wm, 0.7 * wm);
+  const double py = std::clamp(double(int64_t(peak) / c.width) * cs, 0.4 * hm, 0.55 * hm);
+  const double ext = std::max(wm, hm), f = std::max(frames - 1, 1);
+  return {{0, px - 0.25 * ext, py - 0.10 * ext, 0.008 * ext, 20, -14},
+          {0.6 * f, px - 0.06 * ext, py - 0.03 * ext, 0.008 * ext, 25, -16},
+          {0.8 * f, px + 0.01 * ext, py + 0.02 * ext, 0.015 * ext, 90, -22},
+          {f, px, py + 0.08 * ext, 0.04 * ext, 180, -35}};
+}
+
+Key interpolate(const std::vector<Key>& keys, double frame) {
+  if (frame <= keys.front().frame) return keys.front();
+  if (frame >= keys.back().frame) return keys.back();
+  size_t i = 1;
+  while (keys[i].frame < frame) ++i;
+  const Key &a = keys[i - 1], &b = keys[i];
+  const double t = (frame - a.frame) / (b.frame - a.frame);
+  auto mix = [t](double u, double v) { return u + (v - u) * t; };
+  return Key{frame,
+             mix(a.x, b.x),
+             mix(a.y, b.y),
+             mix(a.above, b.above),
+             mix(a.yaw_deg, b.yaw_deg),
+             mix(a.pitch_deg, b.pitch_deg)};
+}
+
+// CPU seconds of the whole process (all threads, llvmpipe's included): on a shared machine a steadier
+// measure of the work per frame than wall time.
+double cpu_seconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+         1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+// Per-frame times (ms) and counts of a flight, for the summaries.
+struct FlightLog {
+  std::vector<double> frame_ms, update_ms, render_ms, upload_ms, psnr;
+  // The update's parts per frame, ms: decode (all of the fill), U, residual, zc, normals, bounds.
+  std::array<std::vector<double>, 6> part_ms;
+  int64_t triangles_total = 0;
+  double cpu_ms_per_frame = 0;
+};
+const char* const kPartNames[] = {"decode", "upsample", "residual", "zc", "normals", "bounds"};
+
+void write_stats_json(const std::string& json_path, const Flight& flight, const Clipmap& clipmap,
+                      const std::string& renderer_name, const FlightLog& log,
+                      const std::vector<LevelScreenError>& sse, double s_px) {
+  const ViewOptions& o = flight.options;
+  const double med = percentile(log.frame_ms, 0.5), p99 = percentile(log.frame_ms, 0.99);
+  std::ofstream js(json_path + ".tmp");
+  cli::JsonWriter j(js);
+  j.begin_object();
+  j.field("pyramid", o.pyramid)
+      .field("renderer", renderer_name)
+      .field("n", flight.clipmap.n)
+      .field("levels", clipmap.level_count());
+  if (o.max_screen_error) j.field("max_screen_error_px", *o.max_screen_error);
+  j.field("width", o.width).field("height", o.height).field("fov_y_deg", o.fov).field("frames", o.frames);
+  j.field("budget", clipmap.budget()).field("transitions", !o.no_transitions).field("culling", !o.no_culling);
+  j.field("frame_ms_median", med).field("frame_ms_p99", p99);
+  j.field("fps_median", med > 0 ? 1e3 / med : 0.0).field("cpu_ms_per_frame", log.cpu_ms_per_frame);
+  j.field("update_ms_median", percentile(log.update_ms, 0.5))
+      .field("update_ms_p99", percentile(log.update_ms, 0.99));
+  for (size_t k = 0; k < log.part_ms.size(); ++k) {
+    j.field(std::string(kPartNames[k]) + "_ms_median", percentile(log.part_ms[k], 0.5));
+    j.field(std::string(kPartNames[k]) + "_ms_p99", percentile(log.part_ms[k], 0.99));
+  }
+  j.field("upload_ms_median", percentile(log.upload_ms, 0.5))
+      .field("upload_ms_p99", percentile(log.upload_ms, 0.99));
+  j.field("render_ms_median", percentile(log.render_ms, 0.5))
+      .field("render_ms_p99", percentile(log.render_ms, 0.99));
+  j.field("triangles_mean", double(log.triangles_total) / o.frames);
+  if (!log.psnr.empty()) {
+    double sum = 0;
+    for (double v : log.psnr) sum += v;
+    j.field("reference", flight.ref_file ? o.reference : o.original)
+        .field("psnr_db_mean", sum / double(log.psnr.size()));
+    j.field("psnr_db_min", *std::min_element(log.psnr.begin(), log.psnr.end()));
+    j.field("psnr_db_median", percentile(log.psnr, 0.5));
+  }
+  if (!sse.empty()) {
+    j.field("triangle_size_px", s_px);
+    j.key("screen_space_error").begin_array();
+    for (const LevelScreenError& e : sse) {
+      j.begin_object();
+      j.field("level", e.level)
+          .field("spacing_m", e.spacing_m)
+          .field("rms_m", e.rms_m)
+          .field("max_m", e.max_m);
+      j.field("rms_px", e.rms_px).field("p999_px", e.p999_px).field("max_px", e.max_px);
+      j.end_object();
+    }
+    j.end_array();
+  }
+  j.end_object();
+  j.finish();
+  js.close();
+  if (!js) throw Error(ErrorCode::WriteFailed, "cannot write " + json_path);
+  std::filesystem::rename(json_path + ".tmp", json_path);
+}
+
+void print_summary(const Flight& flight, const FlightLog& log) {
+  const ViewOptions& o = flight.options;
+  const double med = percentile(log.frame_ms, 0.5), p99 = percentile(log.frame_ms, 0.99);
+  std::printf(
+      "frames %d at %dx%d: frame time median %.2f ms (%.1f fps), p99 %.2f ms; update median %.3f ms, p99 "
+      "%.3f ms; "
+      "upload median %.3f ms; render median %.2f ms; %.0f triangles/frame; process CPU %.1f ms/frame; stats "
+      "in %s\n",
+      o.frames, o.width, o.height, med, med > 0 ? 1e3 / med : 0.0, p99, percentile(log.update_ms, 0.5),
+      percentile(log.update_ms, 0.99), percentile(log.upload_ms, 0.5), percentile(log.render_ms, 0.5),
+      double(log.triangles_total) / o.frames, log.cpu_ms_per_frame, o.out_dir.c_str());
+  std::printf(
+      "update parts, median ms: decode %.3f (U %.3f, residual %.3f), zc %.3f, normals %.3f, bounds %.3f\n",
+      percentile(log.part_ms[0], 0.5), percentile(log.part_ms[1], 0.5), percentile(log.part_ms[2], 0.5),
+      percentile(log.part_ms[3], 0.5), percentile(log.part_ms[4], 0.5), percentile(log.part_ms[5], 0.5));
+  if (!log.psnr.empty())
+    std::printf("image PSNR against %s: median %.2f dB, min %.2f dB (99 = identical)\n",
+                (flight.ref_file ? o.reference : o.original).c_str(), percentile(log.psnr, 0.5),
+                *std::min_element(log.psnr.begin(), log.psnr.end()));
+}
+
+}  // namespace
+
+int run_flight(const Flight& flight) {
+  const ViewOptions& o = flight.options;
+  const ClipmapOptions& copt = flight.clipmap;
+  const double spacing = flight.spacing;
+  RegionDecoderSource& source = flight.source;
+  Clipmap clipmap(flight.heights, copt);
+  const int finest_level = source.level_count() - 1;
+
+  // The reference flight: same clipmap options over another pyramid or the original input.
+  Reference reference;
+  if (auto status = open_reference(flight, reference)) return *status;
+  std::unique_ptr<Clipmap> ref_clipmap;
+  if (reference.source) ref_clipmap = std::make_unique<Clipmap>(*reference.source, copt);
+
+  const std::vector<Key> keys =
+      o.path_file.empty() ? default_path(source, spacing, o.frames) : read_path(o.path_file);
+
+  std::error_code ec;
+  std::filesystem::create_directories(o.out_dir, ec);
+  const std::string csv_path = o.out_dir + "/stats.csv", json_path = o.out_dir + "/stats.json";
+  std::ofstream csv(csv_path + ".tmp");
+  if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
+  csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,residual_ms,zc_ms,normals_ms,bounds_ms,upload_ms,"
+         "render_ms,frame_ms,"
+         "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
+         "samples_reconstructed,residual_samples_decoded,samples_uploaded,psnr_db\n";
+
+  // Screen-space geometric error of the levels this clipmap renders (L&H 2004 Table 2).
+  const double s_px = triangle_size_px(o.width, o.height, o.fov, copt.n);
+  std::vector<LevelScreenError> sse;
+  if (reference.original)
+    sse = report_screen_space_error(flight, *reference.original, clipmap.source_level(0), s_px);
+
+  // Every GL call runs under a GlLeakCheckPause: Mesa's process-lifetime allocations would otherwise
+  // fail an ASan build at exit.
+  std::optional<GlLeakCheckPause> gl_setup_pause(std::in_place);
+  HeadlessGL gl;
+  ClipmapRenderer renderer(copt.n, clipmap.level_count(), o.width, o.height);
+  std::unique_ptr<ClipmapRenderer> ref_renderer;
+  if (ref_clipmap)
+    ref_renderer = std::make_unique<ClipmapRenderer>(copt.n, clipmap.level_count(), o.width, o.height);
+  gl_setup_pause.reset();
+  std::vector<uint8_t> ref_pixels;
+  if (!o.quiet)
+    std::cerr << "clipmap-view: " << gl.renderer_name() << " (EGL " << gl.platform() << "), n=" << copt.n
+              << ", " << clipmap.level_count() << " levels, " << o.width << "x" << o.height << ", spacing "
+              << spacing << " m\n";
+  RenderOptions ropt;
+  ropt.transitions = !o.no_transitions;
+  ropt.culling = !o.no_culling;
+  std::vector<uint8_t> pixels;
+  FlightLog log;
+  float ground_scratch = 0;
+  std::vector<std::string> written;
+  const double cpu0 = cpu_seconds();
+  for (int f = 0; f < o.frames; ++f) {
+    const Key k = interpolate(keys, double(f));
+    // Ground under the camera from the finest level (one sample, decoded through the tile cache).
+    const GridSize fs = source.level_size(finest_level);
+    const int64_t gx = std::clamp<int64_t>(int64_t(std::llround(k.x / spacing)), 0, fs.width - 1);
+    const int64_t gy = std::clamp<int64_t>(int64_t(std::llround(k.y / spacing)), 0, fs.height - 1);
+    source.fill(finest_level, Rect{gx, gy, 1, 1}, &ground_scratch, 1);
+    Camera cam;
+    cam.position[0] = k.x;
+    cam.position[1] = k.y;
+    cam.position[2] = double(ground_scratch) + k.above;
+    cam.yaw = k.yaw_deg * M_PI / 180.0;
+    cam.pitch = k.pitch_deg * M_PI / 180.0;
+    cam.fov_y_deg = o.fov;
+    const RegionStats before = flight.decoder->stats();
+    const auto t0 = Clock::now();
+    const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
+    const double upd = since(t0);
+    RenderStats rs;
+    {
+      const GlLeakCheckPause gl_pause;
+      renderer.upload(clipmap);
+      rs = renderer.render(clipmap, cam, ropt);
+    }
+    const double total = since(t0);
+    const RegionStats after = flight.decoder->stats();
+    double frame_psnr = std::nan("");
+    if (ref_clipmap) {
+      ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
+      {
+        const GlLeakCheckPause gl_pause;
+        ref_renderer->upload(*ref_clipmap);
+        ref_renderer->render(*ref_clipmap, cam, ropt);
+        ref_renderer->read_rgba(ref_pixels);
+        renderer.read_rgba(pixels);
+      }
+      frame_psnr = image_psnr(pixels, ref_pixels);
+      log.psnr.push_back(frame_psnr);
+    }
+    if (o.png_every > 0 && f % o.png_every == 0) {
+      {
+        const GlLeakCheckPause gl_pause;
+        renderer.read_rgba(pixels);
+      }
+      char name[64];
+      std::snprintf(name, sizeof name, "/frame_%05d.png", f);
+      write_png_rgba(o.out_dir + name, o.width, o.height, pixels);
+      written.push_back(o.out_dir + name);
+      if (ref_renderer) {
+        std::snprintf(name, sizeof name, "/reference_%05d.png", f);
+        write_png_rgba(o.out_dir + name, o.width, o.height, ref_pixels);
+      }
+    }
+    log.frame_ms.push_back(total * 1e3);
+    log.update_ms.push_back(upd * 1e3);
+    const double parts[6] = {us.seconds_fill,   us.seconds_upsample, us.seconds_residual,
+                             us.seconds_coarse, us.seconds_normals,  us.seconds_bounds};
+    for (size_t part = 0; part < log.part_ms.size(); ++part) log.part_ms[part].push_back(parts[part] * 1e3);
+    log.render_ms.push_back(rs.seconds_render * 1e3);
+    log.upload_ms.push_back(rs.seconds_upload * 1e3);
+    log.triangles_total += rs.triangles;
+    csv << f << ',' << cam.position[0] << ',' << cam.position[1] << ',' << cam.position[2] << ',' << upd * 1e3
+        << ',' << us.seconds_fill * 1e3 << ',' << us.seconds_upsample * 1e3 << ','
+        << us.seconds_residual * 1e3 << ',' << us.seconds_coarse * 1e3 << ',' << us.seconds_normals * 1e3
+        << ',' << us.seconds_bounds * 1e3 << ',' << rs.seconds_upload * 1e3 << ',' << rs.seconds_render * 1e3
+        << ',' << total * 1e3 << ',' << rs.triangles << ',' << rs.blocks_drawn << ',' << rs.blocks_culled
+        << ',' << rs.draw_calls << ',' << us.active_levels << ',' << us.levels_behind << ','
+        << us.samples_filled << ',' << after.samples_reconstructed - before.samples_reconstructed << ','
+        << after.residual_samples_decoded - before.residual_samples_decoded << ',' << rs.samples_uploaded
+        << ',';
+    if (std::isnan(frame_psnr))
+      csv << '\n';
+    else
+      csv << frame_psnr << '\n';
+  }
+  // CPU per frame covers everything in the loop (reference renders and PNG writing included).
+  log.cpu_ms_per_frame = (cpu_seconds() - cpu0) * 1e3 / o.frames;
+  csv.close();
+  if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
+  std::filesystem::rename(csv_path + ".tmp", csv_path);
+
+  write_stats_json(json_path, flight, clipmap, gl.renderer_name(), log, sse, s_px);
+  print_summary(flight, log);
+  if (!written.empty() && !o.quiet)
+    std::cerr << "clipmap-view: " << written.size() << " PNG frames in " << o.out_dir << "\n";
+  return 0;
+}
+
+}  // namespace clipmap_view

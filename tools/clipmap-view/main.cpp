@@ -1,0 +1,195 @@
+// clipmap-view: plays a camera flight over a compressed pyramid through the geometry clipmap and
+// the headless OpenGL renderer; writes PNG frames and per-frame statistics (CSV and JSON). This file:
+// the options, the choice of n and the dispatch to the flight (flight.cpp, verify.cpp) or --bench
+// (bench.cpp).
+#include <cstdio>
+#include <iostream>
+
+#include "cli.h"
+#include "clipmap_view.h"
+#include "container/container.h"
+#include "runtime/synthesis.h"
+
+using namespace terrain;
+using namespace terrain::runtime;
+using namespace clipmap_view;
+
+namespace {
+
+// --max-screen-error: the smallest n whose estimated (or, with the file's recorded finest-level
+// error, bounded) p99.9 screen-space error meets the tolerance on the worst rendered level.
+int clipmap_size_for(const ViewOptions& o, const ContainerInfo& info, RegionDecoderSource& source,
+                     const ClipmapOptions& copt) {
+  const int first_level = source.level_count() - clipmap_level_count(copt, source.level_count());
+  const double s_ref = triangle_size_px(o.width, o.height, o.fov, 255);
+  const auto t0 = Clock::now();
+  std::vector<LevelScreenError> errors = estimate_screen_space_error(source, first_level, s_ref);
+  // The estimate takes the file's finest level for the truth; the finest level's own error against
+  // the input, which version 1.1 files record, turns it into a bound.
+  const std::optional<LevelError> finest_error = level_error_metres(info, info.levels.size() - 1);
+  if (finest_error) add_finest_error_bound(errors, finest_error->rms, finest_error->max_abs, s_ref);
+  const ClipmapSizeChoice choice =
+      clipmap_size_for_screen_error(errors, s_ref, o.width, o.height, o.fov, *o.max_screen_error);
+  if (!o.quiet) {
+    std::fprintf(
+        stderr,
+        "clipmap-view: --max-screen-error %g px: n = %d, p99.9 %s %.3f px on the worst level (%.2f s)%s\n",
+        *o.max_screen_error, choice.n, finest_error ? "bound" : "estimate", choice.p999_px, since(t0),
+        choice.met ? "" : "; n = 1023 is the largest, so the tolerance is not met");
+    if (finest_error)
+      std::fprintf(stderr,
+                   "clipmap-view: the bound includes the finest level's compression error (max %.3f m)\n",
+                   finest_error->max_abs);
+    else
+      std::fprintf(stderr,
+                   "clipmap-view: warning: %s (format 1.0) does not record its compression error; the "
+                   "estimate leaves it out\n",
+                   o.pyramid.c_str());
+  }
+  return choice.n;
+}
+
+int run(int argc, char** argv) {
+  ViewOptions o;
+  int bench = 0, synth_levels = 0;
+  double synth_detail = 1.0;
+  int n = 255, levels = 0;
+  int64_t budget = 0;
+  bool n_given = false;
+  cli::CommonFlags common;
+  cli::ArgParser p(
+      "clipmap-view", "PYRAMID [options]",
+      "Flies a camera over a compressed pyramid (.pyr) with the geometry clipmap, renders each frame\n"
+      "off-screen with OpenGL 4.5 core through EGL (Mesa llvmpipe when there is no GPU), and writes\n"
+      "PNG frames, stats.csv (one row per frame) and stats.json (summary) into --out.");
+  p.positional("PYRAMID", "compressed pyramid file written by pyramid-build", &o.pyramid);
+  p.option("--out", "DIR", "output directory (default clipmap-frames)", &o.out_dir);
+  p.option("--path", "FILE",
+           "camera keyframes, one per line: frame x_m y_m above_ground_m yaw_deg pitch_deg (# comments);\n"
+           "linear in between. Default: a built-in pass over the terrain",
+           &o.path_file);
+  p.option("--width", "PX", "frame width (default 640)",
+           [&](const std::string& v) { o.width = int(cli::parse_int("--width", v, 16, 8192)); });
+  p.option("--height", "PX", "frame height (default 480)",
+           [&](const std::string& v) { o.height = int(cli::parse_int("--height", v, 16, 8192)); });
+  p.option("--n", "N", "clipmap level size, 2^k-1 in 15..1023 (default 255)", [&](const std::string& v) {
+    n = int(cli::parse_int("--n", v, 15, 1023));
+    n_given = true;
+    if (((n + 1) & n) != 0) throw cli::UsageError("--n must be 2^k - 1, got " + v);
+  });
+  p.option("--max-screen-error", "PX",
+           "choose n instead of --n: the smallest 2^k-1 (15..1023) whose 99.9th-percentile screen-space\n"
+           "geometric error (L&H 2004 Table 2, at this --width/--height/--fov) is at most PX pixels on\n"
+           "the worst rendered level, from the pyramid's own finest level plus that level's compression\n"
+           "error as the file records it (a bound; files of format 1.0 lack the record and get an estimate\n"
+           "without it; --original reports the true figures). Rugged 90 m DEMs need n = 511 for 1 px",
+           [&](const std::string& v) {
+             o.max_screen_error = cli::parse_double("--max-screen-error", v);
+             if (!(*o.max_screen_error > 0 && *o.max_screen_error <= 1000))
+               throw cli::UsageError("--max-screen-error must be in (0, 1000] pixels");
+           });
+  p.option("--levels", "L", "clipmap levels (default: all pyramid levels)",
+           [&](const std::string& v) { levels = int(cli::parse_int("--levels", v, 1, 30)); });
+  p.option("--budget", "SAMPLES", "samples refilled per frame (default n*n)",
+           [&](const std::string& v) { budget = cli::parse_int("--budget", v, 1, int64_t(1) << 40); });
+  p.option("--fov", "DEG", "vertical field of view (default 60)", [&](const std::string& v) {
+    o.fov = cli::parse_double("--fov", v);
+    if (!(o.fov > 1 && o.fov < 179)) throw cli::UsageError("--fov must be in (1, 179) degrees");
+  });
+  p.option("--frames", "N", "frames to play (default 300)",
+           [&](const std::string& v) { o.frames = int(cli::parse_int("--frames", v, 1, 1000000)); });
+  p.option("--png-every", "K", "write every K-th frame as PNG, 0 = none (default 1)",
+           [&](const std::string& v) { o.png_every = int(cli::parse_int("--png-every", v, 0, 1000000)); });
+  p.option("--reference", "PYR",
+           "also render the flight from this pyramid (e.g. a --lossless build of the original input) and\n"
+           "report per-frame image PSNR of PYRAMID's frames against it",
+           &o.reference);
+  p.option("--original", "FILE",
+           "the original, uncompressed input (any format pyramid-build reads): render the flight from its\n"
+           "lossless pyramid too and report per-frame image PSNR against it, and the screen-space geometric\n"
+           "error per level (L&H 2004 Table 2: rms, 99.9th percentile, max pixels) of PYRAMID's levels\n"
+           "against the original's finest level",
+           &o.original);
+  p.option("--original-vscale", "S",
+           "metres per stored unit of --original (default: the pyramid's for integer inputs)",
+           [&](const std::string& v) { o.original_vscale = cli::parse_double("--original-vscale", v); });
+  p.option("--bench", "K",
+           "benchmark instead of a flight: K full n x n refills of each clipmap level on one core (fresh\n"
+           "decoder cache each time), timing U, residual decode, the rest of the fill, zc, normal map and\n"
+           "z bounds; then U and the residual decode of one n x n window through the region decoder",
+           [&](const std::string& v) { bench = int(cli::parse_int("--bench", v, 1, 1000)); });
+  p.option("--synth-levels", "K",
+           "synthesise K levels finer than the pyramid's finest (U + Gaussian noise whose variance is\n"
+           "extrapolated from the stored residual statistics; docs/synthesis.md)",
+           [&](const std::string& v) {
+             synth_levels = int(cli::parse_int("--synth-levels", v, 1, SynthesisOptions::kMaxLevels));
+           });
+  p.option("--synth-detail", "F", "scale of the synthesised noise (default 1; 0 = zero detail, U alone)",
+           [&](const std::string& v) {
+             synth_detail = cli::parse_double("--synth-detail", v);
+             if (!(synth_detail >= 0 && synth_detail <= 100))
+               throw cli::UsageError("--synth-detail must be in [0, 100]");
+           });
+  p.flag("--no-transitions", "disable the transition morph (to see popping)", &o.no_transitions);
+  p.flag("--no-culling", "disable view-frustum culling", &o.no_culling);
+  p.add_common(common, false);
+  p.epilog(
+      "Times in stats: update = decode (the height source's fill, of which upsample = U of the coarser\n"
+      "clipmap level and residual = residual decode + addition) + zc + normals + z bounds; upload = texture\n"
+      "uploads; render = draw + glFinish. The summary line gives the median and\n"
+      "99th percentile of update + upload + render per frame.");
+  if (auto status = p.parse(argc, argv)) return *status;
+  o.quiet = common.quiet;
+
+  if (!o.reference.empty() && !o.original.empty())
+    throw cli::UsageError("give --reference or --original, not both");
+  std::shared_ptr<const PyramidFile> file, ref_file;
+  try {
+    file = PyramidFile::open(o.pyramid);
+    if (!o.reference.empty()) ref_file = PyramidFile::open(o.reference);
+  } catch (const Error& e) {
+    std::cerr << "clipmap-view: error: " << e.what() << "\n";
+    return cli::exit_status(e.code());
+  }
+  const ContainerInfo& info = file->info();
+  // Arc-second grids: about 30.87 m per arc-second (the terrain is rendered flat, as in the paper).
+  const double spacing = info.horizontal_units == "arc-second" ? info.spacing_x * 30.87 : info.spacing_x;
+  auto decoder = std::make_shared<const RegionDecoder>(file);
+  RegionDecoderSource source(decoder, spacing);
+  std::unique_ptr<SynthesisSource> synth;
+  if (synth_levels > 0) {
+    if (!o.reference.empty() || !o.original.empty() || bench > 0)
+      throw cli::UsageError("--synth-levels cannot be combined with --reference, --original or --bench");
+    ResidualFit fit;
+    synth = std::make_unique<SynthesisSource>(
+        source, synthesis_options_for(*file, synth_levels, 1, synth_detail, &fit));
+    if (!o.quiet) {
+      std::cerr << "clipmap-view: synthesis: " << fit.note << ", log2 variance slope " << fit.slope
+                << " per level (fitted " << fit.slope_fitted << "); noise std";
+      for (int l = source.level_count(); l < synth->level_count(); ++l)
+        std::cerr << ' ' << synth->noise_std_m(l);
+      std::cerr << " m\n";
+    }
+  }
+  HeightSource& heights = synth ? static_cast<HeightSource&>(*synth) : source;
+  if (levels > heights.level_count())
+    throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the source's " +
+                          std::to_string(heights.level_count()));
+  ClipmapOptions copt;
+  copt.levels = levels;
+  copt.budget = budget;
+  if (o.max_screen_error) {
+    if (n_given) throw cli::UsageError("give --n or --max-screen-error, not both");
+    if (synth) throw cli::UsageError("--max-screen-error cannot be combined with --synth-levels");
+    n = clipmap_size_for(o, info, source, copt);
+  }
+  copt.n = n;
+  if (bench > 0) return run_bench(file, spacing, copt, bench, o.quiet);
+  return run_flight(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return cli::run_tool("clipmap-view", [&] { return run(argc, argv); });
+}
