@@ -31,7 +31,7 @@ bool in_file(uint64_t offset, uint64_t size, size_t file_size) {
 }
 
 void fix_checksums(std::vector<uint8_t>& f) {
-  using terrain::runtime::crc32c;
+  using terrain::container::crc32c;
   if (f.size() < 64) return;
   const uint64_t index_offset = get_u64(f.data() + 24), index_size = get_u64(f.data() + 32);
   if (in_file(index_offset, index_size, f.size()) && index_size >= 264) {
@@ -58,6 +58,7 @@ void fix_checksums(std::vector<uint8_t>& f) {
 
 void decode_some(const std::string& path) {
   using namespace terrain::runtime;
+  using namespace terrain::container;
   using terrain::Error;
   using terrain::ErrorCode;
   std::shared_ptr<const PyramidFile> file;

@@ -11,13 +11,13 @@
 
 namespace {
 
-using terrain::runtime::ErrorMode;
+using terrain::container::ErrorMode;
 
 int run(int argc, char** argv) {
   std::string input, output, json_path;
   cli::CommonFlags common;
   terrain::ReadOptions read_options;
-  terrain::runtime::BuildFileOptions o;
+  terrain::build::BuildFileOptions o;
   int targets = 0;
   auto set_target = [&](ErrorMode mode, const std::string& name, const std::string& v) {
     o.mode = mode;
@@ -69,8 +69,9 @@ int run(int argc, char** argv) {
   if (targets > 1) throw cli::UsageError("give at most one of --rms, --max-error, --step, --lossless");
 
   std::ostringstream opts;
-  opts << "{\"target\":\"" << terrain::runtime::error_mode_name(o.mode) << "\",\"metres\":" << o.target_metres
-       << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size << "}";
+  opts << "{\"target\":\"" << terrain::container::error_mode_name(o.mode)
+       << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
+       << "}";
 
   std::unique_ptr<cli::Progress> bar;
   std::string phase;
@@ -83,9 +84,9 @@ int run(int argc, char** argv) {
     }
     bar->update(int64_t(f * 1000));
   };
-  terrain::runtime::BuildFileResult r;
+  terrain::build::BuildFileResult r;
   try {
-    r = terrain::runtime::build_pyramid_file(input, read_options, output, o, opts.str(), progress);
+    r = terrain::build::build_pyramid_file(input, read_options, output, o, opts.str(), progress);
   } catch (const std::invalid_argument& e) {
     throw cli::UsageError(e.what());
   }

@@ -634,12 +634,12 @@ int run_self_test(std::vector<std::unique_ptr<peers::Peer>>& peer_list) {
 // The pyramid end to end.
 
 struct PyramidTarget {
-  terrain::runtime::ErrorMode target;
+  terrain::container::ErrorMode target;
   double metres;
 };
 
 std::vector<PyramidTarget> pyramid_sweep(bool quick) {
-  using terrain::runtime::ErrorMode;
+  using terrain::container::ErrorMode;
   std::vector<PyramidTarget> t{{ErrorMode::Lossless, 0}};
   const std::vector<double> rms =
       quick ? std::vector<double>{0.5, 1, 2, 4} : std::vector<double>{0.25, 0.5, 1, 1.4, 2, 2.8, 4, 8};
@@ -690,6 +690,8 @@ Row measure_pyramid(const std::string& path, const terrain::ReadOptions& read_op
                     const std::string& file, const terrain::Heightmap& map,
                     const std::vector<double>& reference, const PyramidTarget& target, const Options& opt) {
   using namespace terrain::runtime;
+  using namespace terrain::container;
+  using namespace terrain::build;
   Row row;
   row.file = file;
   row.codec = kPyramid;
@@ -806,7 +808,7 @@ int main(int argc, char** argv) {
   if (opt.self_test) return run_self_test(peer_list);
   if (!opt.region_speed.empty()) {
     try {
-      auto file = terrain::runtime::PyramidFile::open(opt.region_speed);
+      auto file = terrain::container::PyramidFile::open(opt.region_speed);
       terrain::runtime::RegionDecoder decoder(file);
       const int finest = file->level_count() - 1;
       const RegionTiming t = time_cold_windows(decoder, finest, file->level_size(finest), 64, nullptr);

@@ -19,10 +19,10 @@
 
 namespace {
 
-using terrain::runtime::Container;
-using terrain::runtime::ContainerInfo;
-using terrain::runtime::error_mode_name;
-using terrain::runtime::ErrorMode;
+using terrain::container::Container;
+using terrain::container::ContainerInfo;
+using terrain::container::error_mode_name;
+using terrain::container::ErrorMode;
 
 // A .pyr: what its header and index say (nothing is decoded); with verify, every level's checksum.
 int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bool verify) {
@@ -63,7 +63,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
       j.field("level", int64_t(l)).field("width", int64_t(li.width)).field("height", int64_t(li.height));
       j.field("bytes", int64_t(c.level(l).size));
       j.field("residual_rms_units", li.stats.rms);
-      const auto error = terrain::runtime::level_error_metres(info, l);
+      const auto error = terrain::container::level_error_metres(info, l);
       j.key("error_rms_m");
       error ? j.value(error->rms) : j.null();
       j.key("error_max_m");
@@ -109,7 +109,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
     const size_t bytes = c.level(l).size;
     std::printf("%5u %13s %12zu %9.4f", l, size.c_str(), bytes,
                 double(bytes) * 8 / double(li.width * li.height));
-    if (const auto error = terrain::runtime::level_error_metres(info, l))
+    if (const auto error = terrain::container::level_error_metres(info, l))
       std::printf(" %12.4f %12.4f\n", error->rms, error->max_abs);
     else
       std::printf(" %12s %12s\n", "-", "-");
@@ -138,7 +138,7 @@ int run(int argc, char** argv) {
   cli::add_read_options(parser, options);
   parser.add_common(common);
   if (auto status = parser.parse(argc, argv)) return *status;
-  if (terrain::runtime::is_container_file(path)) {
+  if (terrain::container::is_container_file(path)) {
     return describe_pyramid(path, common, verify);
   }
   if (verify) throw cli::UsageError("--verify applies to pyramid files only");

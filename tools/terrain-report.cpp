@@ -19,6 +19,7 @@ namespace {
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
 
 // Linear ramp black -> blue -> magenta -> orange -> yellow, for e in [0, 1].
 void heat_colour(double e, uint8_t* rgb) {

@@ -16,7 +16,9 @@
 #include "container/pyramid_file.h"
 #include "core/text.h"
 
-namespace terrain::runtime {
+namespace terrain::build {
+
+using namespace terrain::container;  // the stage below
 namespace {
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -270,4 +272,4 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   return out;
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::build

@@ -5,7 +5,7 @@
 
 #include "container/container.h"
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 const char* error_mode_name(ErrorMode mode) {
   switch (mode) {
@@ -89,4 +89,4 @@ void validate_info(const ContainerInfo& info) {
           "quantisation values must be finite");
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-namespace terrain::runtime::mask_runs {
+namespace terrain::container::mask_runs {
 namespace {
 
 // Reads one varint at runs[pos]; false if it is cut off or longer than 64 bits.
@@ -64,4 +64,4 @@ void expand(const uint8_t* runs, size_t size, uint64_t first, uint64_t count, ui
   }
 }
 
-}  // namespace terrain::runtime::mask_runs
+}  // namespace terrain::container::mask_runs

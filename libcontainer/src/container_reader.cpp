@@ -13,7 +13,7 @@
 #include "container/internal/container_mask.h"
 #include "container/internal/mmap_file.h"
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 using namespace layout;
 
@@ -337,4 +337,4 @@ void Container::verify() const {
   }
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

@@ -16,7 +16,7 @@
 #include "container/internal/container_mask.h"
 #include "container/internal/held_bytes.h"
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 using namespace layout;
 
@@ -305,4 +305,4 @@ void ContainerWriter::finish() {
   }
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

@@ -11,7 +11,7 @@
 
 #include "container/container.h"
 
-namespace terrain::runtime::detail {
+namespace terrain::container::detail {
 namespace {
 
 [[noreturn]] void spill_failure(const std::string& dir, const std::string& what, int err) {
@@ -75,4 +75,4 @@ void HeldBytes::drain(const std::function<void(const uint8_t*, size_t)>& out) {
   spilled_ = 0;
 }
 
-}  // namespace terrain::runtime::detail
+}  // namespace terrain::container::detail

@@ -11,7 +11,7 @@
 
 #include "container/container.h"
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 MappedFile::MappedFile(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
@@ -47,4 +47,4 @@ MappedFile::~MappedFile() {
   if (data_) ::munmap(const_cast<uint8_t*>(data_), size_t(size_));
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

@@ -11,7 +11,7 @@
 #include <limits>
 #include <stdexcept>
 
-namespace terrain::runtime {
+namespace terrain::container {
 namespace {
 
 constexpr uint32_t kBandMagic = 0x54444e42;  // "BNDT"
@@ -177,4 +177,4 @@ size_t PyramidFile::band_of_row(int level, int64_t y) const {
   return lo;
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

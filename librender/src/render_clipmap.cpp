@@ -13,7 +13,9 @@
 
 #include "render/renderer.h"
 
-namespace terrain::runtime {
+namespace terrain::render {
+
+using namespace terrain::runtime;  // the stage below
 
 namespace {
 
@@ -613,4 +615,4 @@ void ClipmapRenderer::read_rgba(std::vector<uint8_t>& out) const {
                      out.begin() + ptrdiff_t(size_t(height_ - 1 - y) * row));
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::render

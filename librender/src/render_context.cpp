@@ -11,7 +11,9 @@
 
 #include "render/renderer.h"
 
-namespace terrain::runtime {
+namespace terrain::render {
+
+using namespace terrain::runtime;  // the stage below
 
 namespace {
 
@@ -89,4 +91,4 @@ std::string HeadlessGL::renderer_name() const {
   return s ? s : "?";
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::render

@@ -5,7 +5,9 @@
 #include "readers/image8.h"
 #include "render/renderer.h"
 
-namespace terrain::runtime {
+namespace terrain::render {
+
+using namespace terrain::runtime;  // the stage below
 
 void write_png_rgba(const std::string& path, int width, int height, const std::vector<uint8_t>& rgba) {
   if (width < 1 || height < 1 || rgba.size() != size_t(width) * size_t(height) * 4)
@@ -18,4 +20,4 @@ void write_png_rgba(const std::string& path, int width, int height, const std::v
   }
 }
 
-}  // namespace terrain::runtime
+}  // namespace terrain::render

@@ -12,6 +12,8 @@
 
 namespace terrain::runtime {
 
+using namespace terrain::container;  // the stage below
+
 struct RegionDecoder::Band {
   std::once_flag once;
   codec::Decoder decoder;

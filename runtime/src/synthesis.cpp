@@ -11,6 +11,8 @@
 #include "container/pyramid_file.h"
 
 namespace terrain::runtime {
+
+using namespace terrain::container;  // the stage below
 namespace {
 
 uint64_t splitmix64(uint64_t& state) {

@@ -15,6 +15,8 @@
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
+using namespace terrain::build;
 
 namespace {
 

@@ -6,8 +6,8 @@
 
 #include "container/container.h"
 
-using terrain::runtime::crc32c;
-using terrain::runtime::crc32c_portable;
+using terrain::container::crc32c;
+using terrain::container::crc32c_portable;
 
 TEST_CASE("crc32c matches the published CRC-32C check value", "[runtime][container][crc]") {
   const char* check = "123456789";

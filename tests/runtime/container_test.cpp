@@ -18,7 +18,7 @@
 #include <vector>
 
 namespace fs = std::filesystem;
-using namespace terrain::runtime;
+using namespace terrain::container;
 using terrain::Error;
 using terrain::ErrorCode;
 

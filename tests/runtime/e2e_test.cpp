@@ -13,6 +13,8 @@
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
+using namespace terrain::build;
 
 namespace {
 

@@ -18,7 +18,7 @@
 #include "readers/terrain_generator.h"
 
 using namespace terrain;
-using namespace terrain::runtime;
+using namespace terrain::container;
 
 namespace {
 

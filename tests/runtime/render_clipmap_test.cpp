@@ -12,6 +12,7 @@
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::render;
 using rendertest::gl;
 
 namespace {

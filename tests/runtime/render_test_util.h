@@ -15,14 +15,14 @@ namespace rendertest {
 
 // One context for the whole test program (inline: every test file shares it, so renderers created
 // by different files never meet a context that is not current).
-inline terrain::runtime::HeadlessGL& gl() {
-  static terrain::runtime::HeadlessGL context;
+inline terrain::render::HeadlessGL& gl() {
+  static terrain::render::HeadlessGL context;
   return context;
 }
 
 // Render options of the crack check: every terrain pixel white, the background black.
-inline terrain::runtime::RenderOptions crack_check_options() {
-  terrain::runtime::RenderOptions opt;
+inline terrain::render::RenderOptions crack_check_options() {
+  terrain::render::RenderOptions opt;
   opt.flat_colour = true;
   opt.background_rgb[0] = opt.background_rgb[1] = opt.background_rgb[2] = 0.0f;
   return opt;
@@ -30,8 +30,8 @@ inline terrain::runtime::RenderOptions crack_check_options() {
 
 // The same with transitions, perimeter snap and stitching off: real cracks at the ring boundaries
 // (the negative control: the crack check must see them).
-inline terrain::runtime::RenderOptions cracked_options() {
-  terrain::runtime::RenderOptions opt = crack_check_options();
+inline terrain::render::RenderOptions cracked_options() {
+  terrain::render::RenderOptions opt = crack_check_options();
   opt.transitions = false;
   opt.snap_perimeter = false;
   opt.stitch = false;
@@ -42,12 +42,12 @@ inline terrain::runtime::RenderOptions cracked_options() {
 // (x, y) metres, yaw 0.41 i, the top of the frame 0.15 rad below the horizon (the frame reaches from
 // below the camera to where the rays meet the ground, hundreds of metres ahead or more). The height
 // above that sample goes to *above_m when given.
-inline terrain::runtime::Camera low_grazing_view(terrain::runtime::HeightSource& source, int i, double x,
-                                                 double y, double* above_m = nullptr) {
+inline terrain::render::Camera low_grazing_view(terrain::runtime::HeightSource& source, int i, double x,
+                                                double y, double* above_m = nullptr) {
   float ground = 0;
   const double g = source.spacing_m();
   source.fill(source.level_count() - 1, terrain::Rect{int64_t(x / g), int64_t(y / g), 1, 1}, &ground, 1);
-  terrain::runtime::Camera cam;
+  terrain::render::Camera cam;
   cam.position[0] = x;
   cam.position[1] = y;
   const double above = 32.0 + 4.0 * (i % 5);

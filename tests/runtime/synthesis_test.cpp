@@ -19,6 +19,9 @@
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
+using namespace terrain::build;
+using namespace terrain::render;
 
 namespace {
 

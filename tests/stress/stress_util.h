@@ -19,6 +19,8 @@ namespace stress {
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
+using namespace terrain::build;
 
 inline Heightmap make_grid(int64_t w, int64_t h, SampleType type, double fill = 0) {
   Heightmap m;

@@ -15,6 +15,7 @@ namespace clipmap_view {
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
 
 namespace {
 

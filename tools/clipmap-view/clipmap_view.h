@@ -35,8 +35,8 @@ struct ViewOptions {
 // What a flight flies over.
 struct Flight {
   const ViewOptions& options;
-  std::shared_ptr<const terrain::runtime::PyramidFile> file, ref_file;  // ref_file: --reference, or null
-  std::shared_ptr<const terrain::runtime::RegionDecoder> decoder;       // source's (per-frame counts)
+  std::shared_ptr<const terrain::container::PyramidFile> file, ref_file;  // ref_file: --reference, or null
+  std::shared_ptr<const terrain::runtime::RegionDecoder> decoder;         // source's (per-frame counts)
   terrain::runtime::RegionDecoderSource& source;  // the pyramid's levels (ground height, default path)
   terrain::runtime::HeightSource& heights;        // what the clipmap shows: source or its synthesis
   terrain::runtime::ClipmapOptions clipmap;
@@ -64,7 +64,7 @@ double image_psnr(const std::vector<uint8_t>& pixels, const std::vector<uint8_t>
 
 // --bench: `reps` full refills of every clipmap level, then one n x n window of the finest level
 // split into U and residual. Prints the tables on stdout; returns the exit status.
-int run_bench(const std::shared_ptr<const terrain::runtime::PyramidFile>& file, double spacing,
+int run_bench(const std::shared_ptr<const terrain::container::PyramidFile>& file, double spacing,
               terrain::runtime::ClipmapOptions options, int reps, bool quiet);
 
 }  // namespace clipmap_view

@@ -20,6 +20,7 @@ namespace clipmap_view {
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::render;
 
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;

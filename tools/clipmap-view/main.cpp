@@ -12,6 +12,7 @@
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
 using namespace clipmap_view;
 
 namespace {

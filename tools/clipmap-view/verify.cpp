@@ -12,6 +12,7 @@ namespace clipmap_view {
 
 using namespace terrain;
 using namespace terrain::runtime;
+using namespace terrain::container;
 
 std::optional<int> open_reference(const Flight& flight, Reference& out) {
   const ViewOptions& o = flight.options;

@@ -13,11 +13,12 @@
 #include "pyramid/pyramid.h"
 #include "readers/heightmap.h"
 
-namespace terrain::runtime {
+namespace terrain::build {
 
 struct BuildFileOptions {
-  ErrorMode mode = ErrorMode::Lossless;  // what target_metres is (stored in the file as given)
-  double target_metres = 0;              // the step, rms or max error asked for, in metres
+  container::ErrorMode mode =
+      container::ErrorMode::Lossless;  // what target_metres is (stored in the file as given)
+  double target_metres = 0;            // the step, rms or max error asked for, in metres
   double quantum_metres = 0;        // level unit for float input (0: 0.01 m); integer input uses its own unit
   int levels = 0;                   // 0: automatic
   uint32_t tile_size = 32;          // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
@@ -48,4 +49,4 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                                    const std::string& metadata_json_extra = "{}",
                                    const BuildProgress& progress = nullptr);
 
-}  // namespace terrain::runtime
+}  // namespace terrain::build

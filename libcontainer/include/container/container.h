@@ -23,7 +23,7 @@
 #include "codec/crc32c.h"
 #include "core/error.h"
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 // ---------------------------------------------------------------------------------------------
 // Checksum used throughout the format: CRC-32C (Castagnoli, reflected polynomial 0x82F63B78,
@@ -263,4 +263,4 @@ class Container {
   uint16_t minor_version_ = 0;
 };
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

@@ -14,7 +14,7 @@
 #include "container/container.h"
 #include "pyramid/pyramid.h"
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 // Streams the builder's output into a ContainerWriter (temporary file until finish()). Bands may
 // arrive with levels interleaved, each level top to bottom; each level's blob is complete once its
@@ -88,4 +88,4 @@ class PyramidFile {
 std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
                                        const std::string& what);
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container

@@ -18,7 +18,7 @@
 #include <sanitizer/lsan_interface.h>
 #endif
 
-namespace terrain::runtime {
+namespace terrain::render {
 
 // Allocations the calling thread makes while one lives are never reported as leaks; other threads'
 // allocations still are. Pauses nest.
@@ -38,4 +38,4 @@ class GlLeakCheckPause {
   GlLeakCheckPause& operator=(const GlLeakCheckPause&) = delete;
 };
 
-}  // namespace terrain::runtime
+}  // namespace terrain::render

@@ -30,7 +30,7 @@
 // Not needed here: kept while tools/clipmap-view.cpp still reaches GlLeakCheckPause through this header.
 #include "render/leak_check.h"
 
-namespace terrain::runtime {
+namespace terrain::render {
 
 struct Camera {
   double position[3] = {0, 0, 1000};  // metres
@@ -96,10 +96,10 @@ class ClipmapRenderer {
   // textures never keep heights that the culling bounds, taken from the clipmap, do not describe.
   // `everything` uploads all levels with data. Throws std::invalid_argument when the clipmap's n or
   // level count differs from the renderer's, std::runtime_error on GL errors.
-  void upload(const Clipmap& clipmap, bool everything = false);
+  void upload(const runtime::Clipmap& clipmap, bool everything = false);
   // Draws the clipmap's active regions into the framebuffer and waits for the GPU (the textures are
   // what the last upload() put there). Throws as upload().
-  RenderStats render(const Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
+  RenderStats render(const runtime::Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
   // Frame as RGBA8, top row first (out resized to width*height*4). Throws std::runtime_error on GL
   // errors.
   void read_rgba(std::vector<uint8_t>& out) const;
@@ -120,4 +120,4 @@ class ClipmapRenderer {
 // path when rgba is not width * height * 4 bytes, std::runtime_error naming it when writing fails.
 void write_png_rgba(const std::string& path, int width, int height, const std::vector<uint8_t>& rgba);
 
-}  // namespace terrain::runtime
+}  // namespace terrain::render

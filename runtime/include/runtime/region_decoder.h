@@ -46,7 +46,8 @@ class RegionDecoder {
   // libcodec tiles its rectangles intersect, and nothing is kept); any other bound keeps at least the
   // most recent tile. `file` must not be null. Throws Error(Corrupt) for a
   // file of more than kMaxLevels levels. Band streams are opened on first use, not here.
-  explicit RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes = size_t(256) << 20);
+  explicit RegionDecoder(std::shared_ptr<const container::PyramidFile> file, size_t cache_bytes = size_t(256)
+                                                                                                  << 20);
   ~RegionDecoder();
 
   // T^_level on rect in level units (int32) into out (row stride out_stride); rect must lie inside
@@ -71,7 +72,7 @@ class RegionDecoder {
   double metres_per_unit() const { return file_->info().vertical_scale; }
   double metres_offset() const { return file_->info().vertical_offset; }
 
-  const PyramidFile& file() const { return *file_; }
+  const container::PyramidFile& file() const { return *file_; }
   RegionStats stats() const;  // counts since construction or the last reset_stats
   void reset_stats();
   void clear_cache();  // drops every cached tile (the next requests decode again)
@@ -85,7 +86,7 @@ class RegionDecoder {
                                             int64_t ty) const;
   void count_decoded(int level, uint64_t tiles, uint64_t samples) const;
 
-  std::shared_ptr<const PyramidFile> file_;
+  std::shared_ptr<const container::PyramidFile> file_;
   size_t cache_capacity_;
   std::vector<std::vector<std::unique_ptr<Band>>> bands_;
   // LRU of decoded residual tiles: most recent at the front; the map points into the list.

@@ -21,9 +21,11 @@
 #include "pyramid/pyramid.h"
 #include "runtime/height_source.h"
 
-namespace terrain::runtime {
-
+namespace terrain::container {
 class PyramidFile;
+}
+
+namespace terrain::runtime {
 
 // ---------------------------------------------------------------------------------------------
 // Noise variance model
@@ -54,7 +56,7 @@ std::vector<double> extrapolate_residual_std(const std::vector<double>& stored_v
 
 // The per-level residual variances (m^2) a pyramid file stores (container ResidualStats, in level
 // units, times metres_per_unit^2), index = level. Reads the file's index only (no decoding).
-std::vector<double> stored_residual_variance_m2(const PyramidFile& file);
+std::vector<double> stored_residual_variance_m2(const container::PyramidFile& file);
 
 // ---------------------------------------------------------------------------------------------
 // The synthesising height source
@@ -125,7 +127,7 @@ std::vector<double> gaussian_noise_table(uint64_t seed, int table_log2);
 // residual variances, times detail_scale (0: zero detail, U alone). Throws std::invalid_argument
 // for a detail_scale that is negative or not finite; `levels` is checked by the SynthesisSource
 // constructor, not here.
-SynthesisOptions synthesis_options_for(const PyramidFile& file, int levels, uint64_t seed,
+SynthesisOptions synthesis_options_for(const container::PyramidFile& file, int levels, uint64_t seed,
                                        double detail_scale = 1.0, ResidualFit* fit = nullptr);
 
 // Noise standard deviations for a pure generator: std0_m at the first added level, then a factor

@@ -10,7 +10,7 @@
 
 #include "core/bytes.h"
 
-namespace terrain::runtime::layout {
+namespace terrain::container::layout {
 
 inline constexpr uint8_t kMagic[8] = {0x89, 'T', 'P', 'Y', 'R', '\r', '\n', 0x1A};
 inline constexpr uint64_t kAlignment = 8;
@@ -68,4 +68,4 @@ using bytes::get_u64;
 
 inline uint64_t align_up(uint64_t v) { return (v + kAlignment - 1) & ~(kAlignment - 1); }
 
-}  // namespace terrain::runtime::layout
+}  // namespace terrain::container::layout

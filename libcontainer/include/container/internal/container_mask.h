@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-namespace terrain::runtime::mask_runs {
+namespace terrain::container::mask_runs {
 
 // Appends v as an unsigned LEB128 varint.
 void put_varint(std::vector<uint8_t>& out, uint64_t v);
@@ -20,4 +20,4 @@ std::string check(const uint8_t* runs, size_t size, uint64_t samples, uint64_t v
 // 0 = void. Runs are scanned from the start: O(runs before the range + count).
 void expand(const uint8_t* runs, size_t size, uint64_t first, uint64_t count, uint8_t* out);
 
-}  // namespace terrain::runtime::mask_runs
+}  // namespace terrain::container::mask_runs

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace terrain::runtime::detail {
+namespace terrain::container::detail {
 
 class HeldBytes {
  public:
@@ -43,4 +43,4 @@ class HeldBytes {
 // Error(WriteFailed) naming `dir`.
 int create_unnamed_file(const std::string& dir);
 
-}  // namespace terrain::runtime::detail
+}  // namespace terrain::container::detail

@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string>
 
-namespace terrain::runtime {
+namespace terrain::container {
 
 class MappedFile {
  public:
@@ -24,4 +24,4 @@ class MappedFile {
   uint64_t size_ = 0;
 };
 
-}  // namespace terrain::runtime
+}  // namespace terrain::container
