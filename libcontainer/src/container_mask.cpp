@@ -3,32 +3,22 @@
 #include <algorithm>
 #include <cstring>
 
+#include "core/bytes.h"
+
 namespace terrain::container::mask_runs {
 namespace {
 
-// Reads one varint at runs[pos]; false if it is cut off or longer than 64 bits.
+// Reads one varint at runs[pos] and moves pos past it; false if it is cut off or beyond 64 bits.
 bool get_varint(const uint8_t* runs, size_t size, size_t& pos, uint64_t& v) {
-  v = 0;
-  for (int shift = 0; shift < 64; shift += 7) {
-    if (pos >= size) return false;
-    const uint8_t b = runs[pos++];
-    const uint64_t bits = uint64_t(b & 0x7F);
-    if (shift == 63 && bits > 1) return false;
-    v |= bits << shift;
-    if (!(b & 0x80)) return true;
-  }
-  return false;
+  const uint8_t* p = runs + pos;
+  const bool ok = bytes::get_varint(p, runs + size, &v);
+  pos = size_t(p - runs);
+  return ok;
 }
 
 }  // namespace
 
-void put_varint(std::vector<uint8_t>& out, uint64_t v) {
-  while (v >= 0x80) {
-    out.push_back(uint8_t(v | 0x80));
-    v >>= 7;
-  }
-  out.push_back(uint8_t(v));
-}
+void put_varint(std::vector<uint8_t>& out, uint64_t v) { bytes::put_varint(out, v); }
 
 std::string check(const uint8_t* runs, size_t size, uint64_t samples, uint64_t voids) {
   size_t pos = 0;

@@ -11,6 +11,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/bytes.h"
+
 namespace terrain::container {
 namespace {
 
@@ -18,22 +20,10 @@ constexpr uint32_t kBandMagic = 0x54444e42;  // "BNDT"
 constexpr size_t kFooterSize = 16;
 constexpr size_t kBandRecordSize = 32;
 
-void put_u64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-void put_u32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
-}
-uint64_t get_u64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-uint32_t get_u32(const uint8_t* p) {
-  uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
+using bytes::get_u32;
+using bytes::get_u64;
+using bytes::put_u32;
+using bytes::put_u64;
 
 }  // namespace
 

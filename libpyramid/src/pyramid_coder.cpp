@@ -4,7 +4,8 @@
 #include <limits>
 #include <stdexcept>
 
-#include "pyramid/internal/pyramid_varint.h"
+#include "core/bytes.h"
+#include "pyramid/internal/zigzag.h"
 #include "pyramid/pyramid.h"
 
 namespace terrain {
@@ -46,7 +47,7 @@ std::vector<uint8_t> UniformQuantizerCoder::encode(const int32_t* residual, int6
     if (z < 0x80)
       *p++ = uint8_t(z);
     else
-      p = detail::put_varint(p, z);
+      p = bytes::put_varint(p, z);
   }
   out.resize(size_t(p - out.data()));
   return out;
@@ -58,7 +59,7 @@ bool UniformQuantizerCoder::decode(const uint8_t* data, size_t n, int64_t w, int
   const int64_t s = step_;
   for (int64_t k = 0; k < w * h; ++k) {
     uint64_t v;
-    if (!detail::get_varint(&p, end, &v) || v > 0xffffffffu) return false;
+    if (!bytes::get_varint(p, end, &v, 0xffffffffu)) return false;
     const int64_t q = detail::unzigzag(uint32_t(v));
     out[k] = int32_t(
         std::clamp<int64_t>(q * s, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()));

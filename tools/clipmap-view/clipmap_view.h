@@ -10,8 +10,10 @@
 #include <string>
 #include <vector>
 
+#include "render/leak_check.h"
 #include "runtime/clipmap.h"
 #include "runtime/region_decoder.h"
+#include "runtime/screen_error.h"
 
 namespace clipmap_view {
 

@@ -27,8 +27,6 @@
 #include <vector>
 
 #include "runtime/clipmap.h"
-// Not needed here: kept while tools/clipmap-view.cpp still reaches GlLeakCheckPause through this header.
-#include "render/leak_check.h"
 
 namespace terrain::render {
 

@@ -37,8 +37,6 @@
 
 #include "pyramid/pyramid.h"
 #include "runtime/height_source.h"
-// Not needed here: kept while callers still reach the screen-space error through this header.
-#include "runtime/screen_error.h"
 
 namespace terrain::runtime {
 

@@ -1,83 +1,14 @@
-// Verification of the clipmap against the original data: the original input's levels T_l in
-// memory (the reference flight's height source) and the screen-space geometric error of
-// the rendered levels (L&H 2004 §9, Table 2).
+// The screen-space geometric error of the rendered levels against the original data (L&H 2004 §9,
+// Table 2) and the clipmap size it asks for.
+#include "runtime/screen_error.h"
+
 #include <algorithm>
 #include <cassert>
 #include <cmath>
 #include <stdexcept>
 
-#include "pyramid/level_units.h"
-#include "pyramid/reference.h"
-#include "runtime/clipmap.h"
 
 namespace terrain::runtime {
-
-GridHeightSource::GridHeightSource(std::vector<GridSize> sizes, std::vector<std::vector<float>> levels,
-                                   double spacing_m)
-    : sizes_(std::move(sizes)), levels_(std::move(levels)), spacing_m_(spacing_m) {
-  if (sizes_.empty() || sizes_.size() != levels_.size())
-    throw std::invalid_argument("GridHeightSource: one grid per level needed");
-  for (size_t l = 0; l < sizes_.size(); ++l)
-    if (sizes_[l].width < 1 || sizes_[l].height < 1 ||
-        levels_[l].size() != size_t(sizes_[l].width * sizes_[l].height))
-      throw std::invalid_argument("GridHeightSource: level " + std::to_string(l) +
-                                  " has the wrong number of samples");
-  if (!(spacing_m_ > 0) || !std::isfinite(spacing_m_))
-    throw std::invalid_argument("GridHeightSource: spacing must be a positive number of metres");
-}
-
-void GridHeightSource::fill(int level, const Rect& rect, float* out, int64_t out_stride) {
-  const GridSize s = level_size(level);
-  const float* z = levels_[size_t(level)].data();
-  for (int64_t y = 0; y < rect.height; ++y) {
-    const float* row = z + std::clamp<int64_t>(rect.y0 + y, 0, s.height - 1) * s.width;
-    float* o = out + y * out_stride;
-    for (int64_t x = 0; x < rect.width; ++x) o[x] = row[std::clamp<int64_t>(rect.x0 + x, 0, s.width - 1)];
-  }
-}
-
-GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
-                                 int level_count, const std::vector<double>& filter_11x11, double spacing_m) {
-  const Heightmap map = read_heightmap(input, read_options);
-  if (map.width() != finest.width || map.height() != finest.height)
-    throw std::invalid_argument(input + ": " + std::to_string(map.width()) + "x" +
-                                std::to_string(map.height()) +
-                                " samples, but the pyramid's finest level is " +
-                                std::to_string(finest.width) + "x" + std::to_string(finest.height));
-  const LevelUnits units = level_units(map.info, 0);
-  BuildOptions bo;
-  bo.level_count = level_count;
-  bo.value_scale = units.value_scale;
-  bo.threads = 1;
-  if (filter_11x11.size() == size_t(DownsampleFilter::kSize * DownsampleFilter::kSize)) {
-    // The compressed file's D, so that the reference's coarse levels are the T_l it approximates.
-    bo.use_fixed_filter = true;
-    bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
-    std::copy(filter_11x11.begin(), filter_11x11.end(), bo.fixed_filter.taps.begin());
-  }
-  const ReferenceLevels reference = reference_levels(map, bo);
-  if (int(reference.levels.size()) != level_count)
-    throw std::invalid_argument(input + ": the reference pyramid has " +
-                                std::to_string(reference.levels.size()) + " levels, expected " +
-                                std::to_string(level_count));
-  const double metres_per_unit = map.info.vertical_scale / units.value_scale,
-               offset = map.info.vertical_offset;
-  std::vector<std::vector<float>> levels(static_cast<size_t>(level_count));
-  for (int l = 0; l < level_count; ++l) {
-    const std::vector<int32_t>& r = reference.levels[size_t(l)];
-    levels[size_t(l)].resize(r.size());
-    for (size_t i = 0; i < r.size(); ++i) levels[size_t(l)][i] = float(r[i] * metres_per_unit + offset);
-  }
-  std::vector<uint8_t> valid = map.valid;
-  if (!valid.empty()) {  // voids read as 0 m, as RegionDecoderSource gives them
-    std::vector<float>& f = levels.back();
-    for (size_t i = 0; i < f.size(); ++i)
-      if (!valid[i]) f[i] = 0.0f;
-  }
-  GridHeightSource src(reference.sizes, std::move(levels), spacing_m);
-  src.finest_valid = std::move(valid);
-  return src;
-}
 
 double triangle_size_px(int width, int height, double fov_y_deg, int n) {
   const double tan_half_h = std::tan(fov_y_deg * M_PI / 360.0) * double(width) / double(height);
