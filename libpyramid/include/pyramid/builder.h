@@ -1,0 +1,127 @@
+// The closed-loop residual pyramid of Losasso & Hoppe 2004 (section 5), built streamed out of core:
+// T_{l-1} = round(D(T_l)), R_l = T_l - U(T^_{l-1}), T^_l = U(T^_{l-1}) + decoded R_l.
+//
+// Levels are numbered coarse to fine: level 0 is the coarsest, level m (= level_count-1) the input.
+// Every level is an int32 grid in the input's native units (times BuildOptions::value_scale), so
+// that a quantiser step of 1 makes the whole pipeline exactly lossless.
+//
+// Extent rule (any size, rectangular, tiny): coarse extent = ceil(fine/2) per axis, and coarse
+// sample i sits on fine sample 2i (grid-registered: 1201->601->301->151, 1025->513->257,
+// 7->4->2->1, 1->1). See docs/pyramid.md for the boundary rules of U and D.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "pyramid/downsample.h"
+#include "pyramid/filter_fit.h"
+#include "pyramid/levels.h"
+#include "pyramid/residual_coder.h"
+#include "readers/heightmap.h"
+
+namespace terrain {
+
+// Builder
+
+struct BuildOptions {
+  int level_count = 0;              // 0: automatic (see pyramid_level_sizes)
+  int64_t min_coarsest_side = 128;  // automatic level count stops before the longer side drops below
+  double value_scale = 1.0;         // level value = round(native * value_scale); integer inputs must
+                                    // give integers (else the build fails); float inputs are rounded
+  double value_offset = 0.0;        // an integer subtracted after scaling: level value =
+                                    // round(native * value_scale) - value_offset; keeps inputs far
+                                    // from zero (1e6 m, int32 millimetres) inside the coder's range
+  bool use_fixed_filter = false;    // true: use `fixed_filter` instead of fitting D
+  DownsampleFilter fixed_filter = DownsampleFilter::default_filter();
+  FilterFitOptions fit;
+  int threads = 2;              // results are bit-identical for every thread count
+  int64_t fill_band_rows = 64;  // nodata push-pull works on bands of this many input rows
+  int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
+};
+
+// Everything a decoder needs besides the per-band bytes.
+struct PyramidHeader {
+  std::vector<GridSize> levels;  // coarsest first
+  DownsampleFilter filter;       // the D used (informative: decoding needs only U)
+  int64_t band_rows = 0;         // coder band height at the finest level (halved per coarser level)
+  double value_scale = 1.0;
+  GridInfo input;  // the input's description
+};
+
+// What the builder measured on one level while coding it.
+struct LevelBuildStats {
+  GridSize size;
+  double residual_rms = 0;  // of R_l = T_l - U(T^_{l-1}) (T_0 - 0 for the coarsest)
+  int64_t residual_max_abs = 0;
+  double error_rms = 0;  // of T_l - T^_l (valid samples at the finest level)
+  int64_t error_max_abs = 0;
+  uint64_t bytes = 0;  // coded residual bytes
+};
+
+struct BuildResult {
+  PyramidHeader header;
+  FilterFitReport filter_report;
+  std::vector<LevelBuildStats> levels;  // coarsest first
+  int64_t void_count = 0;
+  // Wall time: seconds_pass_input = fitting D; seconds_pass_residual = the rest of the streaming build
+  // (read, D cascade, closed loop).
+  double seconds_pass_input = 0, seconds_pass_residual = 0;
+  std::vector<std::string> log;  // human-readable build log (filter choice, fallbacks)
+};
+
+// Receives the output as it is produced: begin() once the filter is known, then the coded bands,
+// levels interleaved, each level top to bottom. Before each finest-level band, mask_rows() gives
+// the validity of its rows; whether the input has voids at all is known only at the end, so a
+// sink that stores a mask decides what to keep once every row has arrived. reconstructed_rows()
+// calls may come at any time (even before begin()), each level top to bottom. Ordering levels for
+// a file is the sink's business (PyramidFileWriter does it).
+class PyramidSink {
+ public:
+  virtual ~PyramidSink() = default;
+  virtual void begin(const PyramidHeader& header) { (void)header; }
+  virtual void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) = 0;
+  // Validity of finest-level rows y0..y0+rows-1, rows x width bytes (1 = data, 0 = void).
+  virtual void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) {
+    (void)y0, (void)rows, (void)valid;
+  }
+  // The decoder-exact reconstruction T^_level of rows y0.. (only called when wants_reconstruction()).
+  virtual bool wants_reconstruction(int level) const {
+    (void)level;
+    return false;
+  }
+  virtual void reconstructed_rows(int level, int64_t y0, int64_t rows, int64_t width, const int32_t* data) {
+    (void)level, (void)y0, (void)rows, (void)width, (void)data;
+  }
+};
+
+// Keeps nothing but the number of coded bytes: for trial builds and benchmarks, which need the
+// figures of a build and not its output. Not thread-safe (the builder calls its sink from one thread).
+class CountingSink final : public PyramidSink {
+ public:
+  void band(int, int64_t, int64_t, std::vector<uint8_t>&& bytes) override { band_bytes += bytes.size(); }
+  uint64_t band_bytes = 0;  // coded residual bytes of every level
+};
+
+// Builds the pyramid from the input streamed through `input`: one pass, nothing written but what
+// the sink writes. Level l lags the input by about 8 * 2^l of its rows, so memory is
+// O(width * 2^levels), independent of the input height. Throws Error for I/O problems
+// (naming the file) and std::invalid_argument for unusable input or options.
+BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder,
+                          PyramidSink& sink);
+
+// The same builder fed from memory (the grid is streamed from `map` through a BandReader).
+BuildResult build_pyramid(const Heightmap& map, const BuildOptions& options, ResidualCoder& coder,
+                          PyramidSink& sink);
+
+// The integer grid the builder codes as its finest level: native value * value_scale, rounded, with
+// the voids filled by push-pull exactly as the builder fills them; `valid` receives the mask.
+std::vector<int32_t> to_level_grid(const Heightmap& map, const BuildOptions& options,
+                                   std::vector<uint8_t>* valid = nullptr);
+
+// A BandReader over an in-memory grid, handing out at most max_rows_per_call rows per call.
+std::unique_ptr<BandReader> make_memory_band_reader(const Heightmap& map,
+                                                    int64_t max_rows_per_call = 1 << 30);
+
+}  // namespace terrain

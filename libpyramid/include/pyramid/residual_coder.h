@@ -1,0 +1,44 @@
+// How the builder codes residual bands: the interface the real coder implements (build/ptc_coder.h,
+// through libcodec) and a uniform quantiser for tests and references.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace terrain {
+
+// Residual coding interface (the real coder lives in libcodec and implements this).
+
+class ResidualCoder {
+ public:
+  virtual ~ResidualCoder() = default;
+  // Rows per band the coder wants at the finest level: the builder codes each level as consecutive,
+  // independent bands (the last one shorter), level l of m+1 with max(1, band_rows >> (m - l)) rows
+  // so that coarse bands do not hold back the finer levels. Each band is a whole image to the coder.
+  virtual int64_t band_rows() const = 0;
+  // encode/decode may be called concurrently from several threads (one band each).
+  // Codes one band of integer residuals (w x h, row-major) and writes into `reconstructed` the exact
+  // values decode() will produce from the returned bytes.
+  virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h,
+                                      int32_t* reconstructed) = 0;
+  // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).
+  virtual bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) = 0;
+};
+
+// Uniform scalar quantiser, one absolute step for every level: q = sign(r) * floor((|r| + S/2) / S),
+// reconstruction q*S, so |r - r^| <= S/2 (step 1 is lossless). Bytes: zigzag LEB128 varints of q.
+class UniformQuantizerCoder final : public ResidualCoder {
+ public:
+  explicit UniformQuantizerCoder(int32_t step, int64_t band_rows = 64);
+  int64_t band_rows() const override { return band_rows_; }
+  std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed) override;
+  bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;
+  int32_t step() const { return step_; }
+
+ private:
+  int32_t step_;
+  int64_t band_rows_;
+};
+
+}  // namespace terrain
