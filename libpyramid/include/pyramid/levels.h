@@ -28,5 +28,4 @@ inline int64_t coarse_extent(int64_t fine) { return (fine + 1) / 2; }
 // longer side would still be >= min_coarsest_side.
 std::vector<GridSize> pyramid_level_sizes(GridSize finest, int level_count, int64_t min_coarsest_side = 128);
 
-
 }  // namespace terrain
