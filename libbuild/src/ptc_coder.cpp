@@ -39,9 +39,13 @@ PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
 std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
                                               int32_t* reconstructed) {
   const codec::EncodeOptions copts = to_codec(options_);
-  std::vector<uint8_t> out(codec::encode_bound(w, h, copts));
+  // The bound is ~16 bytes per sample and a band's stream ~0.3: a fresh zero-filled buffer per band
+  // cost 8-14% of the build's CPU in page faults, so each thread keeps one and copies out the bytes.
+  thread_local std::vector<uint8_t> buffer;
+  const size_t bound = codec::encode_bound(w, h, copts);
+  if (buffer.size() < bound) buffer.resize(bound);
   size_t written = 0;
-  const codec::Status s = codec::encode(residual, w, w, h, copts, out.data(), out.size(), &written,
+  const codec::Status s = codec::encode(residual, w, w, h, copts, buffer.data(), bound, &written,
                                         thread_scratch(), reconstructed, w);
   if (s != codec::Status::Ok) {
     int64_t largest = 0;
@@ -50,8 +54,7 @@ std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w
                              "x" + std::to_string(h) + " band, largest |residual| " +
                              std::to_string(largest) + "): " + codec::status_name(s));
   }
-  out.resize(written);
-  return out;
+  return std::vector<uint8_t>(buffer.begin(), buffer.begin() + ptrdiff_t(written));
 }
 
 bool PtcResidualCoder::decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) {
