@@ -1,0 +1,98 @@
+"""Tests of the Python module `terrain` (python/terrain_module.cpp), run by ctest through pytest."""
+import os
+
+import numpy as np
+import pytest
+
+import terrain
+
+DATA = os.environ.get("TERRAIN_SHARED_DATA", "")
+RAINIER = os.path.join(DATA, "srtm3_N46W122_rainier_adams_cascades.hgt")
+
+
+def shared(path):
+    """A shared DEM; missing data fails in CI and skips elsewhere."""
+    if not os.path.exists(path):
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"shared data missing in CI: {path}")
+        pytest.skip(f"shared data missing: {path}")
+    return path
+
+
+def synthetic(h, w, seed=1):
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    return (1000 + 300 * np.sin(x / 17.0) * np.cos(y / 23.0) + rng.normal(0, 3, (h, w))).astype(np.float64)
+
+
+def test_lossless_int16_array_round_trips_exactly(tmp_path):
+    grid = np.round(synthetic(203, 301)).astype(np.int16)
+    report = terrain.build(grid, str(tmp_path / "a.pyr"), lossless=True)
+    assert report["finest_max_m"] == 0
+    p = terrain.open(str(tmp_path / "a.pyr"))
+    assert p.levels[-1] == (301, 203)
+    for (cw, ch), (fw, fh) in zip(p.levels, p.levels[1:]):  # ceil-half extent rule
+        assert (cw, ch) == ((fw + 1) // 2, (fh + 1) // 2)
+    a = p.read(p.level_count - 1, 0, 0, 301, 203)
+    assert a.dtype == np.float32 and a.shape == (203, 301)
+    np.testing.assert_array_equal(a, grid.astype(np.float32))
+    assert p.info["error_mode"] == "lossless"
+
+
+def test_window_equals_the_same_part_of_the_whole_level(tmp_path):
+    report = terrain.build(synthetic(260, 190, 2), str(tmp_path / "w.pyr"), step=2.0)
+    assert 0 < report["finest_rms_m"] < 2.0  # a transform step: the error is below the step in rms
+    p = terrain.open(str(tmp_path / "w.pyr"))
+    for level in range(p.level_count):
+        w, h = p.levels[level]
+        whole = p.read(level, 0, 0, w, h)
+        x, y, ww, hh = w // 5, h // 3, max(1, w // 2), max(1, h // 2)
+        np.testing.assert_array_equal(p.read(level, x, y, ww, hh), whole[y:y + hh, x:x + ww])
+
+
+def test_nan_marks_voids_and_rms_target_holds(tmp_path):
+    grid = synthetic(300, 280, 3)
+    grid[40:60, 100:130] = np.nan
+    report = terrain.build(grid, str(tmp_path / "v.pyr"), rms=1.0)
+    assert 0.9 <= report["finest_rms_m"] <= 1.1
+    p = terrain.open(str(tmp_path / "v.pyr"))
+    a = p.read(p.level_count - 1, 0, 0, 280, 300)
+    assert np.isnan(a[40:60, 100:130]).all()
+    valid = ~np.isnan(grid)
+    assert not np.isnan(a[valid]).any()
+    assert p.info["void_count"] == 20 * 30
+    rms = float(np.sqrt(np.mean((a[valid] - grid[valid]) ** 2)))
+    assert rms <= 1.1
+
+
+def test_srtm_tile_geotransform_and_exact_lossless_values(tmp_path):
+    path = shared(RAINIER)
+    terrain.build(path, str(tmp_path / "r.pyr"), lossless=True)
+    p = terrain.open(str(tmp_path / "r.pyr"))
+    # N46W122: the north-west sample centre is at 47N 122W, samples 3 arc-seconds apart.
+    x0, dx, rx, y0, ry, dy = p.geotransform
+    assert (rx, ry) == (0.0, 0.0)
+    assert dx == pytest.approx(3 / 3600) and dy == pytest.approx(-3 / 3600)
+    assert x0 == pytest.approx(-122 - 1.5 / 3600) and y0 == pytest.approx(47 + 1.5 / 3600)
+    raw = np.fromfile(path, dtype=">i2").reshape(1201, 1201).astype(np.float32)
+    np.testing.assert_array_equal(p.read(p.level_count - 1, 100, 250, 300, 200), raw[250:450, 100:400])
+
+
+def test_errors_carry_the_library_code(tmp_path):
+    with pytest.raises(terrain.Error) as missing:
+        terrain.open(str(tmp_path / "missing.pyr"))
+    assert missing.value.code == "not found" and "missing.pyr" in str(missing.value)
+    junk = tmp_path / "junk.pyr"
+    junk.write_bytes(b"not a pyramid at all, just text" * 4)
+    with pytest.raises(terrain.Error) as bad:
+        terrain.open(str(junk))
+    assert bad.value.code == "unknown type or format"
+    terrain.build(np.zeros((40, 40), np.int16), str(tmp_path / "z.pyr"))
+    p = terrain.open(str(tmp_path / "z.pyr"))
+    with pytest.raises(terrain.Error) as outside:
+        p.read(p.level_count - 1, 30, 30, 20, 20)
+    assert outside.value.code == "invalid option"
+    with pytest.raises(terrain.Error):
+        terrain.build(np.zeros((4, 4, 4)), str(tmp_path / "cube.pyr"))
+    with pytest.raises(terrain.Error):
+        terrain.build(np.zeros((8, 8)), str(tmp_path / "two.pyr"), rms=1.0, step=2.0)
