@@ -1,6 +1,6 @@
-// Prototype (not built by CMake): bits of a static-table context coder for libcodec's tile
-// coefficients against the real RLGR stream (codec::encode), on one SRTM .hgt (1201 x 1201) at one
-// step and tile size. Same transform, band steps and reconstruction as libcodec; the levels are
+// Prototype (built as experiments/entropy_bits, not installed): bits of a static-table context coder for
+// libcodec's tile coefficients against the real RLGR stream (codec::encode), on one SRTM .hgt (1201 x 1201)
+// at one step and tile size. Same transform, band steps and reconstruction as libcodec; the levels are
 // quantised with a dead-zone offset per context class (fixed 3/8 by default), so the comparison is
 // made at equal rms: the prototype's step is bisected until its rms matches RLGR's.
 // Model: every coefficient is one token of the hybrid-integer alphabet (m < 16: m; else 16 + 2(n - 4)
@@ -10,9 +10,9 @@
 // normalised to 2^12 and clustered greedily with an estimated table cost (8 bits + 9 per used token),
 // i.e. the ideal cost of a static rANS coder with tables stored once per stream. Per tile: the index
 // entry (5.5 bytes, both coders) and PER_TILE_BITS (default 36: one 32-bit rANS state + padding).
-// Build: g++ -std=c++20 -O2 -Ilibcodec/include -Ilibcore/include tools/experiments/entropy_bits.cpp
-//          build/libcodec/libcodec.a build/libcore/libcore.a -o /tmp/entropy-bits
-// Run:   [PER_TILE_BITS=N] /tmp/entropy-bits DEM.hgt STEP TILE [CONTEXT [OFFSET_QUIET OFFSET_BUSY [RAMP]]]
+// Build: cmake --build build --target entropy_bits
+// Run:   [PER_TILE_BITS=N] build/experiments/entropy_bits DEM.hgt STEP TILE [CONTEXT [OFFSET_QUIET
+// OFFSET_BUSY [RAMP]]]
 //        CONTEXT 0: l + t + acc/2 (default), 1: l + t, 2: acc, 3: l + t + acc/2 rounded; the dead-zone
 //        offset goes linearly from OFFSET_QUIET (class 0) to OFFSET_BUSY (class >= RAMP, default 4).
 #include <algorithm>
