@@ -1,6 +1,6 @@
-// Peer-codec benchmark harness: thin wrappers of the Debian-packaged peer codecs (OpenJPEG, jxrlib,
-// CharLS, LERC, ZFP, zstd, and our own libcodec) behind one interface, plus the measurement loop
-// (codec time only, one thread, best of N) and the error metrics every peer is judged by.
+// Peer-codec benchmark harness: thin wrappers of the Debian-packaged peer codecs (OpenJPEG, OpenJPH,
+// libjxl, jxrlib, CharLS, LERC, ZFP, zstd, and our own libcodec) behind one interface, plus the measurement
+// loop (codec time only, one thread, best of N) and the error metrics every peer is judged by.
 //
 // The benchmark codes int16-range integer grids: each Peer gets the same Image16 and must return
 // exactly width*height decoded samples; errors are measured by the harness, never by the peer.
