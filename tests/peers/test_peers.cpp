@@ -1,12 +1,15 @@
 // terrain-bench's HTJ2K (OpenJPH) and JPEG XL (libjxl) peers: exact round trips where they claim
 // lossless, declared bounds kept, and the HTJ2K step sweep ordered as its labels promise, on a
-// synthetic grid reaching both int16 extremes (signedness and offsets) and on a real SRTM crop.
+// synthetic grid reaching both int16 extremes (signedness and offsets) and on a real SRTM crop; and
+// the report's HTJ2K table, from a quick terrain-bench run on a small raw grid.
 #include <peers.h>
 #include <readers/heightmap.h>
 
 #include <algorithm>
 #include <cmath>
+#include <regex>
 
+#include "io/io_test_util.h"
 #include "shared_data.h"
 
 namespace {
@@ -130,4 +133,51 @@ TEST_CASE("htj2k and jpegxl: exact and within bounds on a Rainier crop, lossless
       }
     if (std::string(name) == "htj2k") check_htj2k_steps(*peer, img, results);
   }
+}
+
+TEST_CASE("terrain-bench --markdown: the HTJ2K table has a ratio to HTJ2K and to the best peer per target") {
+  iotest::TempDir dir;
+  // Rolling hills of 0-1400 m with metre noise, as int16 raw with a sidecar.
+  const int width = 200, height = 150;
+  std::vector<uint8_t> bytes;
+  uint32_t state = 3;
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      state = state * 1664525u + 1013904223u;
+      const auto h = int16_t(
+          std::lround(700 + 600 * std::sin(x / 17.0) * std::cos(y / 23.0) + 2.0 * x + double(state >> 30)));
+      bytes.push_back(uint8_t(uint16_t(h) & 0xff));
+      bytes.push_back(uint8_t(uint16_t(h) >> 8));
+    }
+  iotest::write_file(dir.file("hills.raw"), bytes);
+  iotest::write_file(dir.file("hills.json"),
+                     std::string("{\"width\": 200, \"height\": 150, \"type\": \"int16\"}"));
+  const iotest::ToolResult r =
+      iotest::run_tool(dir, {"peers/terrain-bench",
+                             {"--quick", "--threads", "1", "--peers", "htj2k,jpegxl,charls", "--work-dir",
+                              dir.file(""), "--markdown", dir.file("bench.md"), dir.file("hills.raw")}});
+  INFO(r.err);
+  REQUIRE(r.status == 0);
+  const auto md_bytes = iotest::read_file(dir.file("bench.md"));
+  const std::string md(md_bytes.begin(), md_bytes.end());
+  const size_t section = md.find("## Pyramid against HTJ2K and the best peer");
+  REQUIRE(section != std::string::npos);
+  const size_t row = md.find("\n| hills |", section);
+  REQUIRE(row != std::string::npos);
+  const std::string line = md.substr(row + 1, md.find('\n', row + 1) - row - 1);
+  INFO(line);
+  // DEM, five targets, three speed columns.
+  std::vector<std::string> cells;
+  for (size_t at = 2; at < line.size();) {
+    const size_t end = line.find(" |", at);
+    cells.push_back(line.substr(at, end - at));
+    at = end + 3;
+  }
+  REQUIRE(cells.size() == 9);
+  // Lossless: both the pyramid and HTJ2K's 5/3 are exact, so both ratios exist.
+  CHECK(
+      std::regex_match(cells[1], std::regex(R"([0-9]+\.[0-9]{2} / [0-9]+\.[0-9]{2} (htj2k|jpegxl|charls))")));
+  // JPEG XL's lossless rate is its one figure; HTJ2K's decode speed comes as 9/7 / 5/3.
+  CHECK(std::regex_match(cells[7], std::regex(R"([0-9.]+ / [0-9.]+)")));
+  CHECK(std::regex_match(cells[8], std::regex(R"([0-9.]+)")));
 }

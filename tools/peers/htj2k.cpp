@@ -92,17 +92,11 @@ class Htj2kPeer final : public Peer {
   bool lossless_capable() const override { return true; }
   std::vector<Setting> sweep(bool quick, double unit_m) const override {
     const std::vector<double> metres =
-        quick ? std::vector<double>{0.5, 1, 2, 4, 8, 16}
+        quick ? std::vector<double>{0.5, 1, 2, 4, 8, 16, 32}
               : std::vector<double>{0.25, 0.5, 0.75, 1, 1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48};
-    std::vector<Setting> out;
-    for (double m : metres) {
-      const double step = m / unit_m;
-      char label[48];
-      std::snprintf(label, sizeof label, "9/7 step=%gu", step);
-      out.push_back({label, step, kLossy97, -1});
-    }
-    out.push_back({"5/3 lossless", 0, kLossless53, 0});
-    return out;
+    std::vector<double> steps;  // sample units
+    for (double m : metres) steps.push_back(m / unit_m);
+    return wavelet_sweep(steps, "9/7 step=%gu", kLossy97, kLossless53);
   }
 
   void encode(const Image16& img, const Setting& setting, Bytes& out) override {
