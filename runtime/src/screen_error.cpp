@@ -7,7 +7,6 @@
 #include <cmath>
 #include <stdexcept>
 
-
 namespace terrain::runtime {
 
 double triangle_size_px(int width, int height, double fov_y_deg, int n) {
