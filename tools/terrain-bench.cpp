@@ -66,8 +66,9 @@ std::optional<int> parse_args(int argc, char** argv, Options& o) {
       "terrain-bench", "[options] [FILE...]",
       "Run time against error. For each height grid: this project's whole pyramid (build_pyramid_file,\n"
       "then the region decoder) at a sweep of rms and max-error targets and lossless; and the peer\n"
-      "codecs (OpenJPEG JPEG 2000, jxrlib JPEG XR, CharLS JPEG-LS, LERC, ZFP, zstd, and libcodec alone as\n"
-      "one level) over each codec's parameter sweep, one thread, codec time only.\n"
+      "codecs (OpenJPEG JPEG 2000, OpenJPH HTJ2K, libjxl JPEG XL lossless, jxrlib JPEG XR, CharLS\n"
+      "JPEG-LS, LERC, ZFP, zstd, and libcodec alone as one level) over each codec's parameter sweep,\n"
+      "one thread, codec time only.\n"
       "Writes a markdown summary to stdout (or BENCHMARKS.md with --markdown).");
   p.rest("FILE",
          "height grids; default: every .hgt and .png in the shared data directory ($TERRAIN_DATA_DIR,\n"
@@ -426,6 +427,121 @@ void write_codec_goals(std::ostream& os, const std::vector<Row>& rows,
   os << "\n\n";
 }
 
+// An error target of the report's columns.
+struct Target {
+  enum Kind { Lossless, Rms, Max } kind;
+  double metres;
+  std::string heading() const {
+    return kind == Lossless ? "lossless" : (kind == Rms ? "rms " : "max ") + fmt("%g", metres) + " m";
+  }
+};
+
+// Lossless, then the summary's rms and max-error targets.
+std::vector<Target> summary_targets() {
+  std::vector<Target> t{{Target::Lossless, 0}};
+  for (double m : kRmsTargets) t.push_back({Target::Rms, m});
+  for (double m : kMaxTargets) t.push_back({Target::Max, m});
+  return t;
+}
+
+// Bits/sample of a codec at target t (-1 when its sweeps do not reach it).
+double bits_at(const Curve& c, const Target& t) {
+  if (t.kind == Target::Lossless) return c.lossless;
+  return peers::bits_at_error(t.kind == Target::Rms ? c.by_rms : c.by_max, t.metres);
+}
+
+// The external peers' curves on one DEM.
+struct PeerField {
+  std::vector<Curve> curves;
+  std::vector<std::string> names;
+  // The cheapest peer at t: its bits/sample (-1 when no peer reaches t) and its name.
+  std::pair<double, std::string> best(const Target& t) const {
+    std::pair<double, std::string> out{-1.0, ""};
+    for (size_t i = 0; i < curves.size(); ++i) {
+      const double b = bits_at(curves[i], t);
+      if (b > 0 && (out.first < 0 || b < out.first)) out = {b, names[i]};
+    }
+    return out;
+  }
+};
+
+PeerField external_peers(const std::vector<Row>& rows, const std::string& file,
+                         const std::vector<std::string>& codec_order) {
+  PeerField field;
+  for (const std::string& codec : codec_order)
+    if (is_external_peer(codec)) {
+      Curve c = curve_of(rows, file, codec);
+      if (c.any) field.curves.push_back(std::move(c)), field.names.push_back(codec);
+    }
+  return field;
+}
+
+// Median full-decode speed (Ms per CPU-second) of a codec's settings that declare losslessness
+// (bound 0), or of its other settings; -1 when there are none.
+double median_decode_msps(const std::vector<Row>& rows, const std::string& file, const std::string& codec,
+                          bool lossless) {
+  std::vector<double> v;
+  for (const Row& r : rows)
+    if (r.file == file && r.codec == codec && r.error.empty() && (r.bound == 0) == lossless &&
+        r.result.decode_cpu_seconds > 0)
+      v.push_back(msps(double(r.width * r.height), r.result.decode_cpu_seconds));
+  return median(v);
+}
+
+constexpr const char* kHtj2k = "htj2k";
+constexpr const char* kJpegXl = "jpegxl";
+
+// Pyramid coding v3: the whole pyramid against HTJ2K (the fast transform anchor) and against the
+// best peer at the targets, with the decode speeds side by side.
+void write_htj2k_comparison(std::ostream& os, const std::vector<Row>& rows,
+                            const std::vector<std::string>& file_order,
+                            const std::vector<std::string>& codec_order) {
+  if (std::find(codec_order.begin(), codec_order.end(), kHtj2k) == codec_order.end() ||
+      std::find(codec_order.begin(), codec_order.end(), kPyramid) == codec_order.end())
+    return;
+  const std::vector<Target> targets{
+      {Target::Lossless, 0}, {Target::Rms, 1}, {Target::Rms, 2}, {Target::Max, 2}, {Target::Max, 5}};
+  os << "## Pyramid against HTJ2K and the best peer (pyramid coding v3)\n\n"
+     << "Cell: whole pyramid bits/sample ÷ HTJ2K (OpenJPH) bits/sample at that error / ÷ the best peer's "
+        "(which peer); below 1 the pyramid is smaller. HTJ2K's lossless is its 5/3 reversible mode, its "
+        "lossy points the 9/7 quantisation-step sweep, judged by measured rms and max |error|. Decode: "
+        "million finest samples per CPU-second, one thread, median over the lossy settings / the lossless "
+        "one (pyramid: the region decoder reconstructing the finest level whole).\n\n"
+     << "| DEM";
+  for (const Target& t : targets) os << " | " << t.heading();
+  os << " | pyramid decode Ms/s | HTJ2K decode Ms/s (9/7 / 5/3) | JPEG XL decode Ms/s |\n|---";
+  for (size_t i = 0; i < targets.size() + 3; ++i) os << "|---";
+  os << "|\n";
+  const auto ratio_cell = [](double r) { return r < 0 ? std::string("—") : fmt("%.2f", r); };
+  const auto speed_cell = [](double v) { return v < 0 ? std::string("—") : fmt("%.1f", v); };
+  std::vector<std::vector<double>> by_htj2k(targets.size()), by_best(targets.size());
+  for (const std::string& file : file_order) {
+    const Curve ours = curve_of(rows, file, kPyramid), htj2k = curve_of(rows, file, kHtj2k);
+    if (!ours.any) continue;
+    const PeerField field = external_peers(rows, file, codec_order);
+    os << "| " << file;
+    for (size_t i = 0; i < targets.size(); ++i) {
+      const double mine = bits_at(ours, targets[i]), theirs = bits_at(htj2k, targets[i]);
+      const auto [best, best_name] = field.best(targets[i]);
+      const double r_htj2k = mine > 0 && theirs > 0 ? mine / theirs : -1;
+      const double r_best = mine > 0 && best > 0 ? mine / best : -1;
+      by_htj2k[i].push_back(r_htj2k);
+      by_best[i].push_back(r_best);
+      os << " | " << ratio_cell(r_htj2k) << " / " << ratio_cell(r_best)
+         << (r_best < 0 ? "" : " " + best_name);
+    }
+    os << " | " << speed_cell(median_decode_msps(rows, file, kPyramid, false)) << " / "
+       << speed_cell(median_decode_msps(rows, file, kPyramid, true)) << " | "
+       << speed_cell(median_decode_msps(rows, file, kHtj2k, false)) << " / "
+       << speed_cell(median_decode_msps(rows, file, kHtj2k, true)) << " | "
+       << speed_cell(median_decode_msps(rows, file, kJpegXl, true)) << " |\n";
+  }
+  os << "| **geometric mean**";
+  for (size_t i = 0; i < targets.size(); ++i)
+    os << " | " << cell(geomean(by_htj2k[i])) << " / " << cell(geomean(by_best[i]));
+  os << " | | | |\n\n";
+}
+
 // The generated BENCHMARKS.md: the pyramid against the best peer at each error point, the issue's
 // goals, lossless rates and speeds. Everything comes from `rows`; nothing is typed in by hand.
 void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vector<std::string>& file_order,
@@ -468,44 +584,30 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
         "the pyramid is smaller.\n\n";
   os << "| DEM | lossless | rms 0.5 m | rms 1 m | rms 2 m | rms 4 m | max 1 m | max 2 m | max 5 m |\n"
      << "|---|---|---|---|---|---|---|---|---|\n";
-  std::map<std::string, std::vector<double>> ratios;  // column -> ratio per DEM, for the geometric mean
+  const std::vector<Target> targets = summary_targets();
+  std::vector<std::vector<double>> ratios(targets.size());  // per column, one ratio per DEM
   for (const std::string& file : file_order) {
     const Curve ours = curve_of(rows, file, kPyramid);
     if (!ours.any) continue;
-    std::vector<Curve> peer_curves;
-    std::vector<std::string> peer_names;
-    for (const std::string& codec : codec_order)
-      if (is_external_peer(codec)) {
-        Curve c = curve_of(rows, file, codec);
-        if (c.any) peer_curves.push_back(std::move(c)), peer_names.push_back(codec);
+    const PeerField field = external_peers(rows, file, codec_order);
+    os << "| " << file;
+    for (size_t i = 0; i < targets.size(); ++i) {
+      const double mine = bits_at(ours, targets[i]);
+      const auto [best, best_name] = field.best(targets[i]);
+      os << " | ";
+      if (mine < 0) {
+        os << "—";
+      } else if (best < 0) {
+        os << cell(mine);
+      } else {
+        ratios[i].push_back(mine / best);
+        os << cell(mine) << " (" << fmt("%.2f", mine / best) << " " << best_name << ")";
       }
-    auto entry = [&](const std::string& column, double mine, auto peer_bits) {
-      double best = -1;
-      std::string best_name;
-      for (size_t i = 0; i < peer_curves.size(); ++i) {
-        const double b = peer_bits(peer_curves[i]);
-        if (b > 0 && (best < 0 || b < best)) best = b, best_name = peer_names[i];
-      }
-      if (mine < 0) return std::string("—");
-      if (best < 0) return cell(mine);
-      ratios[column].push_back(mine / best);
-      return cell(mine) + " (" + fmt("%.2f", mine / best) + " " + best_name + ")";
-    };
-    os << "| " << file << " | "
-       << entry("lossless", ours.lossless, [](const Curve& c) { return c.lossless; });
-    for (double t : kRmsTargets)
-      os << " | " << entry("rms" + fmt("%g", t), peers::bits_at_error(ours.by_rms, t), [t](const Curve& c) {
-        return peers::bits_at_error(c.by_rms, t);
-      });
-    for (double t : kMaxTargets)
-      os << " | " << entry("max" + fmt("%g", t), peers::bits_at_error(ours.by_max, t), [t](const Curve& c) {
-        return peers::bits_at_error(c.by_max, t);
-      });
+    }
     os << " |\n";
   }
-  os << "| **geometric mean of the ratios** | " << cell(geomean(ratios["lossless"]));
-  for (double t : kRmsTargets) os << " | " << cell(geomean(ratios["rms" + fmt("%g", t)]));
-  for (double t : kMaxTargets) os << " | " << cell(geomean(ratios["max" + fmt("%g", t)]));
+  os << "| **geometric mean of the ratios**";
+  for (const std::vector<double>& r : ratios) os << " | " << cell(geomean(r));
   os << " |\n\n";
 
   // Table 2: the goals.
@@ -543,6 +645,7 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
      << cell(geomean(g[2])) << " | " << cell(geomean(g[3])) << " | | | | " << cell(geomean(g[4]))
      << " | | |\n\n";
 
+  write_htj2k_comparison(os, rows, file_order, codec_order);
   write_codec_goals(os, rows, file_order, codec_order);
 
   // Table 3: every codec, every point.

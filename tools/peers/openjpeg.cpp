@@ -4,7 +4,6 @@
 #include <openjpeg.h>
 
 #include <algorithm>
-#include <cstdio>
 #include <cstring>
 
 #include "peers.h"
@@ -100,14 +99,7 @@ class OpenJpegPeer final : public Peer {
                                                             2.5, 3.0, 4.0,  5.0, 6.0,  7.0, 8.0};
     // Finer-than-metre units need higher rates to reach the same errors in metres.
     if (!quick && unit_m < 0.75) rates.insert(rates.end(), {9.0, 10.0});
-    std::vector<Setting> out;
-    for (double bps : rates) {
-      char label[48];
-      std::snprintf(label, sizeof label, "9/7 %.2fbps", bps);
-      out.push_back({label, bps, kLossy97, -1});
-    }
-    out.push_back({"5/3 lossless", 0, kLossless53, 0});
-    return out;
+    return wavelet_sweep(rates, "9/7 %.2fbps", kLossy97, kLossless53);
   }
 
   void encode(const Image16& img, const Setting& setting, Bytes& out) override {

@@ -1,6 +1,6 @@
-// Peer-codec benchmark harness: thin wrappers of the Debian-packaged peer codecs (OpenJPEG, jxrlib,
-// CharLS, LERC, ZFP, zstd, and our own libcodec) behind one interface, plus the measurement loop
-// (codec time only, one thread, best of N) and the error metrics every peer is judged by.
+// Peer-codec benchmark harness: thin wrappers of the Debian-packaged peer codecs (OpenJPEG, OpenJPH,
+// libjxl, jxrlib, CharLS, LERC, ZFP, zstd, and our own libcodec) behind one interface, plus the measurement
+// loop (codec time only, one thread, best of N) and the error metrics every peer is judged by.
 //
 // The benchmark codes int16-range integer grids: each Peer gets the same Image16 and must return
 // exactly width*height decoded samples; errors are measured by the harness, never by the peer.
@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -65,6 +66,21 @@ class Peer {
   virtual void decode(const uint8_t* data, size_t size, const Image16& shape, const Setting& setting,
                       int32_t* dst) = 0;
 };
+
+// The sweep of a JPEG 2000 family codec: one 9/7 irreversible setting per parameter, no error bound,
+// labelled by printf of label_format with the parameter (its family name is the label up to the
+// first space, "9/7"), then the exact 5/3 reversible setting.
+inline std::vector<Setting> wavelet_sweep(const std::vector<double>& params, const char* label_format,
+                                          int lossy_mode, int lossless_mode) {
+  std::vector<Setting> out;
+  for (double p : params) {
+    char label[48];
+    std::snprintf(label, sizeof label, label_format, p);
+    out.push_back({label, p, lossy_mode, -1});
+  }
+  out.push_back({"5/3 lossless", 0, lossless_mode, 0});
+  return out;
+}
 
 // Every peer linked into this build, in a fixed order.
 std::vector<std::unique_ptr<Peer>> all_peers();

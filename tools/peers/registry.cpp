@@ -4,6 +4,8 @@
 namespace peers {
 
 std::unique_ptr<Peer> make_openjpeg_peer();
+std::unique_ptr<Peer> make_htj2k_peer();
+std::unique_ptr<Peer> make_jpegxl_peer();
 std::unique_ptr<Peer> make_jpegxr_peer();
 std::unique_ptr<Peer> make_charls_peer();
 std::unique_ptr<Peer> make_lerc_peer();
@@ -20,6 +22,8 @@ std::vector<std::unique_ptr<Peer>> all_peers() {
   list.push_back(make_ours_peer(256));
 #endif
   list.push_back(make_openjpeg_peer());
+  list.push_back(make_htj2k_peer());
+  list.push_back(make_jpegxl_peer());
   list.push_back(make_jpegxr_peer());
   list.push_back(make_charls_peer());
   list.push_back(make_lerc_peer());
