@@ -96,3 +96,22 @@ def test_errors_carry_the_library_code(tmp_path):
         terrain.build(np.zeros((4, 4, 4)), str(tmp_path / "cube.pyr"))
     with pytest.raises(terrain.Error):
         terrain.build(np.zeros((8, 8)), str(tmp_path / "two.pyr"), rms=1.0, step=2.0)
+
+
+def test_read_equals_the_pyramid_extract_window(tmp_path):
+    import json
+    import subprocess
+
+    grid = synthetic(301, 257, 4)
+    terrain.build(grid, str(tmp_path / "e.pyr"), rms=0.5)
+    p = terrain.open(str(tmp_path / "e.pyr"))
+    level = p.level_count - 2
+    x, y, w, h = 11, 7, 90, 61
+    out = tmp_path / "e.raw"
+    tool = os.path.join(os.environ["TERRAIN_BIN"], "pyramid-extract")
+    subprocess.run([tool, str(tmp_path / "e.pyr"), "-o", str(out), "--level", str(level), "--window",
+                    f"{x},{y},{w},{h}", "-q"], check=True)
+    side = json.load(open(str(out) + ".json"))
+    assert (side["width"], side["height"], side["type"]) == (w, h, "float32")
+    extracted = np.fromfile(out, dtype="<f4").reshape(h, w)
+    np.testing.assert_array_equal(p.read(level, x, y, w, h), extracted)
