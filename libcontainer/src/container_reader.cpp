@@ -2,6 +2,8 @@
 // version, checksums of superblock, index, mask and metadata, every region against the file
 // size, non-overlap, the level dimension chain), so that after open() no accessor can read out
 // of bounds whatever the file contained.
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
@@ -12,6 +14,7 @@
 #include "container/internal/container_format.h"
 #include "container/internal/container_mask.h"
 #include "container/internal/mmap_file.h"
+#include "core/file.h"
 
 namespace terrain::container {
 
@@ -78,11 +81,15 @@ Container::~Container() = default;
 
 bool is_container_file(const std::string& path) {
   uint8_t head[sizeof kMagic] = {};
-  FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return false;
-  const size_t got = std::fread(head, 1, sizeof head, f);
-  std::fclose(f);
-  return got == sizeof head && std::memcmp(head, kMagic, sizeof kMagic) == 0;
+  int fd = -1;
+  try {
+    fd = open_regular_file(path);  // a FIFO or device is no container (and must not block us)
+  } catch (const Error&) {
+    return false;
+  }
+  const ssize_t got = ::read(fd, head, sizeof head);
+  ::close(fd);
+  return got == ssize_t(sizeof head) && std::memcmp(head, kMagic, sizeof kMagic) == 0;
 }
 
 Container Container::open(const std::string& path) {

@@ -10,22 +10,13 @@
 #include <limits>
 
 #include "container/container.h"
+#include "core/file.h"
 
 namespace terrain::container {
 
 MappedFile::MappedFile(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) {
-    throw Error(ErrorCode::NotFound, path + ": cannot open: " + std::strerror(errno));
-  }
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-    const int err = errno;
-    ::close(fd);
-    throw Error(ErrorCode::NotFound,
-                path + ": " + (S_ISREG(st.st_mode) ? std::strerror(err) : "not a regular file"));
-  }
-  const uint64_t size = uint64_t(st.st_size);
+  uint64_t size = 0;
+  const int fd = open_regular_file(path, &size);
   if (size > std::numeric_limits<size_t>::max()) {
     ::close(fd);
     throw Error(ErrorCode::NotFound, path + ": too large to map in this address space");

@@ -2,6 +2,7 @@
 // and render of every frame (and of the reference flight beside it), PNG frames, stats.csv and
 // stats.json.
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -13,6 +14,7 @@
 #include <sstream>
 
 #include "clipmap_view.h"
+#include "core/file.h"
 #include "json_writer.h"
 #include "render/renderer.h"
 
@@ -38,6 +40,11 @@ struct Key {
 };
 
 std::vector<Key> read_path(const std::string& path) {
+  // A camera path is a small text file: anything else (a FIFO, /dev/zero) is refused before reading.
+  constexpr uint64_t kMaxPathBytes = uint64_t(16) << 20;
+  uint64_t bytes = 0;
+  ::close(terrain::open_regular_file(path, &bytes));
+  if (bytes > kMaxPathBytes) throw Error(ErrorCode::Oversized, path + ": camera path larger than 16 MiB");
   std::ifstream in(path);
   if (!in) throw Error(ErrorCode::NotFound, "cannot open camera path " + path);
   std::vector<Key> keys;
