@@ -21,6 +21,11 @@ namespace terrain::build {
 using namespace terrain::container;  // the stage below
 namespace {
 
+// libcodec quantises with steps up to its largest sample magnitude; a target so loose that the
+// calibration would go beyond it (a constant or all-void grid, --rms 1e6) gets that step, which
+// already codes every residual of such a grid as zero.
+constexpr double kLargestStep = double(codec::kMaxAbsSample);
+
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -158,6 +163,10 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       break;
     case ErrorMode::Step:
       co.step = o.target_metres / mpu;
+      if (co.step > kLargestStep)
+        throw Error(ErrorCode::InvalidOption, "step " + std::to_string(o.target_metres) +
+                                                  " m is above the coder's largest, " +
+                                                  std::to_string(kLargestStep * mpu) + " m (2^20 units)");
       if (!(co.step >= 1))
         throw std::invalid_argument("step " + std::to_string(o.target_metres) +
                                     " m is below the input's unit of " + std::to_string(mpu) + " m");
@@ -173,7 +182,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       // that overshoots the target.
       Trial below{}, above{};  // largest step meeting the target; smallest step missing it
       bool have_below = false, have_above = false;
-      double step = std::max(1.0, codec::step_for_target_rms(target));
+      double step = std::clamp(codec::step_for_target_rms(target), 1.0, kLargestStep);
       for (int i = 0; i < 10; ++i) {
         co.step = step;
         const Trial t = trial_build(window, bo, co);
@@ -193,7 +202,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
           step = std::sqrt(below.step * above.step);
         } else {
           const double ratio = t.rms > 0 ? target / t.rms : 4.0;
-          step = std::max(1.0, step * std::clamp(ratio, 0.5, 4.0));
+          step = std::clamp(step * std::clamp(ratio, 0.5, 4.0), 1.0, kLargestStep);
         }
         if (step == previous) break;
       }
@@ -212,13 +221,13 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       out.max_error_units = uint32_t(std::min<double>(e_units, codec::kMaxAbsSample));
       co.bound_max_error = true;
       co.max_error = out.max_error_units;
-      co.step = std::max(1.0, 2.0 * out.max_error_units);
+      co.step = std::clamp(2.0 * out.max_error_units, 1.0, kLargestStep);
       if (out.max_error_units > 0) {
         // The transform step that gives the fewest bytes under the bound depends on the terrain.
         if (progress) progress("calibrating step", 0);
         Trial best{};
         for (double f : {1.0, 1.5, 2.0, 3.0, 4.0}) {
-          co.step = std::max(1.0, f * out.max_error_units);
+          co.step = std::clamp(f * out.max_error_units, 1.0, kLargestStep);
           const Trial t = trial_build(window, bo, co);
           out.calibration_log.push_back("step " + std::to_string(t.step) + " units: max " +
                                         std::to_string(t.max_abs) + " units, " + std::to_string(t.bytes) +

@@ -3,9 +3,12 @@
 #include <sys/stat.h>
 
 #include <catch2/catch.hpp>
+#include <filesystem>
 #include <string>
 
 #include "io/io_test_util.h"
+#include "readers/image8.h"
+#include "shared_data.h"
 
 namespace {
 
@@ -49,4 +52,43 @@ TEST_CASE("FIFOs and devices as inputs are refused at once (no hang, no endless 
   CHECK(run_bounded(dir, "clipmap-view", {pyr, "--path", fifo, "--out", frames, "-q"}, &err) == 2);
   CHECK_THAT(err, Catch::Contains("not a regular file"));
   CHECK(run_bounded(dir, "clipmap-view", {pyr, "--path", "/dev/zero", "--out", frames, "-q"}) == 2);
+}
+
+TEST_CASE("constant and all-void grids and very loose targets build (they used to exit 70)",
+          "[runtime][hostile]") {
+  iotest::TempDir dir;
+  const auto raw = [&](const std::string& name, const std::string& type, const std::string& nodata,
+                       const std::vector<uint8_t>& sample) {
+    std::vector<uint8_t> bytes;
+    for (int i = 0; i < 300 * 200; ++i) bytes.insert(bytes.end(), sample.begin(), sample.end());
+    iotest::write_file(dir.file(name), bytes);
+    iotest::write_file(dir.file(name) + ".json",
+                       "{\"width\": 300, \"height\": 200, \"type\": \"" + type + "\"" + nodata + "}");
+    return dir.file(name);
+  };
+  const std::vector<std::string> inputs = {
+      raw("c16.raw", "int16", "", {0xd2, 0x04}),                               // 1234 everywhere
+      raw("cf.raw", "float32", "", {0x00, 0x00, 0x48, 0x41}),                  // 12.5 everywhere
+      raw("nan.raw", "float32", ", \"nodata\": \"NaN\"", {0, 0, 0xc0, 0x7f}),  // every sample void
+  };
+  std::vector<uint8_t> white(size_t(64 * 48 * 3), 0xff);  // Terrain-RGB 0xFFFFFF: 1667721.5 m
+  terrain::write_image8(dir.file("white.png"), 64, 48, 3, white.data());
+  const std::vector<std::vector<std::string>> targets = {
+      {"--rms", "1"}, {"--rms", "1e6"}, {"--max-error", "2"}, {"--max-error", "1e6"}, {"--step", "5"}};
+  for (const std::string& in : {inputs[0], inputs[1], inputs[2], dir.file("white.png")})
+    for (const auto& t : targets) {
+      std::vector<std::string> args = {in, "-o", dir.file("out.pyr"), "-q"};
+      args.insert(args.end(), t.begin(), t.end());
+      std::string err;
+      INFO(in << " " << t[0] << " " << t[1]);
+      CHECK(run_bounded(dir, "pyramid-build", args, &err) == 0);
+      CHECK(err.empty());
+      if (in != dir.file("white.png")) CHECK(std::filesystem::file_size(dir.file("out.pyr")) < 4096);
+    }
+  const std::string dem = testdata::require("srtm3_N46W122_rainier_adams_cascades.hgt");
+  if (dem.empty()) return;
+  for (const auto& t : {std::vector<std::string>{"--rms", "1e6"}, {"--max-error", "1e6"}}) {
+    INFO(t[0]);
+    CHECK(run_bounded(dir, "pyramid-build", {dem, "-o", dir.file("r.pyr"), t[0], t[1], "-q"}) == 0);
+  }
 }
