@@ -8,6 +8,7 @@
 #include "cli.h"
 #include "json_writer.h"
 #include "progress.h"
+#include "report_file.h"
 
 namespace {
 
@@ -107,13 +108,8 @@ int run(int argc, char** argv) {
                  double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
   }
   if (!json_path.empty()) {
-    std::ofstream file;
-    if (json_path != "-") {
-      file.open(json_path);
-      if (!file)
-        throw terrain::Error(terrain::ErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
-    }
-    std::ostream& os = json_path == "-" ? std::cout : file;
+    cli::ReportFile report(json_path);
+    std::ostream& os = report.stream();
     cli::JsonWriter j(os);
     j.begin_object();
     j.field("input", input).field("output", output).field("bytes", int64_t(r.file_bytes));
@@ -136,6 +132,7 @@ int run(int argc, char** argv) {
     j.end_array();
     j.end_object();
     j.finish();
+    report.finish();
   }
   return 0;
 }

@@ -17,6 +17,7 @@
 #include "export/geotiff.h"
 #include "json_writer.h"
 #include "progress.h"
+#include "report_file.h"
 #include "runtime/region_decoder.h"
 
 namespace {
@@ -187,12 +188,8 @@ int run(int argc, char** argv) {
   progress.finish();
 
   if (!json_path.empty()) {
-    std::ofstream f;
-    if (json_path != "-") {
-      f.open(json_path);
-      if (!f) throw Error(ErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
-    }
-    std::ostream& os = json_path == "-" ? std::cout : f;
+    cli::ReportFile report(json_path);
+    std::ostream& os = report.stream();
     cli::JsonWriter j(os);
     j.begin_object();
     j.key("input").value(input).key("output").value(output).key("level").value(int64_t(l));
@@ -207,7 +204,7 @@ int run(int argc, char** argv) {
     }
     j.end_object();
     j.finish();
-    if (!os) throw Error(ErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
+    report.finish();
   }
   if (common.verbose)
     std::cerr << "pyramid-extract: level " << l << ", " << rect.width << "x" << rect.height << " samples at ("

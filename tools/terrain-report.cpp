@@ -13,6 +13,7 @@
 #include "pyramid/error_stats.h"
 #include "pyramid/reference.h"
 #include "readers/image8.h"
+#include "report_file.h"
 #include "runtime/region_decoder.h"
 
 namespace {
@@ -174,12 +175,8 @@ int run(int argc, char** argv) {
                 samples / 1e6 / std::max(1e-9, decode_seconds));
   }
   if (!json_path.empty()) {
-    std::ofstream f;
-    if (json_path != "-") {
-      f.open(json_path);
-      if (!f) throw Error(ErrorCode::WriteFailed, json_path + ": cannot write the JSON report");
-    }
-    std::ostream& os = json_path == "-" ? std::cout : f;
+    cli::ReportFile report(json_path);
+    std::ostream& os = report.stream();
     cli::JsonWriter j(os);
     auto put = [&](const ErrorStats& e) {
       j.field("samples", e.count)
@@ -214,6 +211,7 @@ int run(int argc, char** argv) {
     j.end_array();
     j.end_object();
     j.finish();
+    report.finish();
   }
   return voids_mismatch ? 10 : 0;
 }

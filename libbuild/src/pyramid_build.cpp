@@ -14,6 +14,7 @@
 #include "build/ptc_coder.h"
 #include "codec/codec.h"
 #include "container/pyramid_file.h"
+#include "core/file.h"
 #include "core/text.h"
 
 namespace terrain::build {
@@ -130,6 +131,8 @@ Trial trial_build(const Heightmap& window, BuildOptions bo, const PtcCoderOption
 BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
                                    const std::string& output, const BuildFileOptions& o,
                                    const std::string& metadata_json_extra, const BuildProgress& progress) {
+  // The output must not replace the input or one of its side files (sidecar, ESRI header, .prj).
+  check_output_path(output, {input, input + ".json", input + ".hdr", input + ".prj"});
   BuildFileResult out;
   auto reader = open_band_reader(input, read_options);
   const GridInfo g = reader->info();

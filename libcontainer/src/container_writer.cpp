@@ -15,6 +15,7 @@
 #include "container/internal/container_format.h"
 #include "container/internal/container_mask.h"
 #include "container/internal/held_bytes.h"
+#include "core/file.h"
 
 namespace terrain::container {
 
@@ -37,6 +38,7 @@ ContainerWriter::LevelRecord::LevelRecord(LevelRecord&&) noexcept = default;
 ContainerWriter::LevelRecord& ContainerWriter::LevelRecord::operator=(LevelRecord&&) noexcept = default;
 
 ContainerWriter::ContainerWriter(std::string path) : path_(std::move(path)), directory_(directory_of(path_)) {
+  check_output_path(path_);
   const std::string base = path_ + ".tmp." + std::to_string(::getpid());
   // O_EXCL so two writers in one process aimed at the same target cannot share a temp file.
   for (int attempt = 0; attempt < 100 && fd_ < 0; ++attempt) {
@@ -291,6 +293,7 @@ void ContainerWriter::finish() {
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0) fail("cannot close");
+  check_output_path(path_);  // again: something may have been put there while we wrote
   if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
     throw Error(ErrorCode::WriteFailed,
                 path_ + ": cannot rename " + temp_path_ + " onto it: " + std::strerror(errno));

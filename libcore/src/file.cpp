@@ -28,4 +28,18 @@ int open_regular_file(const std::string& path, uint64_t* size) {
   return fd;
 }
 
+void check_output_path(const std::string& path, const std::vector<std::string>& inputs) {
+  struct stat out {};
+  if (::stat(path.c_str(), &out) != 0) return;  // absent (or unreachable: creating it will say so)
+  if (!S_ISREG(out.st_mode))
+    throw Error(ErrorCode::WriteFailed, path +
+                                            ": not a regular file (a device, FIFO or directory); refusing to "
+                                            "replace it");
+  for (const std::string& in : inputs) {
+    struct stat st {};
+    if (::stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino)
+      throw Error(ErrorCode::WriteFailed, path + ": is the input " + in + "; refusing to overwrite it");
+  }
+}
+
 }  // namespace terrain

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/file.h"
 #include "core/text.h"
 #include "export/geotiff.h"
 
@@ -42,6 +43,7 @@ struct GeoTiffWriter::Impl {
 
 GeoTiffWriter::GeoTiffWriter(const std::string& path, int64_t width, int64_t height, const GeoTiffOptions& o)
     : impl_(std::make_unique<Impl>(path)) {
+  check_output_path(path);
   Impl& m = *impl_;
   if (o.type != SampleType::Float32 && o.type != SampleType::Int16)
     fail(ErrorCode::InvalidOption, path, "GeoTIFF output is float32 or int16");
@@ -124,6 +126,7 @@ void GeoTiffWriter::finish() {
   XTIFFClose(m.tif);
   m.tif = nullptr;
   if (!flushed) m.fail("write error (disk full?)");
+  check_output_path(m.path);
   if (std::rename(m.temp.c_str(), m.path.c_str()) != 0) m.fail("cannot rename the finished file into place");
   m.committed = true;
 }

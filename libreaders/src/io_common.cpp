@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <system_error>
 
+#include "core/file.h"
 #include "core/text.h"
 #include "readers/internal/io_internal.h"
 
@@ -120,6 +121,7 @@ std::string format_double(double v) {
 }
 
 AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
+  check_output_path(target_);
   static std::atomic<unsigned> counter{0};
   std::filesystem::path p(target_);
   // Keep the extension so OpenImageIO chooses the writer from the temporary name too.
@@ -138,6 +140,7 @@ AtomicOutput::~AtomicOutput() {
 }
 
 void AtomicOutput::commit() {
+  check_output_path(target_);
   std::error_code ec;
   std::filesystem::rename(temp_, target_, ec);
   if (ec) fail(ErrorCode::WriteFailed, target_, "cannot rename " + temp_ + " into place: " + ec.message());

@@ -1,6 +1,7 @@
 // Hostile inputs that used to hang a tool or grow its memory without bound: FIFOs and devices given
 // where a file is expected are refused at once with exit status 2, naming the file.
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <catch2/catch.hpp>
 #include <filesystem>
@@ -91,4 +92,47 @@ TEST_CASE("constant and all-void grids and very loose targets build (they used t
     INFO(t[0]);
     CHECK(run_bounded(dir, "pyramid-build", {dem, "-o", dir.file("r.pyr"), t[0], t[1], "-q"}) == 0);
   }
+}
+
+TEST_CASE("outputs never replace devices or inputs, and write errors are failures", "[runtime][hostile]") {
+  iotest::TempDir dir;
+  const std::string raw = dir.file("g.raw"), pyr = dir.file("g.pyr");
+  REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", raw, "--width", "300", "--height", "240", "-q"}})
+              .status == 0);
+  std::string err;
+  // -o /dev/null used to rename the temporary over the device node (as root).
+  CHECK(run_bounded(dir, "pyramid-build", {raw, "-o", "/dev/null", "--lossless", "-q"}, &err) == 9);
+  CHECK_THAT(err, Catch::Contains("/dev/null") && Catch::Contains("not a regular file"));
+  struct stat st {};
+  REQUIRE(::stat("/dev/null", &st) == 0);
+  CHECK(S_ISCHR(st.st_mode));
+  // The input, or its sidecar, as the output.
+  const auto before = iotest::read_file(raw), sidecar = iotest::read_file(raw + ".json");
+  CHECK(run_bounded(dir, "pyramid-build", {raw, "-o", raw, "--lossless", "-q"}, &err) == 9);
+  CHECK_THAT(err, Catch::Contains("is the input"));
+  CHECK(run_bounded(dir, "pyramid-build", {raw, "-o", raw + ".json", "--lossless", "-q"}) == 9);
+  CHECK(iotest::read_file(raw) == before);
+  CHECK(iotest::read_file(raw + ".json") == sidecar);
+  // Reports that cannot be written: --json to a full device, data on a full stdout.
+  REQUIRE(run_bounded(dir, "pyramid-build", {raw, "-o", pyr, "--lossless", "-q"}) == 0);
+  CHECK(run_bounded(dir, "pyramid-build", {raw, "-o", pyr, "--lossless", "--json", "/dev/full", "-q"},
+                    &err) == 9);
+  CHECK_THAT(err, Catch::Contains("/dev/full"));
+  CHECK(run_bounded(dir, "terrain-report", {raw, pyr, "--json", "/dev/full", "-q"}) == 9);
+  CHECK(std::system(("timeout 20 " + iotest::shell_quote(iotest::tool_path("terrain-info")) + " " +
+                     iotest::shell_quote(pyr) + " --json >/dev/full 2>/dev/null; test $? -eq 9")
+                        .c_str()) == 0);
+  const std::string device_link = dir.file("null.tif");  // a name that looks right, pointing at a device
+  REQUIRE(::symlink("/dev/null", device_link.c_str()) == 0);
+  CHECK(run_bounded(dir, "pyramid-extract", {pyr, "-o", device_link, "-q"}) == 9);
+  // A full disk, as an 8 KiB file-size limit: exit 9, nothing left under the final or a temporary name.
+  const std::string out = dir.file("big.pyr");
+  const std::string cmd = "ulimit -f 8; timeout 20 " +
+                          iotest::shell_quote(iotest::tool_path("pyramid-build")) + " " +
+                          iotest::shell_quote(raw) + " -o " + iotest::shell_quote(out) +
+                          " --lossless -q 2>/dev/null; test $? -eq 9";
+  CHECK(std::system(("bash -c " + iotest::shell_quote(cmd)).c_str()) == 0);
+  CHECK_FALSE(std::filesystem::exists(out));
+  for (const auto& e : std::filesystem::directory_iterator(dir.file("")))
+    CHECK(e.path().filename().string().find("big.pyr") == std::string::npos);
 }

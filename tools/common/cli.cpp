@@ -4,6 +4,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <new>
@@ -257,8 +258,16 @@ void add_read_options(ArgParser& p, terrain::ReadOptions& o) {
 }
 
 int run_tool(const std::string& program, const std::function<int()>& body) {
+  // Past a file-size limit (ulimit -f) a write fails with EFBIG, reported as "cannot write" (exit 9),
+  // instead of the default SIGXFSZ killing the process with its temporary file left behind.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
-    return body();
+    const int status = body();
+    // Data on stdout that never arrived (a full disk, /dev/full, a closed pipe) is a failed run.
+    std::cout.flush();
+    if (!std::cout || std::fflush(stdout) != 0 || std::ferror(stdout))
+      throw terrain::Error(terrain::ErrorCode::WriteFailed, "standard output: write error");
+    return status;
   } catch (const terrain::Error& e) {
     std::cerr << program << ": error: " << e.what() << "\n";
     return exit_status(e.code());

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace terrain {
 
@@ -12,5 +13,11 @@ namespace terrain {
 // Error(NotFound, "<path>: ...") when it is missing, unreadable or not a regular file. The caller
 // closes the descriptor. Thread-safe.
 int open_regular_file(const std::string& path, uint64_t* size = nullptr);
+
+// Outputs are written to a temporary file and renamed over the target, which would replace a device
+// node or FIFO by a regular file (as root, `-o /dev/null` did). Throws Error(WriteFailed, "<path>:
+// ...") when `path` exists and is not a regular file (symbolic links are followed), or when it is
+// the same file as one of `inputs` (device and inode compared; inputs that do not exist are ignored).
+void check_output_path(const std::string& path, const std::vector<std::string>& inputs = {});
 
 }  // namespace terrain
