@@ -137,8 +137,12 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_read_rows(terrain_image_reader* reade
       return report(TERRAIN_IMAGE_BAD_ARGUMENT, "bad reader or pixel type", message, message_size);
     OIIO::ImageInput& in = *reader->input;
     const int y0 = in.spec().y + row_begin;
-    if (!in.read_scanlines(0, 0, y0, y0 + (row_end - row_begin), 0, 0, channels, type, pixels))
-      return report(TERRAIN_IMAGE_READ_FAILED, in.geterror(), message, message_size);
+    // OpenImageIO can return success for strips libtiff failed to decode (a truncated file, a strip
+    // past its end, an unknown compression) and keep only an error message: those rows would read
+    // as zeros. Any error it recorded is a failed read.
+    const bool read = in.read_scanlines(0, 0, y0, y0 + (row_end - row_begin), 0, 0, channels, type, pixels);
+    if (!read || in.has_error())
+      return report(TERRAIN_IMAGE_READ_FAILED, or_unknown(in.geterror()), message, message_size);
     return TERRAIN_IMAGE_OK;
   });
 }

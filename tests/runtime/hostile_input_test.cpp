@@ -136,3 +136,23 @@ TEST_CASE("outputs never replace devices or inputs, and write errors are failure
   for (const auto& e : std::filesystem::directory_iterator(dir.file("")))
     CHECK(e.path().filename().string().find("big.pyr") == std::string::npos);
 }
+
+TEST_CASE("a damaged TIFF is an error, not rows of zeros", "[runtime][hostile]") {
+  iotest::TempDir dir;
+  const std::string tif = dir.file("t.tif");
+  REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", tif, "--width", "300", "--height", "200", "-q"}})
+              .status == 0);
+  const auto bytes = iotest::read_file(tif);
+  REQUIRE(bytes.size() > 2000);
+  REQUIRE(run_bounded(dir, "pyramid-build", {tif, "-o", dir.file("ok.pyr"), "--lossless", "-q"}) == 0);
+  for (const size_t keep : {size_t(1000), bytes.size() / 2, bytes.size() - 10}) {
+    INFO("truncated to " << keep << " of " << bytes.size() << " bytes");
+    const std::string cut = dir.file("cut.tif");
+    iotest::write_file(cut, std::vector<uint8_t>(bytes.begin(), bytes.begin() + ptrdiff_t(keep)));
+    std::string err;
+    CHECK(run_bounded(dir, "pyramid-build", {cut, "-o", dir.file("cut.pyr"), "--lossless", "-q"}, &err) ==
+          10);
+    CHECK_THAT(err, Catch::Contains("cut.tif"));
+    CHECK_FALSE(std::filesystem::exists(dir.file("cut.pyr")));
+  }
+}
