@@ -156,3 +156,30 @@ TEST_CASE("a damaged TIFF is an error, not rows of zeros", "[runtime][hostile]")
     CHECK_FALSE(std::filesystem::exists(dir.file("cut.pyr")));
   }
 }
+
+TEST_CASE("terrain-report against an input without the pyramid's voids gives finite figures and says so",
+          "[runtime][hostile]") {
+  iotest::TempDir dir;
+  const int w = 120, h = 90;
+  std::vector<uint8_t> with_voids, filled;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int16_t v = int16_t(200 + (x * 7 + y * 3) % 90);
+      const int16_t stored = (x > 30 && x < 50 && y > 20 && y < 40) ? int16_t(-32768) : v;
+      for (int b = 0; b < 2; ++b) with_voids.push_back(uint8_t(uint16_t(stored) >> (8 * b)));
+      for (int b = 0; b < 2; ++b) filled.push_back(uint8_t(uint16_t(v) >> (8 * b)));
+    }
+  const std::string side = "{\"width\": 120, \"height\": 90, \"type\": \"int16\"";
+  iotest::write_file(dir.file("voids.raw"), with_voids);
+  iotest::write_file(dir.file("voids.raw.json"), side + ", \"nodata\": -32768}");
+  iotest::write_file(dir.file("filled.raw"), filled);
+  iotest::write_file(dir.file("filled.raw.json"), side + "}");
+  REQUIRE(run_bounded(dir, "pyramid-build",
+                      {dir.file("voids.raw"), "-o", dir.file("v.pyr"), "--rms", "1", "-q"}) == 0);
+  const iotest::ToolResult r =
+      iotest::run_tool(dir, {"terrain-report", {dir.file("filled.raw"), dir.file("v.pyr"), "--json", "-"}});
+  CHECK(r.status == 10);
+  CHECK(r.out.find("nan") == std::string::npos);
+  CHECK(r.out.find("inf") == std::string::npos);
+  CHECK(r.out.find("\"voids_added\": 361") != std::string::npos);  // 19 x 19 samples
+}
