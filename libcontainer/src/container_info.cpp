@@ -29,6 +29,25 @@ std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t l
 }
 
 namespace {
+// Units are shown to people and written into JSON: well-formed UTF-8 without control characters.
+bool printable_utf8(const std::string& s) {
+  for (size_t i = 0; i < s.size();) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    if (c < 0x20 || c == 0x7F) return false;
+    const int extra = c < 0x80                          ? 0
+                      : (c & 0xE0) == 0xC0 && c >= 0xC2 ? 1
+                      : (c & 0xF0) == 0xE0              ? 2
+                      : (c & 0xF8) == 0xF0 && c <= 0xF4 ? 3
+                                                        : -1;
+    if (extra < 0) return false;
+    for (int k = 1; k <= extra; ++k)
+      if (i + size_t(k) >= s.size() || (static_cast<unsigned char>(s[i + size_t(k)]) & 0xC0) != 0x80)
+        return false;
+    i += size_t(extra) + 1;
+  }
+  return true;
+}
+
 void require(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument("invalid pyramid description: " + what);
 }
@@ -67,14 +86,14 @@ void validate_info(const ContainerInfo& info) {
       "vertical scale must be finite and non-zero, offset finite");
   require(info.horizontal_units.size() <= kMaxUnitsLength && info.vertical_units.size() <= kMaxUnitsLength,
           "units strings are limited to " + std::to_string(kMaxUnitsLength) + " bytes");
-  require(info.horizontal_units.find('\0') == std::string::npos &&
-              info.vertical_units.find('\0') == std::string::npos,
-          "units strings must not contain NUL");
+  require(printable_utf8(info.horizontal_units) && printable_utf8(info.vertical_units),
+          "units strings must be printable UTF-8");
   if (info.georeference) {
     const Georeference& g = *info.georeference;
     require(std::isfinite(g.origin_x) && std::isfinite(g.origin_y), "georeference origin must be finite");
-    require(g.units.size() <= kMaxUnitsLength && g.units.find('\0') == std::string::npos,
-            "georeference units must be at most " + std::to_string(kMaxUnitsLength) + " bytes, no NUL");
+    require(g.units.size() <= kMaxUnitsLength && printable_utf8(g.units),
+            "georeference units must be at most " + std::to_string(kMaxUnitsLength) +
+                " bytes of printable UTF-8");
   }
   require(info.filter_size <= kMaxFilterSize, "filter larger than " + std::to_string(kMaxFilterSize));
   require(info.filter.size() == size_t(info.filter_size) * info.filter_size,
@@ -87,6 +106,17 @@ void validate_info(const ContainerInfo& info) {
   require(uint32_t(q.mode) <= uint32_t(ErrorMode::Lossless), "unknown error mode");
   require(std::isfinite(q.step_units) && std::isfinite(q.step_metres) && std::isfinite(q.target),
           "quantisation values must be finite");
+  // libcodec's steps are at least 1 unit; a lossless file records target 0, the others a positive one.
+  require(q.step_units >= 1 && q.step_metres > 0,
+          "quantisation step must be at least 1 unit and positive in metres");
+  require(q.mode == ErrorMode::Lossless ? q.target >= 0 : q.target > 0, "error target must be positive");
+  for (size_t l = 0; l < info.levels.size(); ++l) {
+    const ResidualStats& r = info.levels[l].stats;
+    require(std::isfinite(r.mean) && std::isfinite(r.variance) && std::isfinite(r.rms) &&
+                std::isfinite(r.min) && std::isfinite(r.max) && r.variance >= 0 && r.rms >= 0 &&
+                r.min <= r.max,
+            "level " + std::to_string(l) + " residual statistics must be finite and ordered");
+  }
 }
 
 }  // namespace terrain::container

@@ -285,11 +285,18 @@ Container Container::open(const std::string& path) {
     if (covered_to > regions[i].offset) {
       parse.fail(Code::CorruptData, regions[i - 1].what + " overlaps " + regions[i].what);
     }
+    // Between regions there is alignment padding only: anything longer is bytes no field accounts for.
+    if (regions[i].offset - covered_to >= kAlignment) {
+      parse.fail(Code::CorruptData, std::to_string(regions[i].offset - covered_to) +
+                                        " unaccounted bytes before " + regions[i].what);
+    }
     if (!Parser::all_zero(base + covered_to, size_t(regions[i].offset - covered_to))) {
       parse.fail(Code::CorruptData, "padding before " + regions[i].what + " is not zero");
     }
     covered_to = regions[i].offset + regions[i].size;
   }
+  parse.require(size - covered_to < kAlignment,
+                std::to_string(size - covered_to) + " unaccounted bytes after " + regions.back().what);
   parse.require(Parser::all_zero(base + covered_to, size_t(size - covered_to)),
                 "padding at the end is not zero");
   return c;

@@ -4,9 +4,12 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <cstring>
 #include <filesystem>
 #include <string>
 
+#include "container/container.h"
+#include "container/internal/container_format.h"
 #include "io/io_test_util.h"
 #include "readers/image8.h"
 #include "shared_data.h"
@@ -182,4 +185,83 @@ TEST_CASE("terrain-report against an input without the pyramid's voids gives fin
   CHECK(r.out.find("nan") == std::string::npos);
   CHECK(r.out.find("inf") == std::string::npos);
   CHECK(r.out.find("\"voids_added\": 361") != std::string::npos);  // 19 x 19 samples
+}
+
+namespace {
+
+uint64_t le(const std::vector<uint8_t>& b, size_t at, int n) {
+  uint64_t v = 0;
+  for (int i = n - 1; i >= 0; --i) v = v << 8 | b[at + size_t(i)];
+  return v;
+}
+void put(std::vector<uint8_t>& b, size_t at, uint64_t v, int n) {
+  for (int i = 0; i < n; ++i) b[at + size_t(i)] = uint8_t(v >> (8 * i));
+}
+void put_f64(std::vector<uint8_t>& b, size_t at, double v) {
+  uint64_t u;
+  std::memcpy(&u, &v, 8);
+  put(b, at, u, 8);
+}
+// The superblock's index CRC and its own, recomputed after a field was forged (docs/format.md).
+void reseal(std::vector<uint8_t>& b) {
+  namespace sb = terrain::container::layout::sb;
+  const uint64_t offset = le(b, sb::kIndexOffset, 8), size = le(b, sb::kIndexSize, 8);
+  put(b, sb::kIndexCrc, terrain::container::crc32c(b.data() + offset, size_t(size)), 4);
+  put(b, sb::kCrc, terrain::container::crc32c(b.data(), sb::kCrc), 4);
+}
+
+}  // namespace
+
+TEST_CASE("forged .pyr fields with recomputed checksums are rejected on open", "[runtime][hostile]") {
+  namespace info = terrain::container::layout::info;
+  namespace sb = terrain::container::layout::sb;
+  iotest::TempDir dir;
+  const std::string raw = dir.file("g.raw"), pyr = dir.file("g.pyr");
+  REQUIRE(
+      iotest::run_tool(dir, {"terrain-synth", {"-o", raw, "--width", "90", "--height", "70", "-q"}}).status ==
+      0);
+  REQUIRE(iotest::run_tool(dir, {"pyramid-build", {raw, "-o", pyr, "--rms", "1", "-q"}}).status == 0);
+  const std::vector<uint8_t> good = iotest::read_file(pyr);
+  const size_t index = size_t(le(good, sb::kIndexOffset, 8));
+  const auto rejected = [&](std::vector<uint8_t> b, const std::string& what) {
+    reseal(b);
+    const std::string forged = dir.file("forged.pyr");
+    iotest::write_file(forged, b);
+    INFO(what);
+    try {
+      terrain::container::Container::open(forged);
+      FAIL_CHECK("accepted: " << what);
+    } catch (const terrain::Error& e) {
+      CHECK(e.code() == terrain::ErrorCode::CorruptData);
+    }
+    CHECK(run_bounded(dir, "terrain-info", {forged}) == 10);
+  };
+  {
+    std::vector<uint8_t> b = good;  // untouched, resealed: still fine
+    reseal(b);
+    iotest::write_file(dir.file("same.pyr"), b);
+    CHECK_NOTHROW(terrain::container::Container::open(dir.file("same.pyr")));
+  }
+  for (const double step : {0.0, -1.0, 0.5}) {
+    std::vector<uint8_t> b = good;
+    put_f64(b, index + info::kStepUnits, step);
+    rejected(b, "step_units " + std::to_string(step));
+  }
+  {
+    std::vector<uint8_t> b = good;
+    put_f64(b, index + info::kTarget, -1.0);
+    rejected(b, "target -1");
+  }
+  {
+    std::vector<uint8_t> b = good;
+    b[index + info::kVerticalUnits] = 0xC3;  // a lead byte with no continuation: invalid UTF-8
+    b[index + info::kVerticalUnits + 1] = 'x';
+    rejected(b, "invalid UTF-8 units");
+  }
+  {
+    std::vector<uint8_t> b = good;  // 64 zero bytes after everything, the recorded size updated
+    b.resize(b.size() + 64, 0);
+    put(b, sb::kFileSize, b.size(), 8);
+    rejected(b, "bytes after the last region");
+  }
 }
