@@ -32,8 +32,9 @@ int run(int argc, char** argv) {
       "Streams a heightmap (any format of terrain-info) once, builds the filtered pyramid with the\n"
       "per-terrain optimal 11x11 downsampling filter, and codes the closed-loop residuals of every level\n"
       "with one absolute quantisation step (libcodec). Memory stays bounded for any input height.\n"
-      "Error targets, in metres at the finest level: --rms M (the step is calibrated on a window of the\n"
-      "input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; integer "
+      "Error targets, in metres at the finest level: --rms M (the step is calibrated on bands spread over\n"
+      "the whole input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; "
+      "integer "
       "input).\n"
       "The output is written to OUT.pyr.tmp.<pid> and renamed when complete.");
   parser.positional("INPUT", "heightmap to read", &input);

@@ -74,39 +74,55 @@ class ProgressSink final : public PyramidSink {
   int64_t total_ = 0, done_ = 0;
 };
 
-// The first calibration_rows rows of the input, cropped to the central calibration_cols columns.
-Heightmap read_calibration_window(const std::string& input, const ReadOptions& ro,
-                                  const BuildFileOptions& o) {
+// The calibration sample: up to calibration_cols columns (centred) of the input's rows. An input of
+// at most calibration_rows rows is taken whole; a taller one gives kCalibrationBands bands of
+// calibration_rows / kCalibrationBands rows spread evenly from its top to its bottom, so that the
+// step represents the whole input (the first rows alone can be all sea on a coastal tile).
+constexpr int64_t kCalibrationBands = 4;
+
+std::vector<Heightmap> read_calibration_windows(const std::string& input, const ReadOptions& ro,
+                                                const BuildFileOptions& o) {
   auto reader = open_band_reader(input, ro);
   const GridInfo& g = reader->info();
-  const int64_t cw = std::min(g.width, o.calibration_cols), ch = std::min(g.height, o.calibration_rows);
+  const int64_t cw = std::min(g.width, o.calibration_cols);
+  const int64_t bands = g.height <= o.calibration_rows ? 1 : kCalibrationBands;
+  const int64_t bh = bands == 1 ? g.height : std::max<int64_t>(1, o.calibration_rows / bands);
   const int64_t x0 = (g.width - cw) / 2;
-  Heightmap map;
-  map.info = g;
-  map.info.width = cw;
-  map.info.height = ch;
-  map.values.resize(size_t(cw * ch));
-  map.valid.resize(size_t(cw * ch));
+  std::vector<Heightmap> windows(static_cast<size_t>(bands));
   std::vector<double> row(size_t(g.width));
   std::vector<uint8_t> valid(size_t(g.width));
-  for (int64_t y = 0; y < ch; ++y) {
-    if (reader->read_rows(1, row.data(), valid.data()) != 1)
-      throw Error(ErrorCode::Truncated, input + ": ended while reading the calibration window");
-    std::copy_n(row.begin() + x0, cw, map.values.begin() + y * cw);
-    std::copy_n(valid.begin() + x0, cw, map.valid.begin() + y * cw);
+  int64_t y = 0;  // rows read so far
+  for (int64_t k = 0; k < bands; ++k) {
+    const int64_t top = bands == 1 ? 0 : k * (g.height - bh) / (bands - 1);
+    for (; y < top; ++y)
+      if (reader->read_rows(1, row.data(), valid.data()) != 1)
+        throw Error(ErrorCode::Truncated, input + ": ended while reading the calibration windows");
+    Heightmap& map = windows[size_t(k)];
+    map.info = g;
+    map.info.width = cw;
+    map.info.height = bh;
+    map.values.resize(size_t(cw * bh));
+    map.valid.resize(size_t(cw * bh));
+    for (int64_t r = 0; r < bh; ++r, ++y) {
+      if (reader->read_rows(1, row.data(), valid.data()) != 1)
+        throw Error(ErrorCode::Truncated, input + ": ended while reading the calibration windows");
+      std::copy_n(row.begin() + x0, cw, map.values.begin() + r * cw);
+      std::copy_n(valid.begin() + x0, cw, map.valid.begin() + r * cw);
+    }
   }
-  return map;
+  return windows;
 }
 
 // Integer level-unit offset that centres the window's valid values when they reach beyond half of
 // libcodec's range; 0 otherwise.
-double centring_offset(const Heightmap& window, double value_scale) {
+double centring_offset(const std::vector<Heightmap>& windows, double value_scale) {
   double lo = INFINITY, hi = -INFINITY;
-  for (size_t i = 0; i < window.values.size(); ++i)
-    if (window.valid.empty() || window.valid[i]) {
-      const double v = std::nearbyint(window.values[i] * value_scale);
-      lo = std::min(lo, v), hi = std::max(hi, v);
-    }
+  for (const Heightmap& window : windows)
+    for (size_t i = 0; i < window.values.size(); ++i)
+      if (window.valid.empty() || window.valid[i]) {
+        const double v = std::nearbyint(window.values[i] * value_scale);
+        lo = std::min(lo, v), hi = std::max(hi, v);
+      }
   if (!(hi >= lo) || std::max(std::abs(lo), std::abs(hi)) <= double(codec::kMaxAbsSample / 2)) return 0;
   return std::nearbyint(0.5 * (lo + hi));
 }
@@ -118,12 +134,23 @@ struct Trial {
   uint64_t bytes = 0;
 };
 
-// Only the figures of a trial matter: it keeps no output and writes no file.
-Trial trial_build(const Heightmap& window, BuildOptions bo, const PtcCoderOptions& co) {
+// Only the figures of a trial matter: it keeps no output and writes no file. Over several windows:
+// the rms of all their samples, the largest error, the bytes of all.
+Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const PtcCoderOptions& co) {
   PtcResidualCoder coder(co);
-  CountingSink sink;
-  const BuildResult r = build_pyramid(window, bo, coder, sink);
-  return Trial{co.step, r.levels.back().error_rms, r.levels.back().error_max_abs, sink.band_bytes};
+  Trial t{co.step, 0, 0, 0};
+  double squares = 0, samples = 0;
+  for (const Heightmap& window : windows) {
+    CountingSink sink;
+    const BuildResult r = build_pyramid(window, bo, coder, sink);
+    const double n = double(window.width() * window.height());
+    squares += r.levels.back().error_rms * r.levels.back().error_rms * n;
+    samples += n;
+    t.max_abs = std::max(t.max_abs, r.levels.back().error_max_abs);
+    t.bytes += sink.band_bytes;
+  }
+  t.rms = samples > 0 ? std::sqrt(squares / samples) : 0;
+  return t;
 }
 
 }  // namespace
@@ -148,8 +175,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
   // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
-  // the first rows' mid-range. Ordinary DEMs keep their native units (offset 0).
-  const Heightmap window = read_calibration_window(input, read_options, o);
+  // the calibration sample's mid-range. Ordinary DEMs keep their native units (offset 0).
+  const std::vector<Heightmap> window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
   const LevelUnits stored =
       LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -263,5 +264,42 @@ TEST_CASE("forged .pyr fields with recomputed checksums are rejected on open", "
     b.resize(b.size() + 64, 0);
     put(b, sb::kFileSize, b.size(), 8);
     rejected(b, "bytes after the last region");
+  }
+}
+
+TEST_CASE("the rms target is calibrated on the whole input: a tile whose top rows are all sea still meets it",
+          "[runtime][hostile]") {
+  // 600 x 1500: the top 1100 rows flat sea (0), below them rough mountains. Calibrating on the
+  // first 1024 rows alone saw only sea and chose a step far too large or too small.
+  iotest::TempDir dir;
+  const int w = 600, h = 1500;
+  std::vector<uint8_t> bytes;
+  uint32_t noise = 12345;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      noise = noise * 1664525u + 1013904223u;
+      const double land = y < 1100 ? 0.0
+                                   : 800 + 500 * std::sin(x / 23.0) * std::cos(y / 31.0) +
+                                         90 * std::sin(x / 5.0 + y / 7.0) + double(noise >> 24) / 8.0;
+      const int16_t v = int16_t(std::lround(land));
+      bytes.push_back(uint8_t(uint16_t(v))), bytes.push_back(uint8_t(uint16_t(v) >> 8));
+    }
+  iotest::write_file(dir.file("coast.raw"), bytes);
+  iotest::write_file(dir.file("coast.raw.json"), "{\"width\": 600, \"height\": 1500, \"type\": \"int16\"}");
+  for (const double target : {1.0, 2.0}) {
+    const iotest::ToolResult r =
+        iotest::run_tool(dir, {"pyramid-build",
+                               {dir.file("coast.raw"), "-o", dir.file("c.pyr"), "--rms",
+                                std::to_string(target), "--json", "-", "-q"}});
+    REQUIRE(r.status == 0);
+    const iotest::ToolResult rep = iotest::run_tool(
+        dir, {"terrain-report", {dir.file("coast.raw"), dir.file("c.pyr"), "--json", "-", "-q"}});
+    REQUIRE(rep.status == 0);
+    // The finest level's rms is the last "rms_m" of the report's levels.
+    const size_t at = rep.out.rfind("\"rms_m\": ");
+    REQUIRE(at != std::string::npos);
+    const double rms = std::stod(rep.out.substr(at + 9));
+    INFO("target " << target << " m, finest rms " << rms << " m");
+    CHECK(std::abs(rms / target - 1) <= 0.10);
   }
 }

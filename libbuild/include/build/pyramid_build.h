@@ -23,7 +23,8 @@ struct BuildFileOptions {
   int levels = 0;                   // 0: automatic
   uint32_t tile_size = 32;          // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
   int threads = 0;                  // 0: all cores
-  int64_t calibration_rows = 1024;  // rms/max-error calibration window (rows x columns of the input)
+  int64_t calibration_rows = 1024;  // rms/max-error calibration sample: this many rows (taller inputs: in
+                                    // 4 bands spread from top to bottom) x up to calibration_cols columns
   int64_t calibration_cols = 2048;
 };
 
