@@ -6,6 +6,7 @@
 #include <charconv>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <system_error>
 
 #include "core/file.h"
@@ -101,7 +102,13 @@ uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
   if (g.width <= 0 || g.height <= 0 || g.width > kMaxSide || g.height > kMaxSide)
     fail(ErrorCode::DimensionMismatch, path,
          "invalid dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height));
-  return uint64_t(g.width) * uint64_t(g.height) * uint64_t(stored_bytes(layout.stored));
+  const unsigned __int128 bytes = (unsigned __int128)g.width * (unsigned __int128)g.height *
+                                  (unsigned __int128)stored_bytes(layout.stored);
+  if (bytes > (unsigned __int128)(uint64_t(1) << 56))  // 64 PiB: beyond any grid, and no 64-bit wrap
+    fail(ErrorCode::DimensionMismatch, path,
+         "dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height) +
+             " need more than 2^56 bytes");
+  return uint64_t(bytes);
 }
 
 void apply_common_overrides(GridInfo& info, const ReadOptions& o) {
@@ -118,6 +125,20 @@ std::string format_double(double v) {
   char buf[64];
   auto res = std::to_chars(buf, buf + sizeof buf, v);
   return std::string(buf, res.ptr);
+}
+
+std::string read_small_text_file(const std::string& path, size_t limit) {
+  if (existing_file_size(path) > limit)  // also refuses FIFOs and devices before opening them
+    fail(ErrorCode::MissingField, path, "side file larger than " + std::to_string(limit) + " bytes");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(ErrorCode::NotFound, path, "cannot open");
+  std::string text;
+  text.resize(limit + 1);
+  in.read(text.data(), std::streamsize(limit + 1));
+  text.resize(size_t(in.gcount()));
+  if (text.size() > limit)
+    fail(ErrorCode::MissingField, path, "side file larger than " + std::to_string(limit) + " bytes");
+  return text;
 }
 
 AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {

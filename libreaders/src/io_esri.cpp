@@ -26,8 +26,7 @@ using Header = std::map<std::string, std::string>;  // upper-case keyword -> val
 Header read_header(const std::string& hdr, const std::string& where) {
   if (!file_exists(hdr))
     fail(ErrorCode::MissingField, where, "missing header file " + hdr + " for the ESRI grid");
-  std::ifstream in(hdr);
-  if (!in) fail(ErrorCode::NotFound, where, "cannot open the header");
+  std::istringstream in(read_small_text_file(hdr, kSideFileLimit));
   Header out;
   std::string line;
   int line_no = 0;
@@ -154,8 +153,7 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
   // A .prj with a geographic and no projected system means degrees; spacing is kept in arc-seconds.
   std::string prj = hdr.substr(0, hdr.size() - 4) + ".prj";
   if (file_exists(prj)) {
-    std::ifstream in(prj);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string text = read_small_text_file(prj, kSideFileLimit);
     if (text.find("GEOGCS") != std::string::npos && text.find("PROJCS") == std::string::npos) {
       g.horizontal_units = "arc-second";
       g.spacing_x *= 3600.0;

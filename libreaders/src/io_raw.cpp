@@ -170,18 +170,6 @@ class RawStreamReader final : public BandReader {
   }
 };
 
-std::string read_small_text_file(const std::string& path, size_t limit) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(ErrorCode::NotFound, path, "cannot open");
-  std::string text;
-  text.resize(limit + 1);
-  in.read(text.data(), std::streamsize(limit + 1));
-  text.resize(size_t(in.gcount()));
-  if (text.size() > limit)
-    fail(ErrorCode::MissingField, path, "sidecar larger than " + std::to_string(limit) + " bytes");
-  return text;
-}
-
 std::optional<std::string> find_sidecar(const std::string& path) {
   if (file_exists(path + ".json")) return path + ".json";
   auto dot = path.find_last_of('.');
@@ -233,7 +221,7 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
   auto sidecar = find_sidecar(path);
   if (sidecar) {
     std::string error;
-    auto obj = parse_json_object(read_small_text_file(*sidecar, 1 << 16), error);
+    auto obj = parse_json_object(read_small_text_file(*sidecar, kSideFileLimit), error);
     if (!obj) fail(ErrorCode::MissingField, *sidecar, "malformed JSON sidecar: " + error);
     // The sidecar must describe the grid fully; command-line options may still override it.
     int64_t w = dimension_member(*obj, "width", *sidecar);

@@ -303,3 +303,18 @@ TEST_CASE("the rms target is calibrated on the whole input: a tile whose top row
     CHECK(std::abs(rms / target - 1) <= 0.10);
   }
 }
+
+TEST_CASE("sizes that wrap and oversized side files are refused before any allocation",
+          "[runtime][hostile]") {
+  iotest::TempDir dir;
+  iotest::write_file(dir.file("zero.raw"), std::string());
+  iotest::write_file(dir.file("zero.raw.json"),
+                     "{\"width\": 2147483648, \"height\": 2147483648, \"type\": \"float32\"}");
+  std::string err;
+  CHECK(run_bounded(dir, "terrain-info", {dir.file("zero.raw")}, &err) == 5);  // 2^64 bytes wrapped to 0
+  CHECK_THAT(err, Catch::Contains("zero.raw"));
+  iotest::write_file(dir.file("e.bil"), std::string(100, '\0'));
+  iotest::write_file(dir.file("e.hdr"), "NROWS 5\nNCOLS 10\n" + std::string(size_t(1) << 20, 'X') + "\n");
+  CHECK(run_bounded(dir, "terrain-info", {dir.file("e.bil")}, &err) == 8);
+  CHECK_THAT(err, Catch::Contains("e.hdr") && Catch::Contains("larger than"));
+}

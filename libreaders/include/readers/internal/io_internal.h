@@ -37,6 +37,11 @@ struct RawLayout {
 uint64_t layout_bytes(const std::string& path, const RawLayout& layout);
 // Band reader over a fixed-layout file (fread at the data offset, or gzread for gzip streams).
 std::unique_ptr<BandReader> open_raw_stream(const std::string& path, const RawLayout& layout);
+// The whole of a small side file (JSON sidecar, ESRI .hdr and .prj): MissingField when it is larger
+// than `limit` bytes (memory stays bounded whatever the file), NotFound when it is not a regular file.
+std::string read_small_text_file(const std::string& path, size_t limit);
+inline constexpr size_t kSideFileLimit = size_t(1) << 16;
+
 // Overrides every format honours: spacing, vertical scale/offset, nodata.
 void apply_common_overrides(GridInfo& info, const ReadOptions& options);
 
