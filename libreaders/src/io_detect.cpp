@@ -1,4 +1,5 @@
 // Format detection (file name first, then magic bytes) and the format-independent entry points.
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 
@@ -40,34 +41,60 @@ Kind detect_kind(const std::string& path, const ReadOptions& options) {
            "sidecar or --type/--width/--height");
 }
 
+// Values that came from a file (a header, a sidecar) or an override and that no stage can use: a
+// MissingField error naming the file and the field, whatever the format.
+const GridInfo& checked(const GridInfo& g, const std::string& path) {
+  const auto bad = [&](const std::string& field, const std::string& rule) {
+    io::fail(ErrorCode::MissingField, path, field + " " + rule);
+  };
+  if (!(std::isfinite(g.spacing_x) && g.spacing_x > 0)) bad("spacing_x", "must be finite and positive");
+  if (!(std::isfinite(g.spacing_y) && g.spacing_y > 0)) bad("spacing_y", "must be finite and positive");
+  if (!(std::isfinite(g.vertical_scale) && g.vertical_scale > 0))
+    bad("vertical_scale", "must be finite and positive");
+  if (!std::isfinite(g.vertical_offset)) bad("vertical_offset", "must be finite");
+  constexpr size_t kMaxUnits = 31;  // the .pyr stores units in 32-byte fields
+  if (g.horizontal_units.size() > kMaxUnits) bad("horizontal_units", "must be at most 31 bytes");
+  for (const char c : g.horizontal_units)
+    if (static_cast<unsigned char>(c) < 0x20) bad("horizontal_units", "must be printable text");
+  if (g.origin_x && !std::isfinite(*g.origin_x)) bad("origin_x", "must be finite");
+  if (g.origin_y && !std::isfinite(*g.origin_y)) bad("origin_y", "must be finite");
+  return g;
+}
+
 }  // namespace
 
 GridInfo probe(const std::string& path, const ReadOptions& options) {
   switch (detect_kind(path, options)) {
     case Kind::Hgt:
-      return io::probe_hgt_layout(path, options).info;
+      return checked(io::probe_hgt_layout(path, options).info, path);
     case Kind::Esri:
-      return io::probe_esri_layout(path, options).info;
+      return checked(io::probe_esri_layout(path, options).info, path);
     case Kind::Image:
-      return io::probe_image(path, options);
+      return checked(io::probe_image(path, options), path);
     case Kind::Raw:
-      return io::probe_raw_layout(path, options).info;
+      return checked(io::probe_raw_layout(path, options).info, path);
   }
   return {};
 }
 
 std::unique_ptr<BandReader> open_band_reader(const std::string& path, const ReadOptions& options) {
+  std::unique_ptr<BandReader> reader;
   switch (detect_kind(path, options)) {
     case Kind::Hgt:
-      return io::open_raw_stream(path, io::probe_hgt_layout(path, options));
+      reader = io::open_raw_stream(path, io::probe_hgt_layout(path, options));
+      break;
     case Kind::Esri:
-      return io::open_raw_stream(path, io::probe_esri_layout(path, options));
+      reader = io::open_raw_stream(path, io::probe_esri_layout(path, options));
+      break;
     case Kind::Image:
-      return io::open_image_reader(path, options);
+      reader = io::open_image_reader(path, options);
+      break;
     case Kind::Raw:
-      return io::open_raw_stream(path, io::probe_raw_layout(path, options));
+      reader = io::open_raw_stream(path, io::probe_raw_layout(path, options));
+      break;
   }
-  return nullptr;
+  if (reader) checked(reader->info(), path);
+  return reader;
 }
 
 Heightmap read_heightmap(const std::string& path, const ReadOptions& options) {

@@ -318,3 +318,25 @@ TEST_CASE("sizes that wrap and oversized side files are refused before any alloc
   CHECK(run_bounded(dir, "terrain-info", {dir.file("e.bil")}, &err) == 8);
   CHECK_THAT(err, Catch::Contains("e.hdr") && Catch::Contains("larger than"));
 }
+
+TEST_CASE("unusable values read from a file are exit 8 naming the file and the field", "[runtime][hostile]") {
+  iotest::TempDir dir;
+  iotest::write_file(dir.file("g.raw"), std::vector<uint8_t>(size_t(64 * 48 * 2), 7));
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"\"spacing_x\": -30", "spacing_x"},
+      {"\"spacing_x\": 0", "spacing_x"},
+      {"\"spacing_y\": \"NaN\"", "spacing_y"},
+      {"\"vertical_scale\": 0", "vertical_scale"},
+      {"\"vertical_scale\": -1", "vertical_scale"},
+      {"\"horizontal_units\": \"" + std::string(100, 'm') + "\"", "horizontal_units"}};
+  for (const auto& [field, name] : bad) {
+    INFO(field);
+    iotest::write_file(dir.file("g.raw.json"),
+                       "{\"width\": 64, \"height\": 48, \"type\": \"int16\", " + field + "}");
+    std::string err;
+    CHECK(run_bounded(dir, "pyramid-build", {dir.file("g.raw"), "-o", dir.file("g.pyr"), "--lossless", "-q"},
+                      &err) == 8);
+    CHECK_THAT(err, Catch::Contains("g.raw") && Catch::Contains(name));
+    CHECK(run_bounded(dir, "terrain-info", {dir.file("g.raw")}) == 8);
+  }
+}
