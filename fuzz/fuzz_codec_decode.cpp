@@ -26,7 +26,7 @@ void put_u32(uint8_t* p, uint32_t v) {
 void fix_checksums(std::vector<uint8_t>& s) {
   constexpr size_t kHeaderCrcAt = 52;
   if (s.size() < kHeaderCrcAt + 4) return;
-  put_u32(s.data() + kHeaderCrcAt, codec::detail::crc32c(s.data(), kHeaderCrcAt));
+  put_u32(s.data() + kHeaderCrcAt, codec::crc32c(s.data(), kHeaderCrcAt));
   codec::HeaderInfo h;
   if (codec::read_header(s.data(), s.size(), &h) != codec::Status::Ok) return;
   if (h.index_offset > s.size()) return;
@@ -42,12 +42,12 @@ void fix_checksums(std::vector<uint8_t>& s) {
     }
     if (s.size() - p < 4) return;
     if (offset <= h.index_offset && size <= h.index_offset - offset)
-      put_u32(s.data() + p, codec::detail::crc32c(s.data() + offset, size_t(size)));
+      put_u32(s.data() + p, codec::crc32c(s.data() + offset, size_t(size)));
     p += 4;
     offset += size;
   }
   if (s.size() - p < 4) return;
-  put_u32(s.data() + p, codec::detail::crc32c(s.data() + h.index_offset, p - h.index_offset));
+  put_u32(s.data() + p, codec::crc32c(s.data() + h.index_offset, p - h.index_offset));
 }
 
 void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
@@ -63,7 +63,7 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
   if (decoder.decode_region(r, part.data(), r.width, scratch) != codec::Status::Ok) std::abort();
   for (int64_t y = 0; y < r.height; ++y)
     for (int64_t x = 0; x < r.width; ++x)
-      if (part[size_t(y * r.width + x)] != full[size_t((r.y + y) * h.width + r.x + x)]) std::abort();
+      if (part[size_t(y * r.width + x)] != full[size_t((r.y0 + y) * h.width + r.x0 + x)]) std::abort();
 }
 
 void round_trip(const uint8_t* data, size_t size, codec::Scratch& scratch) {

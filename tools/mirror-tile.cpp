@@ -1,5 +1,7 @@
 // mirror-tile: makes a large seamless int16 raw grid (+ .json sidecar) by mirror-tiling a real tile,
 // for out-of-core benchmarks. The output is written row by row: only the tile is held in memory.
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -8,6 +10,8 @@
 #include <vector>
 
 #include "cli.h"
+#include "core/file.h"
+#include "core/text.h"
 #include "readers/heightmap.h"
 
 namespace {
@@ -65,8 +69,21 @@ int run(int argc, char** argv) {
     samples[size_t(k)] = int16_t(v);
   }
 
-  const std::string temp = output + ".tmp";
-  std::FILE* f = std::fopen(temp.c_str(), "wb");
+  terrain::check_output_path(output, {input});
+  terrain::check_output_path(output + ".json", {input});
+  // The grid is written out in full: refuse at once when it cannot fit (a 2^31 x 2^31 request wrote
+  // 24 GiB before the disk filled).
+  const std::filesystem::path dir = std::filesystem::absolute(output).parent_path();
+  const unsigned __int128 need = (unsigned __int128)width * (unsigned __int128)height * 2;
+  std::error_code ec;
+  const std::filesystem::space_info space = std::filesystem::space(dir, ec);
+  if (!ec && need > space.available)
+    throw terrain::Error(terrain::ErrorCode::WriteFailed,
+                         output + ": needs " + std::to_string(double(need) / (1 << 30)) +
+                             " GiB, the file system has " +
+                             std::to_string(double(space.available) / (1 << 30)) + " GiB free");
+  const std::string temp = output + ".tmp." + std::to_string(::getpid());
+  std::FILE* f = std::fopen(temp.c_str(), "wbx");
   if (!f) throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ": cannot create");
   std::setvbuf(f, nullptr, _IOFBF, size_t(1) << 20);
   std::vector<int16_t> row(static_cast<size_t>(width));

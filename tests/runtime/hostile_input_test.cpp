@@ -340,3 +340,19 @@ TEST_CASE("unusable values read from a file are exit 8 naming the file and the f
     CHECK(run_bounded(dir, "terrain-info", {dir.file("g.raw")}) == 8);
   }
 }
+
+TEST_CASE("mirror-tile refuses an output larger than the free disk before writing", "[runtime][hostile]") {
+  iotest::TempDir dir;
+  const std::string tile = dir.file("t.raw");
+  REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", tile, "--width", "16", "--height", "16", "-q"}})
+              .status == 0);
+  std::string err;
+  CHECK(run_bounded(
+            dir, "mirror-tile",
+            {tile, "-o", dir.file("huge.raw"), "--out-width", "2147483648", "--out-height", "2147483648"},
+            &err) == 9);
+  CHECK_THAT(err, Catch::Contains("free"));
+  CHECK_FALSE(std::filesystem::exists(dir.file("huge.raw")));
+  CHECK(run_bounded(dir, "mirror-tile", {tile, "-o", tile}) == 1);  // usage: --out-width missing
+  CHECK(run_bounded(dir, "mirror-tile", {tile, "-o", tile, "--out-width", "4", "--out-height", "4"}) == 9);
+}
