@@ -301,6 +301,16 @@ TEST_CASE("max-error mode never exceeds E", "[codec]") {
   }
 }
 
+// A uniformly random non-empty rectangle inside img.
+codec::Rect random_rect(std::mt19937& rng, const Image& img) {
+  codec::Rect r;
+  r.width = std::uniform_int_distribution<int64_t>(1, img.width)(rng);
+  r.height = std::uniform_int_distribution<int64_t>(1, img.height)(rng);
+  r.x0 = std::uniform_int_distribution<int64_t>(0, img.width - r.width)(rng);
+  r.y0 = std::uniform_int_distribution<int64_t>(0, img.height - r.height)(rng);
+  return r;
+}
+
 TEST_CASE("decode_region equals the same window of a full decode", "[codec]") {
   const Image img = residual_like(333, 257, 6.0, 21);
   std::mt19937 rng(5);
@@ -316,11 +326,7 @@ TEST_CASE("decode_region equals the same window of a full decode", "[codec]") {
     REQUIRE(decoder.open(stream.data(), stream.size()) == codec::Status::Ok);
     codec::Scratch scratch;
     for (int trial = 0; trial < 40; ++trial) {
-      codec::Rect r;
-      r.width = std::uniform_int_distribution<int64_t>(1, img.width)(rng);
-      r.height = std::uniform_int_distribution<int64_t>(1, img.height)(rng);
-      r.x0 = std::uniform_int_distribution<int64_t>(0, img.width - r.width)(rng);
-      r.y0 = std::uniform_int_distribution<int64_t>(0, img.height - r.height)(rng);
+      const codec::Rect r = random_rect(rng, img);
       const ptrdiff_t stride = r.width + 3;
       std::vector<int32_t> window(size_t(stride * r.height), 12345);
       REQUIRE(decoder.decode_region(r, window.data(), stride, scratch) == codec::Status::Ok);
@@ -492,11 +498,7 @@ TEST_CASE("empty tiles: no payload, exact zeros, region decode equals full decod
     REQUIRE(decoder.open(stream.data(), stream.size()) == codec::Status::Ok);
     codec::Scratch scratch;
     for (int trial = 0; trial < 60; ++trial) {
-      codec::Rect r;
-      r.width = std::uniform_int_distribution<int64_t>(1, img.width)(rng);
-      r.height = std::uniform_int_distribution<int64_t>(1, img.height)(rng);
-      r.x0 = std::uniform_int_distribution<int64_t>(0, img.width - r.width)(rng);
-      r.y0 = std::uniform_int_distribution<int64_t>(0, img.height - r.height)(rng);
+      const codec::Rect r = random_rect(rng, img);
       std::vector<int32_t> window(size_t(r.width * r.height), 777);
       REQUIRE(decoder.decode_region(r, window.data(), r.width, scratch) == codec::Status::Ok);
       bool same = true;
