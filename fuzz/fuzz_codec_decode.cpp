@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <utility>
 #include <vector>
 
 #include "codec/codec.h"
@@ -20,34 +21,59 @@ void put_u32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = uint8_t(v >> (8 * i));
 }
 
-// Rewrites header, tile and index CRCs in place (stream layout of formats 2 and 3, docs/codec.md: 56-byte
-// header with its CRC at 52, payloads back to back, then per tile a varint size and a CRC, then the index
-// CRC).
-void fix_checksums(std::vector<uint8_t>& s) {
-  constexpr size_t kHeaderCrcAt = 52;
-  if (s.size() < kHeaderCrcAt + 4) return;
-  put_u32(s.data() + kHeaderCrcAt, codec::crc32c(s.data(), kHeaderCrcAt));
-  codec::HeaderInfo h;
-  if (codec::read_header(s.data(), s.size(), &h) != codec::Status::Ok) return;
-  if (h.index_offset > s.size()) return;
-  size_t p = h.index_offset;
-  uint64_t offset = h.data_offset;
-  for (int64_t i = 0; i < h.tile_count(); ++i) {
-    uint64_t size = 0;
-    for (int shift = 0;; shift += 7) {
-      if (p >= s.size() || shift > 28) return;
-      const uint8_t byte = s[p++];
-      size |= uint64_t(byte & 0x7F) << shift;
-      if (!(byte & 0x80)) break;
-    }
-    if (s.size() - p < 4) return;
-    if (offset <= h.index_offset && size <= h.index_offset - offset)
-      put_u32(s.data() + p, codec::crc32c(s.data() + offset, size_t(size)));
-    p += 4;
-    offset += size;
+bool get_varint(const std::vector<uint8_t>& s, size_t& p, uint64_t* v) {
+  *v = 0;
+  for (int shift = 0;; shift += 7) {
+    if (p >= s.size() || shift > 63) return false;
+    const uint8_t byte = s[p++];
+    *v |= uint64_t(byte & 0x7F) << shift;
+    if (!(byte & 0x80)) return true;
   }
-  if (s.size() - p < 4) return;
-  put_u32(s.data() + p, codec::crc32c(s.data() + h.index_offset, p - h.index_offset));
+}
+
+// Rewrites the row and stream CRCs in place (stream layout of format 4, docs/codec.md: varint header,
+// payloads back to back, index records, one CRC per tile row with payload, then the CRC of header and
+// index (and the payloads, when there is one tile row) as the last 4 bytes).
+void fix_checksums(std::vector<uint8_t>& s) {
+  size_t p = 6;
+  uint64_t w = 0, h = 0, tile16 = 0, flags = 0, step = 0, e = 0, payload = 0;
+  for (uint64_t* field : {&w, &h, &tile16, &flags, &step})
+    if (!get_varint(s, p, field)) return;
+  if ((flags & 1) && !get_varint(s, p, &e)) return;
+  if (!get_varint(s, p, &payload)) return;
+  const size_t data_offset = p;
+  if (payload > s.size() || s.size() - payload < data_offset + 5 || tile16 == 0 || w == 0 || h == 0 ||
+      w > (uint64_t(1) << 40) || h > (uint64_t(1) << 40))
+    return;
+  const size_t index_offset = data_offset + size_t(payload), end = s.size() - 4;
+  const uint64_t t = tile16 * 16, tiles_x = (w + t - 1) / t, tiles = tiles_x * ((h + t - 1) / t);
+  const bool single_row = h <= t;  // no row CRC: the stream CRC covers the payloads
+  p = index_offset;
+  uint64_t offset = data_offset, row = UINT64_MAX;
+  std::vector<std::pair<uint64_t, uint64_t>> rows;  // payload offset, size
+  for (uint64_t n = 0; n < tiles;) {
+    uint64_t record = 0;
+    if (!get_varint(s, p, &record) || p > end) return;
+    if (record & 1) {
+      n += (record >> 1) + 1;
+      continue;
+    }
+    if (n / tiles_x != row) rows.push_back({offset, 0});
+    row = n / tiles_x;
+    rows.back().second += record >> 1;
+    offset += record >> 1;
+    ++n;
+  }
+  for (const auto& [at, size] : rows) {
+    if (single_row) break;
+    if (end - p < 4) return;
+    if (at <= index_offset && size <= index_offset - at)
+      put_u32(s.data() + p, codec::crc32c(s.data() + at, size_t(size)));
+    p += 4;
+  }
+  const size_t covered = single_row ? data_offset : index_offset;
+  put_u32(s.data() + end,
+          codec::crc32c(s.data() + covered, end - covered, codec::crc32c(s.data(), data_offset)));
 }
 
 void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {

@@ -54,10 +54,17 @@ std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w
                              "x" + std::to_string(h) + " band, largest |residual| " +
                              std::to_string(largest) + "): " + codec::status_name(s));
   }
+  codec::HeaderInfo header;
+  // An all-empty stream (every tile decodes to zeros) becomes no bytes at all: the band table marks it.
+  if (codec::read_header(buffer.data(), written, &header) == codec::Status::Ok && header.empty()) return {};
   return std::vector<uint8_t>(buffer.begin(), buffer.begin() + ptrdiff_t(written));
 }
 
 bool PtcResidualCoder::decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) {
+  if (n == 0) {  // an all-zero band
+    std::fill_n(out, size_t(w * h), 0);
+    return true;
+  }
   codec::Decoder d;
   if (d.open(data, n) != codec::Status::Ok) return false;
   if (d.header().width != w || d.header().height != h) return false;

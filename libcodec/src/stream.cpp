@@ -1,7 +1,8 @@
-// Stream container: fixed header (with its CRC32C), the tile payloads in raster order, then the tile
-// index (varint payload sizes with per-tile CRC32C, and an index CRC). Also the public API entry points.
-// Layout: docs/codec.md.
+// Stream container: compact varint header, the tile payloads in raster order, then the tile index
+// (varint records: a payload size, or a run of empty tiles), one CRC32C per tile row of payloads and
+// a CRC32C over header and index. Also the public API entry points. Layout: docs/codec.md.
 #include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <cmath>
 #include <cstring>
@@ -16,11 +17,9 @@
 namespace codec {
 
 struct Scratch::Impl {
-  struct IndexEntry {
-    uint32_t size, crc;
-  };
   detail::TileWork work;
-  std::vector<IndexEntry> index;  // encoder: entries until the index is written
+  std::vector<uint32_t> tile_sizes;  // encoder: payload bytes per tile (0 = empty) until the index is written
+  std::vector<uint8_t> body;         // encoder: payloads and index, until the header's size is known
   // Decoder: band steps of the last (step, fraction bits) seen; computing them costs about as much as
   // decoding a few hundred samples, and region decoders ask for one small tile at a time.
   uint32_t steps_step_q8 = 0;
@@ -42,27 +41,29 @@ Scratch::~Scratch() = default;
 namespace {
 
 constexpr uint8_t kMagic[4] = {'T', 'P', 'T', 'C'};
-constexpr size_t kHeaderSize = 56;
-constexpr size_t kHeaderCrcOffset = 52;
-constexpr size_t kMaxEntrySize = 5 + 4;  // varint payload size + CRC32C
+constexpr size_t kFixedHeader = 6;  // magic + u16 version; varint fields follow
+// Magic, version and the varints at their longest: sides (6 bytes each), tile size / 16 (2), flags
+// (1), step * 256 (4), E (3) and the payload size (10).
+constexpr size_t kMaxHeaderSize = kFixedHeader + 6 + 6 + 2 + 1 + 4 + 3 + 10;
+constexpr size_t kMaxRecordSize = 5;  // index record of a non-empty tile: size << 1 (< 2^33)
 constexpr uint32_t kFlagBoundMaxError = 1;
+constexpr uint32_t kFlagWideFraction = 2;  // lossy streams: kWideFractionBits (else kFineFractionBits)
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
+// Lossy tiles whose samples all lie within +-kEmptyProbeSteps steps are decoded by the encoder to see
+// whether they reconstruct to zero; a tile with a larger sample never did on SRTM residuals, and
+// probing every tile would cost an inverse transform each when the caller wants no reconstruction.
+constexpr double kEmptyProbeSteps = 4.0;
 
 using terrain::bytes::get_u16;
 using terrain::bytes::get_u32;
-using terrain::bytes::get_u64;
 using terrain::bytes::put_u16;
 using terrain::bytes::put_u32;
-using terrain::bytes::put_u64;
-size_t put_varint(uint8_t* p, uint32_t v) { return size_t(terrain::bytes::put_varint(p, v) - p); }
-// A tile size in the index is at most 32 bits.
-bool get_varint(const uint8_t*& p, const uint8_t* end, uint32_t* v) {
-  uint64_t value = 0;
-  if (!terrain::bytes::get_varint(p, end, &value, UINT32_MAX)) return false;
-  *v = uint32_t(value);
-  return true;
+using terrain::bytes::put_varint;
+
+bool get_varint(const uint8_t*& p, const uint8_t* end, uint64_t* v) {
+  return terrain::bytes::get_varint(p, end, v);
 }
 
 bool valid_tile_size(uint32_t t) { return t >= kMinTile && t <= kMaxTile && t % 16 == 0; }
@@ -75,7 +76,7 @@ int tile_extent(int64_t image_side, int64_t tile, int64_t index) {
 
 struct StreamLayout {
   int64_t tiles_x, tiles_y;
-  size_t index_bound;  // largest index (entries + CRC)
+  size_t index_bound;  // largest index (records, row CRCs and the stream CRC)
 };
 
 bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
@@ -84,8 +85,20 @@ bool layout_for(int64_t w, int64_t h, uint32_t tile, StreamLayout* out) {
   out->tiles_y = ceil_div(h, tile);
   const unsigned __int128 n = (unsigned __int128)out->tiles_x * out->tiles_y;
   if (n > (unsigned __int128)(SIZE_MAX / 32)) return false;
-  out->index_bound = size_t(n) * kMaxEntrySize + 4;
+  out->index_bound = size_t(n) * kMaxRecordSize + size_t(out->tiles_y) * 4 + 4;
   return true;
+}
+
+// Whether a tile's samples all lie within +-limit.
+bool within(const int32_t* src, ptrdiff_t stride, int w, int h, int64_t limit) {
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (std::abs(int64_t(src[y * stride + x])) > limit) return false;
+  return true;
+}
+
+bool all_zero(const int32_t* v, size_t n) {
+  return std::all_of(v, v + n, [](int32_t x) { return x == 0; });
 }
 
 }  // namespace
@@ -111,7 +124,7 @@ size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options)
   const int64_t t = options.tile_size;
   const int64_t full_x = width / t, full_y = height / t;
   const int rest_x = int(width % t), rest_y = int(height % t);
-  unsigned __int128 total = kHeaderSize + layout.index_bound;
+  unsigned __int128 total = kMaxHeaderSize + layout.index_bound;
   const auto add = [&](int64_t count, int w, int h) {
     if (count > 0 && w > 0 && h > 0) total += (unsigned __int128)count * detail::tile_payload_bound(w, h);
   };
@@ -147,8 +160,6 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
     }
   }
   if (hi > kMaxAbsSample || lo < -kMaxAbsSample) return Status::ValueOutOfRange;
-  if (dst_capacity < kHeaderSize) return Status::BufferTooSmall;
-
   const uint32_t step_q8 = uint32_t(std::lround(step * 256.0));
   detail::TileParams params;
   const bool lossless = step_q8 <= detail::kStepOne;
@@ -157,58 +168,94 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.steps = lossless ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
+  // Tiles within +-empty_limit are empty outright: zeros meet the bound (lossless: 0, max-error: E).
+  const int64_t empty_limit = params.max_error;
+  const bool probe = !lossless && !options.bound_max_error;
+  const int64_t probe_limit = int64_t(kEmptyProbeSteps * step);
 
-  // Payloads first, then the index (its size depends on theirs), then the header that points at it.
+  // Payloads first, then the index (its size depends on theirs), into scratch; then the header, which
+  // records the payload size, and the body behind it into dst. (The copy costs far less than coding.)
   detail::TileWork& work = scratch.impl().work;
+  std::vector<uint32_t>& sizes = scratch.impl().tile_sizes;
+  std::vector<uint8_t>& body = scratch.impl().body;
   const int64_t t = options.tile_size;
   const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
-  if (scratch.impl().index.size() < tile_count) scratch.impl().index.resize(tile_count);
-  size_t pos = kHeaderSize;
+  if (sizes.size() < tile_count) sizes.resize(tile_count);
+  size_t pos = 0;
   for (int64_t ty = 0; ty < layout.tiles_y; ++ty)
     for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
       const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
       const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-      const size_t size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, dst + pos,
-                                              dst_capacity - pos, recon != nullptr);
-      if (size == 0) return Status::BufferTooSmall;
-      scratch.impl().index[size_t(ty * layout.tiles_x + tx)] = {uint32_t(size), crc32c(dst + pos, size)};
-      pos += size;
+      bool empty = within(tile_src, src_stride, tw, th, empty_limit);
+      size_t size = 0;
+      if (!empty) {
+        const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
+        const size_t bound = detail::tile_payload_bound(tw, th);
+        if (body.size() < pos + bound) body.resize(std::max(pos + bound, body.size() * 2));
+        size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, body.data() + pos,
+                                   body.size() - pos, recon != nullptr || probing);
+        if (size == 0) return Status::BufferTooSmall;
+        empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
+      }
+      sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
+      if (!empty) pos += size;
       if (recon) {
         int32_t* out = recon + ty * t * recon_stride + tx * t;
-        for (int y = 0; y < th; ++y)
-          std::memcpy(out + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
-                      size_t(tw) * sizeof(int32_t));
+        for (int y = 0; y < th; ++y) {
+          if (empty)
+            std::fill_n(out + y * recon_stride, tw, 0);
+          else
+            std::memcpy(out + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
+                        size_t(tw) * sizeof(int32_t));
+        }
       }
     }
-  const size_t index_offset = pos;
-  for (size_t i = 0; i < tile_count; ++i) {
-    uint8_t varint[5];
-    const size_t length = put_varint(varint, scratch.impl().index[i].size);
-    if (dst_capacity - pos < length + 4) return Status::BufferTooSmall;
-    std::memcpy(dst + pos, varint, length);
-    pos += length;
-    put_u32(dst + pos, scratch.impl().index[i].crc);
-    pos += 4;
+  const size_t payload_end = pos;
+  // Index records: size << 1 for a non-empty tile, (run - 1) << 1 | 1 for a run of empty tiles.
+  for (size_t i = 0; i < tile_count;) {
+    uint64_t record = uint64_t(sizes[i]) << 1;
+    size_t next = i + 1;
+    if (sizes[i] == 0) {
+      while (next < tile_count && sizes[next] == 0) ++next;
+      record = (uint64_t(next - i - 1) << 1) | 1;
+    }
+    if (body.size() < pos + terrain::bytes::kMaxVarintBytes) body.resize(2 * body.size() + 64);
+    pos = size_t(put_varint(body.data() + pos, record) - body.data());
+    i = next;
   }
-  if (dst_capacity - pos < 4) return Status::BufferTooSmall;
-  put_u32(dst + pos, crc32c(dst + index_offset, pos - index_offset));
-  pos += 4;
+  // A single tile row has no row CRC: the stream CRC covers its payloads.
+  const bool single_row = layout.tiles_y == 1;
+  size_t row_start = 0;
+  for (int64_t ty = 0; ty < layout.tiles_y && !single_row; ++ty) {
+    size_t row_bytes = 0;
+    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) row_bytes += sizes[size_t(ty * layout.tiles_x + tx)];
+    if (row_bytes == 0) continue;
+    if (body.size() < pos + 4) body.resize(2 * body.size() + 64);
+    put_u32(body.data() + pos, crc32c(body.data() + row_start, row_bytes));
+    pos += 4;
+    row_start += row_bytes;
+  }
 
-  uint8_t* h = dst;
-  std::memset(h, 0, kHeaderSize);
-  std::memcpy(h, kMagic, 4);
-  put_u16(h + 4, uint16_t(kFormatVersion));
-  put_u16(h + 6, uint16_t(kHeaderSize));
-  put_u64(h + 8, uint64_t(width));
-  put_u64(h + 16, uint64_t(height));
-  put_u32(h + 24, options.tile_size);
-  put_u32(h + 28, options.bound_max_error ? kFlagBoundMaxError : 0);
-  put_u32(h + 32, step_q8);
-  put_u32(h + 36, params.max_error);
-  put_u32(h + 40, uint32_t(params.fraction_bits));
-  put_u64(h + 44, index_offset);
-  put_u32(h + kHeaderCrcOffset, crc32c(h, kHeaderCrcOffset));
-  *bytes_written = pos;
+  uint8_t header[kMaxHeaderSize];
+  std::memcpy(header, kMagic, 4);
+  put_u16(header + 4, uint16_t(kFormatVersion));
+  uint8_t* h = header + kFixedHeader;
+  h = put_varint(h, uint64_t(width));
+  h = put_varint(h, uint64_t(height));
+  h = put_varint(h, options.tile_size / 16);
+  h = put_varint(h, (options.bound_max_error ? kFlagBoundMaxError : 0) |
+                        (params.fraction_bits == detail::kWideFractionBits ? kFlagWideFraction : 0));
+  h = put_varint(h, step_q8);
+  if (options.bound_max_error) h = put_varint(h, params.max_error);
+  h = put_varint(h, payload_end);
+  const size_t header_size = size_t(h - header);
+  if (dst_capacity < header_size + 4 || dst_capacity - header_size - 4 < pos) return Status::BufferTooSmall;
+  std::memcpy(dst, header, header_size);
+  std::memcpy(dst + header_size, body.data(), pos);
+  const size_t covered = single_row ? 0 : payload_end;
+  const uint32_t crc = crc32c(body.data() + covered, pos - covered, crc32c(header, header_size));
+  put_u32(dst + header_size + pos, crc);
+  *bytes_written = header_size + pos + 4;
   return Status::Ok;
 }
 
@@ -216,94 +263,152 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   assert(header);
   if (!data) return Status::InvalidArgument;
   if (std::memcmp(data, kMagic, std::min<size_t>(size, 4)) != 0) return Status::Corrupt;
-  if (size < 6) return Status::Truncated;
+  if (size < kFixedHeader) return Status::Truncated;
   if (get_u16(data + 4) != kFormatVersion) return Status::UnsupportedVersion;
-  if (size < kHeaderSize) return Status::Truncated;
-  if (crc32c(data, kHeaderCrcOffset) != get_u32(data + kHeaderCrcOffset)) return Status::ChecksumMismatch;
-  if (get_u16(data + 6) != kHeaderSize) return Status::Corrupt;
+  const uint8_t* p = data + kFixedHeader;
+  const uint8_t* const end = data + size;
+  uint64_t w = 0, h = 0, tile16 = 0, flags = 0, step_q8 = 0, max_error = 0, payload = 0;
+  for (uint64_t* field : {&w, &h, &tile16, &flags, &step_q8})
+    if (!get_varint(p, end, field)) return p == end ? Status::Truncated : Status::Corrupt;
+  if ((flags & kFlagBoundMaxError) && !get_varint(p, end, &max_error))
+    return p == end ? Status::Truncated : Status::Corrupt;
+  if (!get_varint(p, end, &payload)) return p == end ? Status::Truncated : Status::Corrupt;
+  const size_t data_offset = size_t(p - data);
+  // At least one index byte and the stream CRC follow the payloads.
+  if (payload > size - data_offset || size - data_offset - payload < 5) return Status::Truncated;
+  const size_t index_offset = data_offset + size_t(payload);
+  // Streams of one tile row (height <= tile size) have no row CRC: the stream CRC covers the payloads.
+  const bool single_row = tile16 != 0 && h <= tile16 * 16;
+  const size_t covered = single_row ? data_offset : index_offset;
+  if (crc32c(data + covered, size - 4 - covered, crc32c(data, data_offset)) != get_u32(end - 4))
+    return Status::ChecksumMismatch;
   HeaderInfo info;
   info.version = kFormatVersion;
-  const uint64_t w = get_u64(data + 8), h = get_u64(data + 16);
-  info.tile_size = get_u32(data + 24);
-  const uint32_t flags = get_u32(data + 28);
-  const uint32_t step_q8 = get_u32(data + 32);
-  info.max_error = get_u32(data + 36);
-  if (w > uint64_t(kMaxSide) || h > uint64_t(kMaxSide)) return Status::Corrupt;
+  if (w > uint64_t(kMaxSide) || h > uint64_t(kMaxSide) || tile16 > kMaxTile / 16) return Status::Corrupt;
   info.width = int64_t(w);
   info.height = int64_t(h);
+  info.tile_size = uint32_t(tile16 * 16);
   StreamLayout layout;
   if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
-  if ((flags & ~kFlagBoundMaxError) != 0 || step_q8 < detail::kStepOne) return Status::Corrupt;
-  info.bound_max_error = (flags & kFlagBoundMaxError) != 0;
-  if (info.max_error > uint32_t(kMaxAbsSample) || (!info.bound_max_error && info.max_error != 0))
+  if ((flags & ~uint64_t(kFlagBoundMaxError | kFlagWideFraction)) != 0 || step_q8 < detail::kStepOne ||
+      step_q8 > uint64_t(kMaxAbsSample) * 256u || max_error > uint64_t(kMaxAbsSample))
     return Status::Corrupt;
-  if (step_q8 > uint32_t(kMaxAbsSample) * 256u) return Status::Corrupt;
   // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
   // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
-  const uint32_t fraction_bits = get_u32(data + 40);
-  if (step_q8 <= detail::kStepOne ? fraction_bits != 0
-                                  : fraction_bits != uint32_t(detail::kFineFractionBits) &&
-                                        fraction_bits != uint32_t(detail::kWideFractionBits))
-    return Status::Corrupt;
-  const uint64_t index_offset = get_u64(data + 44);
-  if (index_offset < kHeaderSize || index_offset > SIZE_MAX / 2) return Status::Corrupt;
-  info.step = step_q8 / 256.0;
+  const bool wide = (flags & kFlagWideFraction) != 0;
+  if (step_q8 == detail::kStepOne && wide) return Status::Corrupt;
+  info.bound_max_error = (flags & kFlagBoundMaxError) != 0;
+  info.max_error = uint32_t(max_error);
+  info.fraction_bits = step_q8 == detail::kStepOne ? 0
+                       : wide                      ? detail::kWideFractionBits
+                                                   : detail::kFineFractionBits;
+  info.step = double(step_q8) / 256.0;
   info.tiles_x = layout.tiles_x;
   info.tiles_y = layout.tiles_y;
-  info.index_offset = size_t(index_offset);
-  info.data_offset = kHeaderSize;
+  info.index_offset = index_offset;
+  info.data_offset = data_offset;
   *header = info;
   return Status::Ok;
 }
 
-Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries) {
-  assert(data && entries);
-  if (size < header.index_offset) return Status::Truncated;
+Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header,
+                       std::vector<TileEntry>* entries, std::vector<RowChecksum>* rows) {
+  assert(data && entries && rows);
+  entries->clear();
+  rows->clear();
+  if (size < header.index_offset + 4) return Status::Truncated;
   const uint8_t* p = data + header.index_offset;
-  const uint8_t* const end = data + size;
-  const int64_t t = header.tile_size;
+  const uint8_t* const end = data + size - 4;  // the stream CRC (read_header checked it)
+  const int64_t t = header.tile_size, tiles = header.tile_count();
   uint64_t offset = header.data_offset;
-  for (int64_t ty = 0; ty < header.tiles_y; ++ty)
-    for (int64_t tx = 0; tx < header.tiles_x; ++tx) {
-      TileEntry entry;
-      uint32_t tile_size = 0;
-      if (!get_varint(p, end, &tile_size)) return p == end ? Status::Truncated : Status::Corrupt;
-      if (end - p < 4) return Status::Truncated;
-      entry.crc = get_u32(p);
-      p += 4;
-      entry.offset = offset;
-      entry.size = tile_size;
-      const size_t bound =
+  for (int64_t n = 0; n < tiles;) {
+    uint64_t record = 0;
+    if (!get_varint(p, end, &record)) return p == end ? Status::Truncated : Status::Corrupt;
+    TileEntry entry;
+    entry.first_tile = n;
+    entry.offset = offset;
+    if (record & 1) {
+      // Runs are maximal: two in a row would be one longer run.
+      if ((record >> 1) >= uint64_t(tiles - n) || (!entries->empty() && entries->back().size == 0))
+        return Status::Corrupt;
+      entry.count = int64_t(record >> 1) + 1;
+    } else {
+      const int64_t tx = n % header.tiles_x, ty = n / header.tiles_x;
+      const uint64_t bound =
           detail::tile_payload_bound(tile_extent(header.width, t, tx), tile_extent(header.height, t, ty));
-      if (entry.size < 1 || entry.size > bound) return Status::Corrupt;
+      entry.size = uint32_t(std::min<uint64_t>(record >> 1, UINT32_MAX));
+      if (entry.size < 1 || (record >> 1) > bound || entry.size > header.index_offset - offset)
+        return Status::Corrupt;
+      if (rows->empty() || rows->back().tile_row != ty) rows->push_back({ty, offset, 0, 0});
+      rows->back().size += entry.size;
       offset += entry.size;
-      if (offset > header.index_offset) return Status::Corrupt;
-      entries[size_t(ty * header.tiles_x + tx)] = entry;
     }
+    n += entry.count;
+    entries->push_back(entry);
+  }
   if (offset != header.index_offset) return Status::Corrupt;  // payloads are back to back
-  if (end - p < 4) return Status::Truncated;
-  if (crc32c(data + header.index_offset, size_t(p - (data + header.index_offset))) != get_u32(p))
-    return Status::ChecksumMismatch;
+  for (RowChecksum& row : *rows) {
+    if (header.tiles_y == 1) break;  // covered by the stream CRC
+    if (end - p < 4) return Status::Truncated;
+    row.crc = get_u32(p);
+    p += 4;
+  }
+  if (p != end) return Status::Corrupt;  // the index ends at the stream CRC
   return Status::Ok;
 }
+
+// One flag per tile row with payload: set once its CRC has matched.
+struct Decoder::RowState {
+  explicit RowState(size_t n) : checked(new std::atomic<bool>[n]) {
+    for (size_t i = 0; i < n; ++i) checked[i].store(false, std::memory_order_relaxed);
+  }
+  std::unique_ptr<std::atomic<bool>[]> checked;
+};
+
+Decoder::Decoder() = default;
+Decoder::~Decoder() = default;
+Decoder::Decoder(Decoder&&) noexcept = default;
+Decoder& Decoder::operator=(Decoder&&) noexcept = default;
 
 Status Decoder::open(const uint8_t* data, size_t size) {
   data_ = nullptr;
   size_ = 0;
   index_.clear();
+  rows_.clear();
+  row_state_.reset();
   HeaderInfo header;
   Status s = read_header(data, size, &header);
   if (s != Status::Ok) return s;
-  // Every tile takes at least 1 payload byte and 5 index bytes: reject impossible tile counts before
-  // allocating the index (a forged header could otherwise ask for terabytes).
-  if (uint64_t(header.tile_count()) > (size - header.data_offset) / 6) return Status::Truncated;
-  std::vector<TileEntry> index(size_t(header.tile_count()));
-  s = read_tile_index(data, size, header, index.data());
+  std::vector<TileEntry> index;
+  std::vector<RowChecksum> rows;
+  s = read_tile_index(data, size, header, &index, &rows);
   if (s != Status::Ok) return s;
   data_ = data;
   size_ = size;
   header_ = header;
   index_ = std::move(index);
+  rows_ = std::move(rows);
+  row_state_ = std::make_unique<RowState>(rows_.size());
+  if (header_.tiles_y == 1 && !rows_.empty())  // read_header checked the payloads with the stream CRC
+    row_state_->checked[0].store(true, std::memory_order_relaxed);
+  return Status::Ok;
+}
+
+const TileEntry& Decoder::entry_of(int64_t tile) const {
+  const auto it = std::upper_bound(index_.begin(), index_.end(), tile,
+                                   [](int64_t n, const TileEntry& e) { return n < e.first_tile; });
+  return *(it - 1);
+}
+
+// Two threads may both verify a row the first time; both get the same answer.
+Status Decoder::check_row(int64_t tile_row) const {
+  const auto it = std::lower_bound(rows_.begin(), rows_.end(), tile_row,
+                                   [](const RowChecksum& r, int64_t ty) { return r.tile_row < ty; });
+  assert(it != rows_.end() && it->tile_row == tile_row);
+  std::atomic<bool>& checked = row_state_->checked[size_t(it - rows_.begin())];
+  if (checked.load(std::memory_order_acquire)) return Status::Ok;
+  if (crc32c(data_ + it->offset, size_t(it->size)) != it->crc) return Status::ChecksumMismatch;
+  checked.store(true, std::memory_order_release);
   return Status::Ok;
 }
 
@@ -314,32 +419,38 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
       rect.x0 > header_.width - rect.width || rect.y0 > header_.height - rect.height)
     return Status::InvalidArgument;
   detail::TileParams params;
-  params.fraction_bits = int(get_u32(data_ + 40));
-  const uint32_t step_q8 = get_u32(data_ + 32);
-  params.steps = scratch.impl().band_steps(step_q8, params.fraction_bits);
+  params.fraction_bits = header_.fraction_bits;
+  params.steps = scratch.impl().band_steps(uint32_t(std::lround(header_.step * 256.0)), params.fraction_bits);
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
   detail::TileWork& work = scratch.impl().work;
   const int64_t t = header_.tile_size;
   const int64_t tx0 = rect.x0 / t, tx1 = (rect.x0 + rect.width - 1) / t;
   const int64_t ty0 = rect.y0 / t, ty1 = (rect.y0 + rect.height - 1) / t;
-  for (int64_t ty = ty0; ty <= ty1; ++ty)
+  for (int64_t ty = ty0; ty <= ty1; ++ty) {
+    bool row_checked = false;
     for (int64_t tx = tx0; tx <= tx1; ++tx) {
-      const TileEntry& entry = index_[size_t(ty * header_.tiles_x + tx)];
-      const uint8_t* payload = data_ + entry.offset;
-      if (crc32c(payload, entry.size) != entry.crc) return Status::ChecksumMismatch;
+      const TileEntry& entry = entry_of(ty * header_.tiles_x + tx);
       const int tw = tile_extent(header_.width, t, tx), th = tile_extent(header_.height, t, ty);
       const int64_t x0 = std::max(rect.x0, tx * t), x1 = std::min(rect.x0 + rect.width, tx * t + tw);
       const int64_t y0 = std::max(rect.y0, ty * t), y1 = std::min(rect.y0 + rect.height, ty * t + th);
-      const detail::TileWindow window{int(x0 - tx * t),
-                                      int(y0 - ty * t),
-                                      int(x1 - tx * t),
-                                      int(y1 - ty * t),
-                                      dst + (y0 - rect.y0) * dst_stride + (x0 - rect.x0),
-                                      dst_stride};
-      if (detail::decode_tile(payload, entry.size, tw, th, params, work, window) != detail::TileResult::Ok)
+      int32_t* out = dst + (y0 - rect.y0) * dst_stride + (x0 - rect.x0);
+      if (entry.size == 0) {
+        for (int64_t y = y0; y < y1; ++y) std::fill_n(out + (y - y0) * dst_stride, x1 - x0, 0);
+        continue;
+      }
+      if (!row_checked) {
+        const Status s = check_row(ty);
+        if (s != Status::Ok) return s;
+        row_checked = true;
+      }
+      const detail::TileWindow window{
+          int(x0 - tx * t), int(y0 - ty * t), int(x1 - tx * t), int(y1 - ty * t), out, dst_stride};
+      if (detail::decode_tile(data_ + entry.offset, entry.size, tw, th, params, work, window) !=
+          detail::TileResult::Ok)
         return Status::Corrupt;
     }
+  }
   return Status::Ok;
 }
 

@@ -112,7 +112,8 @@ Container Container::open(const std::string& path) {
   if (major != kFormatMajor) {
     parse.fail(Code::UnsupportedVersion,
                "format version " + std::to_string(major) + "." + std::to_string(minor) +
-                   " is not supported (this reader reads version " + std::to_string(kFormatMajor) + ".x)");
+                   " is not supported (this reader reads version " + std::to_string(kFormatMajor) +
+                   ".x): rebuild it with pyramid-build");
   }
   c.minor_version_ = minor;
   // Newer minor versions may grow fixed-size structures; this reader reads the fields it knows.
@@ -149,9 +150,9 @@ Container Container::open(const std::string& path) {
   const uint32_t filter_size = get_u32(idx + info::kFilterSize);
   parse.require(newer ? (info_size >= info::kSizeV1 && info_size % 8 == 0) : info_size == info::kSizeV1,
                 "index info size " + std::to_string(info_size) + " is invalid");
-  // Version 1.0 records end at the residual statistics; 1.1 appends the reconstruction error.
-  const uint32_t known_record_size = minor >= 1 ? level::kSizeV1_1 : level::kSizeV1;
-  const uint32_t known_level_flags = level::kFlagHasCrc | (minor >= 1 ? level::kFlagHasError : 0);
+  // Version 2.0 records are those of 1.1: the residual statistics, then the reconstruction error.
+  const uint32_t known_record_size = level::kSizeV1_1;
+  const uint32_t known_level_flags = level::kFlagHasCrc | level::kFlagHasError;
   parse.require(
       newer ? (record_size >= known_record_size && record_size % 8 == 0) : record_size == known_record_size,
       "level record size " + std::to_string(record_size) + " is invalid");
@@ -220,13 +221,11 @@ Container Container::open(const std::string& path) {
     li.stats.rms = get_f64(r + level::kRms);
     li.stats.min = get_f64(r + level::kMin);
     li.stats.max = get_f64(r + level::kMax);
-    if (minor >= 1) {
-      const double error_rms = get_f64(r + level::kErrorRms), error_max = get_f64(r + level::kErrorMax);
-      if (flags & level::kFlagHasError) {
-        li.error = LevelError{error_rms, error_max};  // validate_info below checks the figures
-      } else {
-        parse.require(error_rms == 0 && error_max == 0, name + " has error figures but its flag is not set");
-      }
+    const double error_rms = get_f64(r + level::kErrorRms), error_max = get_f64(r + level::kErrorMax);
+    if (flags & level::kFlagHasError) {
+      li.error = LevelError{error_rms, error_max};  // validate_info below checks the figures
+    } else {
+      parse.require(error_rms == 0 && error_max == 0, name + " has error figures but its flag is not set");
     }
     parse.require_region(li.blob_offset, li.blob_size, sb_size, name + " blob");
     regions.push_back({li.blob_offset, li.blob_size, name + " blob"});

@@ -1,9 +1,10 @@
 // Level blobs as band tables: writer side (a PyramidSink over ContainerWriter) and reader side.
 //
-// Level blob layout (little endian):
-//   band streams, back to back, each padded to 8 bytes
-//   band table: band_count x { u64 offset (from blob start), u64 size, u64 y0, u64 rows }
-//   footer:     u64 band_count, u32 magic "BNDT", u32 CRC-32C of the band table
+// Level blob layout (container format 2, little endian; docs/format.md "Level blobs"):
+//   band streams, back to back (an all-zero band has none)
+//   band table: records of varint rows, varint code: code = size << 1 for a band with a stream of
+//               `size` bytes, (n - 1) << 1 | 1 for n consecutive all-zero bands of `rows` rows each
+//   footer:     u32 table size, u32 magic "BND2", u32 CRC-32C of the band table
 // The table sits at the end because bands arrive one by one while the blob is being streamed.
 #include "container/pyramid_file.h"
 
@@ -16,14 +17,11 @@
 namespace terrain::container {
 namespace {
 
-constexpr uint32_t kBandMagic = 0x54444e42;  // "BNDT"
-constexpr size_t kFooterSize = 16;
-constexpr size_t kBandRecordSize = 32;
+constexpr uint32_t kBandMagic = 0x32444e42;  // "BND2"
+constexpr size_t kFooterSize = 12;
 
 using bytes::get_u32;
-using bytes::get_u64;
 using bytes::put_u32;
-using bytes::put_u64;
 
 }  // namespace
 
@@ -38,16 +36,24 @@ void PyramidFileWriter::begin(const PyramidHeader& header) {
 
 void PyramidFileWriter::close_level(int level) {
   LevelBands& lb = levels_[size_t(level)];
-  std::vector<uint8_t> table(lb.bands.size() * kBandRecordSize + kFooterSize);
-  uint8_t* p = table.data();
-  for (const BandRecord& b : lb.bands) {
-    put_u64(p, b.offset), put_u64(p + 8, b.size), put_u64(p + 16, b.y0), put_u64(p + 24, b.rows);
-    p += kBandRecordSize;
+  std::vector<uint8_t> table;
+  for (size_t i = 0; i < lb.bands.size();) {
+    const BandRecord& b = lb.bands[i];
+    size_t next = i + 1;
+    uint64_t code = b.size << 1;
+    if (b.size == 0) {  // a run of all-zero bands of the same height
+      while (next < lb.bands.size() && lb.bands[next].size == 0 && lb.bands[next].rows == b.rows) ++next;
+      code = (uint64_t(next - i - 1) << 1) | 1;
+    }
+    bytes::put_varint(table, b.rows);
+    bytes::put_varint(table, code);
+    i = next;
   }
-  const size_t table_bytes = lb.bands.size() * kBandRecordSize;
-  put_u64(p, lb.bands.size());
-  put_u32(p + 8, kBandMagic);
-  put_u32(p + 12, crc32c(table.data(), table_bytes));
+  const size_t table_bytes = table.size();
+  table.resize(table_bytes + kFooterSize);
+  put_u32(table.data() + table_bytes, uint32_t(table_bytes));
+  put_u32(table.data() + table_bytes + 4, kBandMagic);
+  put_u32(table.data() + table_bytes + 8, crc32c(table.data(), table_bytes));
   writer_.append_level(uint32_t(level), table.data(), table.size());
   writer_.end_level(uint32_t(level));
   bytes_ += table.size();
@@ -64,13 +70,9 @@ void PyramidFileWriter::band(int level, int64_t y0, int64_t rows, std::vector<ui
     throw std::logic_error("pyramid writer: level " + std::to_string(level) + " band at row " +
                            std::to_string(y0) + " out of order (next row " + std::to_string(lb.next_row) +
                            ")");
-  lb.bands.push_back({lb.blob_bytes, bytes.size(), uint64_t(y0), uint64_t(rows)});
-  static const uint8_t zeros[8] = {};
-  const size_t pad = (8 - bytes.size() % 8) % 8;
-  writer_.append_level(uint32_t(level), bytes.data(), bytes.size());
-  if (pad) writer_.append_level(uint32_t(level), zeros, pad);
-  lb.blob_bytes += bytes.size() + pad;
-  bytes_ += bytes.size() + pad;
+  lb.bands.push_back({bytes.size(), uint64_t(rows)});
+  if (!bytes.empty()) writer_.append_level(uint32_t(level), bytes.data(), bytes.size());
+  bytes_ += bytes.size();
   lb.next_row = y0 + rows;
   if (lb.next_row == height) close_level(level);
 }
@@ -116,26 +118,35 @@ std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t
   auto corrupt = [&](const std::string& why) { return Error(ErrorCode::CorruptData, what + ": " + why); };
   if (size < kFooterSize) throw corrupt("level blob too small for its band table");
   const uint8_t* footer = blob + size - kFooterSize;
-  const uint64_t count = get_u64(footer);
-  if (get_u32(footer + 8) != kBandMagic) throw corrupt("band table magic missing");
-  if (count == 0 || count > (size - kFooterSize) / kBandRecordSize) throw corrupt("bad band count");
-  const size_t table_bytes = size_t(count) * kBandRecordSize;
+  if (get_u32(footer + 4) != kBandMagic) throw corrupt("band table magic missing");
+  const uint32_t table_bytes = get_u32(footer);
+  if (table_bytes > size - kFooterSize)
+    throw corrupt("band table size " + std::to_string(table_bytes) + " too large");
   const uint8_t* table = footer - table_bytes;
-  if (crc32c(table, table_bytes) != get_u32(footer + 12))
+  if (crc32c(table, table_bytes) != get_u32(footer + 8))
     throw Error(ErrorCode::ChecksumMismatch, what + ": band table checksum mismatch");
   const uint64_t data_end = uint64_t(table - blob);
+  // One view per record: a run of all-zero bands is one view (no stream to find), so the views'
+  // memory is bounded by the table's size.
+  const uint8_t* p = table;
   std::vector<BandView> out;
-  uint64_t next_row = 0;
-  for (uint64_t i = 0; i < count; ++i) {
-    const uint8_t* r = table + i * kBandRecordSize;
-    const uint64_t off = get_u64(r), sz = get_u64(r + 8), y0 = get_u64(r + 16), rows = get_u64(r + 24);
-    if (off > data_end || sz > data_end - off)
-      throw corrupt("band " + std::to_string(i) + " lies outside the blob");
-    if (y0 != next_row || rows == 0 || rows > uint64_t(level_height) - y0)
-      throw corrupt("band " + std::to_string(i) + " rows do not tile the level");
-    next_row = y0 + rows;
-    out.push_back(BandView{int64_t(y0), int64_t(rows), blob + off, size_t(sz)});
+  uint64_t next_row = 0, offset = 0;
+  for (size_t i = 0; p != footer; ++i) {
+    uint64_t rows = 0, code = 0;
+    if (!bytes::get_varint(p, footer, &rows) || !bytes::get_varint(p, footer, &code))
+      throw corrupt("band table ends inside record " + std::to_string(i));
+    const uint64_t left = uint64_t(level_height) - next_row;
+    const uint64_t run = code & 1 ? (code >> 1) + 1 : 1, sz = code & 1 ? 0 : code >> 1;
+    if (rows == 0 || rows > left || run > left / rows)
+      throw corrupt("band record " + std::to_string(i) + " rows do not tile the level");
+    if (!(code & 1) && (sz == 0 || sz > data_end - offset))
+      throw corrupt("band record " + std::to_string(i) + " lies outside the blob");
+    out.push_back(BandView{int64_t(next_row), int64_t(rows * run), sz ? blob + offset : nullptr, size_t(sz)});
+    next_row += rows * run;
+    offset += sz;
   }
+  if (out.empty()) throw corrupt("band table is empty");
+  if (offset != data_end) throw corrupt("band streams do not fill the blob");
   if (next_row != uint64_t(level_height)) throw corrupt("bands do not cover the level");
   return out;
 }

@@ -183,6 +183,7 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
   for (size_t b = file_->band_of_row(level, rect.y0); b < views.size(); ++b) {
     const BandView& view = views[b];
     if (view.y0 >= rect.y0 + rect.height) break;
+    if (view.empty()) continue;  // an all-zero residual band: nothing to decode or add
     const Band& bd = band(level, b);
     const int64_t y0 = std::max(rect.y0, view.y0), y1 = std::min(rect.y0 + rect.height, view.y0 + view.rows);
     const codec::Rect cr{rect.x0, y0 - view.y0, rect.width, y1 - y0};

@@ -521,16 +521,16 @@ TEST_CASE("container version rules", "[runtime][container]") {
   SECTION("an unknown major version is rejected by name, checksum or not") {
     for (bool sealed : {false, true}) {
       std::vector<uint8_t> b = good;
-      put_le(b, kSbMajor, 2, 2);
+      put_le(b, kSbMajor, kFormatMajor + 1, 2);
       if (sealed) reseal(b);
       write_bytes(path, b);
       try {
         Container::open(path);
-        FAIL("version 2 accepted");
+        FAIL("version 3 accepted");
       } catch (const Error& e) {
         CHECK(e.code() == ErrorCode::UnsupportedVersion);
         CHECK_THAT(e.what(),
-                   Catch::Contains(path) && Catch::Contains("version 2." + std::to_string(kFormatMinor)));
+                   Catch::Contains(path) && Catch::Contains("version 3." + std::to_string(kFormatMinor)));
       }
     }
   }
@@ -545,44 +545,31 @@ TEST_CASE("container version rules", "[runtime][container]") {
   }
 }
 
-TEST_CASE("container version 1.0 files (no level error figures) are still read", "[runtime][container]") {
-  // Rewrites a 1.1 file as the 1.0 writer did: 80-byte level records without the error figures
-  // (their flag cleared), minor version 0, sizes and checksums updated. The index is the file's last
-  // region, so it can shrink in place.
+TEST_CASE("container 1.x files are rejected with a message to rebuild them", "[runtime][container]") {
+  // Version 1.0 and 1.1 files hold format-1 level blobs (fixed 32-byte band records, libcodec format
+  // 3 streams), which this reader cannot decode: rejected by version, whether or not the header's
+  // checksum was updated, naming the file, its version and the fix.
   TempDir dir;
-  const std::string path = dir.file("v10.pyr");
+  const std::string path = dir.file("v1.pyr");
   std::mt19937_64 rng(5);
-  Sample s = small_sample();
-  for (LevelInfo& li : s.info.levels) li.error = LevelError{1.5, 4.0};
-  const std::vector<uint8_t> v11 = write_sample_bytes(path, s, rng);
-  constexpr size_t kInfoSize = 264, kRecordSizeField = 8, kRecordV10 = 80, kRecordV11 = 96, kFlags = 36;
-  const size_t index_offset = size_t(get_le(v11, kSbIndexOffset, 8));
-  REQUIRE(get_le(v11, kSbMinor, 2) == 1);
-  REQUIRE(get_le(v11, index_offset + kRecordSizeField, 4) == kRecordV11);
-  const size_t levels = s.info.levels.size();
-  std::vector<uint8_t> v10(v11.begin(), v11.begin() + long(index_offset + kInfoSize));
-  for (size_t l = 0; l < levels; ++l) {
-    const auto record = v11.begin() + long(index_offset + kInfoSize + l * kRecordV11);
-    v10.insert(v10.end(), record, record + long(kRecordV10));
-    CHECK(get_le(v10, v10.size() - kRecordV10 + kFlags, 4) == 3);  // checksum and error figures
-    put_le(v10, v10.size() - kRecordV10 + kFlags, 1, 4);
-  }
-  v10.insert(v10.end(), v11.begin() + long(index_offset + kInfoSize + levels * kRecordV11), v11.end());
-  put_le(v10, index_offset + kRecordSizeField, kRecordV10, 4);
-  put_le(v10, kSbMinor, 0, 2);
-  put_le(v10, kSbIndexSize, v10.size() - index_offset, 8);
-  put_le(v10, kSbFileSize, v10.size(), 8);
-  reseal(v10);
-  write_bytes(path, v10);
-  const Container c = Container::open(path);
-  CHECK(c.minor_version() == 0);
-  for (LevelInfo& li : s.info.levels) li.error.reset();
-  check_matches(c, s, true);
-
-  SECTION("1.0 records cannot claim error figures") {
-    put_le(v10, index_offset + kInfoSize + kFlags, 3, 4);
-    CHECK(resealed_open_error(path, v10) == ErrorCode::CorruptData);
-  }
+  const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
+  REQUIRE(kFormatMajor == 2);
+  for (int minor : {0, 1})
+    for (bool sealed : {false, true}) {
+      std::vector<uint8_t> b = good;
+      put_le(b, kSbMajor, 1, 2);
+      put_le(b, kSbMinor, uint64_t(minor), 2);
+      if (sealed) reseal(b);
+      write_bytes(path, b);
+      try {
+        Container::open(path);
+        FAIL("version 1." << minor << " accepted");
+      } catch (const Error& e) {
+        CHECK(e.code() == ErrorCode::UnsupportedVersion);
+        CHECK_THAT(e.what(), Catch::Contains(path) && Catch::Contains("version 1." + std::to_string(minor)) &&
+                                 Catch::Contains("rebuild it with pyramid-build"));
+      }
+    }
 }
 
 TEST_CASE("container level error figures are validated", "[runtime][container]") {
@@ -862,7 +849,8 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(get_le(b, index + 224, 8) == 5);
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
-  CHECK(get_le(b, kSbMinor, 2) == 1);
+  CHECK(get_le(b, kSbMajor, 2) == 2);
+  CHECK(get_le(b, kSbMinor, 2) == 0);
   CHECK(get_le(b, index + 8, 4) == 96);  // level record size
   const uint64_t level2 = index + 264 + 2 * 96;
   CHECK(get_le(b, level2, 8) == 13);

@@ -317,7 +317,7 @@ TEST_CASE("e2e: terrain-info describes a pyramid from its index; --verify checks
   const std::string build(build_bytes.begin(), build_bytes.end());
   const auto text = iotest::run_tool(dir, {"terrain-info", {pyr}});
   REQUIRE(text.status == 0);
-  CHECK(text.out.find("pyramid (.pyr) version 1.1") != std::string::npos);
+  CHECK(text.out.find("pyramid (.pyr) version 2.0") != std::string::npos);
   CHECK(text.out.find("1201 x 1201 (finest level)") != std::string::npos);
   const auto json = iotest::run_tool(dir, {"terrain-info", {pyr, "--json", "--verify"}});
   REQUIRE(json.status == 0);

@@ -26,8 +26,12 @@
 // Nothing throws except std::bad_alloc.
 // Threads: all functions are reentrant; give each thread its own Scratch.
 // Untrusted input: read_header, read_tile_index, Decoder and decode/decode_region are safe on any
-// bytes, forged checksums included (every size and offset is checked before use, the index
-// allocation is bounded by the stream's size; fuzz/fuzz_codec_decode.cpp): they return a Status.
+// bytes, forged checksums included (every size and offset is checked before use; the index holds one
+// entry per index record, not per tile, so its memory is bounded by the stream's size even when a
+// few bytes announce 2^40 empty tiles; fuzz/fuzz_codec_decode.cpp): they return a Status.
+// Empty tiles: a tile that decodes to all zeros (lossless: all-zero input; max-error mode: every
+// |sample| <= E; otherwise a reconstruction that is all zero) is stored as a mark in the index, with
+// no payload; runs of them cost one varint.
 #pragma once
 
 #include <cstddef>
@@ -41,14 +45,14 @@
 namespace codec {
 
 inline constexpr int32_t kMaxAbsSample = 1 << 20;  // largest |input sample| the coder accepts
-inline constexpr uint32_t kFormatVersion = 3;
+inline constexpr uint32_t kFormatVersion = 4;
 
 enum class Status {
   Ok = 0,
   BufferTooSmall,      // the output buffer cannot hold the result
   Truncated,           // the stream ends before the data its header/index announce
   Corrupt,             // inconsistent header, index or bitstream
-  ChecksumMismatch,    // a CRC32C (header, index or tile) does not match
+  ChecksumMismatch,    // a CRC32C (header + index, or a tile row's payloads) does not match
   UnsupportedVersion,  // right magic, unknown format version
   InvalidArgument,     // bad options or region (e.g. step < 1, rectangle outside the image)
   ValueOutOfRange,     // an input sample exceeds +-kMaxAbsSample
@@ -80,15 +84,27 @@ struct HeaderInfo {
   double step = 1.0;                 // as recorded (1/256 resolution)
   bool bound_max_error = false;      // a max-error stream
   uint32_t max_error = 0;            // its E (0 otherwise)
+  int fraction_bits = 0;             // extra sample precision of the transform (0 = lossless)
   size_t index_offset = 0;           // byte offset of the tile index (it follows the payloads)
   size_t data_offset = 0;            // byte offset of the first tile payload (end of the header)
   int64_t tile_count() const { return tiles_x * tiles_y; }
+  // Every tile is empty (decodes to zeros): the stream has no payload bytes.
+  bool empty() const { return index_offset == data_offset; }
 };
 
+// One index record: a non-empty tile (size > 0) or a run of `count` empty tiles (size 0).
 struct TileEntry {
-  uint64_t offset = 0;  // from the start of the stream
-  uint32_t size = 0;    // bytes
-  uint32_t crc = 0;     // CRC32C of the tile's bytes
+  int64_t first_tile = 0;  // raster number of its (first) tile
+  int64_t count = 1;       // tiles it covers: 1 for a non-empty tile
+  uint64_t offset = 0;     // payload offset from the start of the stream (where it would be, if empty)
+  uint32_t size = 0;       // payload bytes; 0 = empty
+};
+
+// The payloads of one tile row, checked as a whole by one CRC32C (rows of empty tiles have none).
+struct RowChecksum {
+  int64_t tile_row = 0;
+  uint64_t offset = 0, size = 0;  // the row's payload bytes (its tiles are back to back)
+  uint32_t crc = 0;
 };
 
 // A rectangle of samples: columns x0 .. x0 + width - 1, rows y0 .. y0 + height - 1 (core/rect.h).
@@ -124,40 +140,55 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
               const EncodeOptions& options, uint8_t* dst, size_t dst_capacity, size_t* bytes_written,
               Scratch& scratch, int32_t* recon = nullptr, ptrdiff_t recon_stride = 0);
 
-// Parses and checks the header (magic, version, header CRC, sizes) without decoding: Ok and *header
-// filled, or Corrupt (wrong magic, inconsistent fields), Truncated, UnsupportedVersion,
-// ChecksumMismatch; InvalidArgument for a null data. *header is written only on Ok.
+// Parses and checks the header (magic, version, the CRC that covers header and index, sizes) without
+// decoding: Ok and *header filled, or Corrupt (wrong magic, inconsistent fields), Truncated,
+// UnsupportedVersion (any version but kFormatVersion, e.g. 3), ChecksumMismatch; InvalidArgument for
+// a null data. `size` must be the stream's exact size (the CRC is its last 4 bytes). *header is
+// written only on Ok.
 Status read_header(const uint8_t* data, size_t size, HeaderInfo* header);
-// Reads the tile index (row-major tiles) into entries[0 .. header.tile_count()) and checks the
-// index CRC, the sizes, and that the payloads fill [data_offset, index_offset) back to back. Offsets
-// are running sums of the stored sizes. `header` must come from read_header on the same bytes;
-// entries must hold header.tile_count() entries (the caller allocates them: check the count against
-// the stream's size first, as Decoder::open does). Returns Ok, Truncated, Corrupt or
-// ChecksumMismatch; on failure entries are partly written.
-Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header, TileEntry* entries);
+// Reads the tile index: *entries gets its records in raster order (they cover every tile once), *rows
+// the tile rows that have payload bytes, top to bottom, with their CRCs (not yet compared with the
+// payloads: the Decoder does that when it first touches a row; a stream of one tile row stores no
+// row CRC, crc is then 0: read_header's CRC covered its payloads). Checks that each size is at most the
+// largest payload its tile can produce, that the payloads fill [data_offset, index_offset) back to
+// back and that the index ends where the stream's CRC begins. Offsets are running sums of the stored
+// sizes. `header` must come from read_header on the same bytes. Memory is bounded by the index size.
+// Returns Ok, Truncated or Corrupt; on failure the vectors hold unspecified records.
+Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header,
+                       std::vector<TileEntry>* entries, std::vector<RowChecksum>* rows);
 
 // A parsed stream: header and index are validated once, then any number of regions decode from it.
 // The stream bytes must outlive the Decoder. After open, the const members may be called from any
 // number of threads at once (each with its own Scratch).
 class Decoder {
  public:
-  // read_header + read_tile_index, with their statuses (Truncated also for a tile count the size
-  // cannot hold). A failed open leaves the decoder closed: decode_region then returns
-  // InvalidArgument.
+  Decoder();
+  ~Decoder();
+  Decoder(Decoder&&) noexcept;
+  Decoder& operator=(Decoder&&) noexcept;
+  // read_header + read_tile_index, with their statuses. A failed open leaves the decoder closed:
+  // decode_region then returns InvalidArgument.
   Status open(const uint8_t* data, size_t size);
   const HeaderInfo& header() const { return header_; }
   const std::vector<TileEntry>& index() const { return index_; }
   // Decodes rect into dst (dst[0] = sample (rect.x, rect.y); stride in samples). Touches only the
-  // tiles the rectangle intersects; each is decoded once and its checksum verified. Returns
+  // tiles the rectangle intersects; each is decoded once (empty ones are zero-filled). The CRC of a
+  // tile row's payloads is verified the first time any call touches a non-empty tile of the row
+  // (once per Decoder; safe from several threads), so no payload byte is used unchecked. Returns
   // InvalidArgument for an empty rect or one outside the image, ChecksumMismatch or Corrupt for a
-  // damaged tile (dst then holds unspecified values).
+  // damaged tile row (dst then holds unspecified values).
   Status decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const;
 
  private:
+  const TileEntry& entry_of(int64_t tile) const;
+  Status check_row(int64_t tile_row) const;
   const uint8_t* data_ = nullptr;
   size_t size_ = 0;
   HeaderInfo header_;
   std::vector<TileEntry> index_;
+  std::vector<RowChecksum> rows_;
+  struct RowState;
+  std::unique_ptr<RowState> row_state_;  // which rows' CRCs have been verified
 };
 
 // Whole-image and one-shot region decodes (open + decode_region), with their statuses. decode

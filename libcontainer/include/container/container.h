@@ -37,9 +37,11 @@ using codec::crc32c_portable;
 // Contents
 
 // Format version written by this library. A reader accepts any minor version of its major
-// version (minor versions only append fields) and rejects other majors.
-inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 1;
+// version (minor versions only append fields) and rejects other majors. 2.0: level blobs with
+// compact band tables and all-zero bands without a stream, libcodec format 4 streams; its level
+// records are those of 1.1 (with the error figures). 1.x files must be rebuilt.
+inline constexpr uint16_t kFormatMajor = 2;
+inline constexpr uint16_t kFormatMinor = 0;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields

@@ -1,6 +1,7 @@
 // A compressed pyramid on disk: the container (runtime/container.h) whose level blobs hold a
-// level's bands. Each band is one libcodec stream covering rows [y0, y0 + rows) of the level; a
-// band table at the end of the blob locates them (docs/format.md, "Level blob").
+// level's bands. Each band is one libcodec stream covering rows [y0, y0 + rows) of the level, or
+// no stream when its residual is all zero; a band table at the end of the blob locates them
+// (docs/format.md, "Level blobs").
 //
 // PyramidFileWriter is the PyramidSink the builder writes into; PyramidFile opens a finished file
 // (mmap, validated) and gives the band streams of each level without copying.
@@ -27,7 +28,7 @@ class PyramidFileWriter final : public PyramidSink {
 
   void begin(const PyramidHeader& header) override;
   // Throws std::logic_error for a band before begin(), of an unknown level or out of row order;
-  // Error(WriteFailed) when writing fails.
+  // Error(WriteFailed) when writing fails. No bytes: an all-zero band (ResidualCoder::encode).
   void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override;
   // Throws std::logic_error for rows out of order.
   void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) override;
@@ -42,11 +43,10 @@ class PyramidFileWriter final : public PyramidSink {
 
  private:
   struct BandRecord {
-    uint64_t offset, size, y0, rows;
+    uint64_t size, rows;  // size 0: an all-zero band, no stream
   };
   struct LevelBands {
     std::vector<BandRecord> bands;  // the band table, written after the level's last band
-    uint64_t blob_bytes = 0;
     int64_t next_row = 0;
   };
   void close_level(int level);
@@ -57,10 +57,12 @@ class PyramidFileWriter final : public PyramidSink {
   uint64_t bytes_ = 0;
 };
 
+// One band of a level. size 0 (data null): an all-zero residual band, stored as its table record only.
 struct BandView {
   int64_t y0 = 0, rows = 0;
   const uint8_t* data = nullptr;
   size_t size = 0;
+  bool empty() const { return size == 0; }
 };
 
 class PyramidFile {
@@ -72,7 +74,8 @@ class PyramidFile {
   const ContainerInfo& info() const { return container_.info(); }
   int level_count() const { return int(container_.level_count()); }
   GridSize level_size(int level) const;
-  // Bands of a level, top to bottom, covering every row exactly once.
+  // Bands of a level, top to bottom, covering every row exactly once (a run of all-zero bands is
+  // one view without a stream).
   const std::vector<BandView>& bands(int level) const { return bands_.at(size_t(level)); }
   // Index of the band holding row y of the level.
   size_t band_of_row(int level, int64_t y) const;

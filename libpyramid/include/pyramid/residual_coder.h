@@ -19,7 +19,8 @@ class ResidualCoder {
   virtual int64_t band_rows() const = 0;
   // encode/decode may be called concurrently from several threads (one band each).
   // Codes one band of integer residuals (w x h, row-major) and writes into `reconstructed` the exact
-  // values decode() will produce from the returned bytes.
+  // values decode() will produce from the returned bytes. A coder may return no bytes for a band
+  // that reconstructs to all zeros (decode then gets n = 0); the pyramid file stores no stream for it.
   virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h,
                                       int32_t* reconstructed) = 0;
   // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).

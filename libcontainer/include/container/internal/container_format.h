@@ -41,9 +41,8 @@ inline constexpr size_t kUnitsField = 32;
 namespace level {
 inline constexpr size_t kWidth = 0, kHeight = 8, kBlobOffset = 16, kBlobSize = 24, kBlobCrc = 32, kFlags = 36,
                         kMean = 40, kVariance = 48, kRms = 56, kMin = 64, kMax = 72, kErrorRms = 80,
-                        kErrorMax = 88;  // version 1.1
-inline constexpr uint32_t kSizeV1 = 80;
-inline constexpr uint32_t kSizeV1_1 = 96;
+                        kErrorMax = 88;    // version 1.1
+inline constexpr uint32_t kSizeV1_1 = 96;  // versions 1.1 and 2.0 (1.0 records ended at kErrorRms)
 inline constexpr uint32_t kFlagHasCrc = 1;
 inline constexpr uint32_t kFlagHasError = 2;  // version 1.1: error_rms and error_max are recorded
 }  // namespace level
