@@ -54,19 +54,22 @@ std::optional<terrain::GeoTransform> level_geotransform(const terrain::container
   return g;
 }
 
+constexpr const char* kDescription =
+    R"(Decodes one level (default: the finest) of a pyramid, whole or a window of it, to a heightmap
+file chosen by OUT's extension: .tif/.tiff GeoTIFF (georeferenced when the pyramid is; float32
+metres with NaN voids, or int16 with nodata -32768; streamed in bands: memory stays bounded for
+any window), .png 16-bit grey (integer metres 0..65535), .exr float32, .raw + .raw.json sidecar.
+PNG, EXR and raw hold the window in memory (8 bytes per sample).)";
+
 int run(int argc, char** argv) {
   std::string input, output, json_path, type_name = "float32";
   std::optional<int> level;
   std::optional<std::vector<double>> window, bbox;
   int64_t band_rows = 256;
   cli::CommonFlags common;
-  cli::ArgParser parser(
-      "pyramid-extract", "PYRAMID.pyr -o OUT [--level L] [--window X,Y,W,H | --bbox W,S,E,N] [options]",
-      "Decodes one level (default: the finest) of a pyramid, whole or a window of it, to a heightmap\n"
-      "file chosen by OUT's extension: .tif/.tiff GeoTIFF (georeferenced when the pyramid is; float32\n"
-      "metres with NaN voids, or int16 with nodata -32768; streamed in bands: memory stays bounded for\n"
-      "any window), .png 16-bit grey (integer metres 0..65535), .exr float32, .raw + .raw.json sidecar.\n"
-      "PNG, EXR and raw hold the window in memory (8 bytes per sample).");
+  cli::ArgParser parser("pyramid-extract",
+                        "PYRAMID.pyr -o OUT [--level L] [--window X,Y,W,H | --bbox W,S,E,N] [options]",
+                        kDescription);
   parser.positional("PYRAMID", "the .pyr file", &input);
   parser.option("-o,--output", "OUT", "file to write (required)", &output);
   parser.option("--level", "L", "level to extract, 0 = coarsest (default: the finest)",

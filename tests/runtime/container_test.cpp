@@ -17,8 +17,11 @@
 #include <thread>
 #include <vector>
 
+#include "runtime/pyr_test_util.h"
+
 namespace fs = std::filesystem;
 using namespace terrain::container;
+using namespace pyrtest;
 using terrain::Error;
 using terrain::ErrorCode;
 
@@ -61,29 +64,6 @@ void write_bytes(const std::string& path, const uint8_t* data, size_t size) {
 }
 void write_bytes(const std::string& path, const std::vector<uint8_t>& bytes) {
   write_bytes(path, bytes.data(), bytes.size());
-}
-
-uint64_t get_le(const std::vector<uint8_t>& b, size_t at, int bytes) {
-  uint64_t v = 0;
-  for (int i = bytes - 1; i >= 0; --i) v = v << 8 | b[at + size_t(i)];
-  return v;
-}
-void put_le(std::vector<uint8_t>& b, size_t at, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) b[at + size_t(i)] = uint8_t(v >> (8 * i));
-}
-
-// Superblock field offsets from docs/format.md (tests deliberately restate the layout).
-constexpr size_t kSbMajor = 8, kSbMinor = 10, kSbFileSize = 16, kSbIndexOffset = 24, kSbIndexSize = 32,
-                 kSbIndexCrc = 40, kSbCrc = 60;
-
-// Makes the index and superblock checksums match the (edited) bytes again, where the superblock
-// still locates the index inside the file.
-void reseal(std::vector<uint8_t>& b) {
-  const uint64_t offset = get_le(b, kSbIndexOffset, 8), size = get_le(b, kSbIndexSize, 8);
-  if (offset <= b.size() && size <= b.size() - offset) {
-    put_le(b, kSbIndexCrc, crc32c(b.data() + offset, size_t(size)), 4);
-  }
-  put_le(b, kSbCrc, crc32c(b.data(), kSbCrc), 4);
 }
 
 struct Sample {

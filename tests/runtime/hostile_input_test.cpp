@@ -7,12 +7,14 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <random>
 #include <string>
 
 #include "container/container.h"
 #include "container/internal/container_format.h"
 #include "io/io_test_util.h"
 #include "readers/image8.h"
+#include "runtime/pyr_test_util.h"
 #include "shared_data.h"
 
 namespace {
@@ -188,31 +190,6 @@ TEST_CASE("terrain-report against an input without the pyramid's voids gives fin
   CHECK(r.out.find("\"voids_added\": 361") != std::string::npos);  // 19 x 19 samples
 }
 
-namespace {
-
-uint64_t le(const std::vector<uint8_t>& b, size_t at, int n) {
-  uint64_t v = 0;
-  for (int i = n - 1; i >= 0; --i) v = v << 8 | b[at + size_t(i)];
-  return v;
-}
-void put(std::vector<uint8_t>& b, size_t at, uint64_t v, int n) {
-  for (int i = 0; i < n; ++i) b[at + size_t(i)] = uint8_t(v >> (8 * i));
-}
-void put_f64(std::vector<uint8_t>& b, size_t at, double v) {
-  uint64_t u;
-  std::memcpy(&u, &v, 8);
-  put(b, at, u, 8);
-}
-// The superblock's index CRC and its own, recomputed after a field was forged (docs/format.md).
-void reseal(std::vector<uint8_t>& b) {
-  namespace sb = terrain::container::layout::sb;
-  const uint64_t offset = le(b, sb::kIndexOffset, 8), size = le(b, sb::kIndexSize, 8);
-  put(b, sb::kIndexCrc, terrain::container::crc32c(b.data() + offset, size_t(size)), 4);
-  put(b, sb::kCrc, terrain::container::crc32c(b.data(), sb::kCrc), 4);
-}
-
-}  // namespace
-
 TEST_CASE("forged .pyr fields with recomputed checksums are rejected on open", "[runtime][hostile]") {
   namespace info = terrain::container::layout::info;
   namespace sb = terrain::container::layout::sb;
@@ -223,9 +200,9 @@ TEST_CASE("forged .pyr fields with recomputed checksums are rejected on open", "
       0);
   REQUIRE(iotest::run_tool(dir, {"pyramid-build", {raw, "-o", pyr, "--rms", "1", "-q"}}).status == 0);
   const std::vector<uint8_t> good = iotest::read_file(pyr);
-  const size_t index = size_t(le(good, sb::kIndexOffset, 8));
+  const size_t index = size_t(pyrtest::get_le(good, sb::kIndexOffset, 8));
   const auto rejected = [&](std::vector<uint8_t> b, const std::string& what) {
-    reseal(b);
+    pyrtest::reseal(b);
     const std::string forged = dir.file("forged.pyr");
     iotest::write_file(forged, b);
     INFO(what);
@@ -239,18 +216,18 @@ TEST_CASE("forged .pyr fields with recomputed checksums are rejected on open", "
   };
   {
     std::vector<uint8_t> b = good;  // untouched, resealed: still fine
-    reseal(b);
+    pyrtest::reseal(b);
     iotest::write_file(dir.file("same.pyr"), b);
     CHECK_NOTHROW(terrain::container::Container::open(dir.file("same.pyr")));
   }
   for (const double step : {0.0, -1.0, 0.5}) {
     std::vector<uint8_t> b = good;
-    put_f64(b, index + info::kStepUnits, step);
+    pyrtest::put_f64(b, index + info::kStepUnits, step);
     rejected(b, "step_units " + std::to_string(step));
   }
   {
     std::vector<uint8_t> b = good;
-    put_f64(b, index + info::kTarget, -1.0);
+    pyrtest::put_f64(b, index + info::kTarget, -1.0);
     rejected(b, "target -1");
   }
   {
@@ -262,7 +239,7 @@ TEST_CASE("forged .pyr fields with recomputed checksums are rejected on open", "
   {
     std::vector<uint8_t> b = good;  // 64 zero bytes after everything, the recorded size updated
     b.resize(b.size() + 64, 0);
-    put(b, sb::kFileSize, b.size(), 8);
+    pyrtest::put_le(b, sb::kFileSize, b.size(), 8);
     rejected(b, "bytes after the last region");
   }
 }
@@ -273,17 +250,16 @@ TEST_CASE("the rms target is calibrated on the whole input: a tile whose top row
   // first 1024 rows alone saw only sea and chose a step far too large or too small.
   iotest::TempDir dir;
   const int w = 600, h = 1500;
-  std::vector<uint8_t> bytes;
-  uint32_t noise = 12345;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      noise = noise * 1664525u + 1013904223u;
-      const double land = y < 1100 ? 0.0
-                                   : 800 + 500 * std::sin(x / 23.0) * std::cos(y / 31.0) +
-                                         90 * std::sin(x / 5.0 + y / 7.0) + double(noise >> 24) / 8.0;
-      const int16_t v = int16_t(std::lround(land));
-      bytes.push_back(uint8_t(uint16_t(v))), bytes.push_back(uint8_t(uint16_t(v) >> 8));
-    }
+  std::mt19937 rng(12345);
+  std::uniform_real_distribution<double> noise(0, 32);
+  std::vector<int16_t> heights(size_t(w * h), 0);
+  for (size_t i = size_t(1100 * w); i < heights.size(); ++i) {
+    const double x = double(i % size_t(w)), y = double(i / size_t(w));
+    heights[i] = int16_t(std::lround(800 + 500 * std::sin(x / 23.0) * std::cos(y / 31.0) +
+                                     90 * std::sin(x / 5.0 + y / 7.0) + noise(rng)));
+  }
+  std::vector<uint8_t> bytes(heights.size() * 2);
+  std::memcpy(bytes.data(), heights.data(), bytes.size());  // little-endian host, as the sidecar says
   iotest::write_file(dir.file("coast.raw"), bytes);
   iotest::write_file(dir.file("coast.raw.json"), "{\"width\": 600, \"height\": 1500, \"type\": \"int16\"}");
   for (const double target : {1.0, 2.0}) {
