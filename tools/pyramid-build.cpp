@@ -62,6 +62,15 @@ int run(int argc, char** argv) {
                 });
   parser.option("--threads", "N", "worker threads (default: all cores; output is identical for any N)",
                 [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
+  parser.option("--level-error", "absolute|screen",
+                "error schedule over the levels: one absolute step at every level (default, as in the "
+                "paper), or screen: level l's step and max error 2^(m-l) times the finest level's, the same "
+                "error in screen space at every level (smaller files; the target is the finest level's)",
+                [&](const std::string& v) {
+                  if (v != "absolute" && v != "screen")
+                    throw cli::UsageError("--level-error must be absolute or screen");
+                  o.screen_level_error = v == "screen";
+                });
   parser.option("--json", "FILE", "write a JSON build report to FILE ('-' for stdout)", &json_path);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
@@ -73,7 +82,7 @@ int run(int argc, char** argv) {
   std::ostringstream opts;
   opts << "{\"target\":\"" << terrain::container::error_mode_name(o.mode)
        << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
-       << "}";
+       << ",\"level_error\":\"" << (o.screen_level_error ? "screen" : "absolute") << "\"}";
 
   std::unique_ptr<cli::Progress> bar;
   std::string phase;
@@ -116,6 +125,7 @@ int run(int argc, char** argv) {
     j.field("input", input).field("output", output).field("bytes", int64_t(r.file_bytes));
     j.field("finest_samples", r.finest_samples).field("bits_per_sample", bits);
     j.field("metres_per_unit", mpu).field("step_metres", r.step_units * mpu);
+    j.field("level_error", o.screen_level_error ? "screen" : "absolute");
     j.field("max_error_bound_metres", o.mode == ErrorMode::MaxError ? double(r.max_error_units) * mpu : -1.0);
     j.field("filter", r.build.filter_report.summary())
         .field("filter_fallback", r.build.filter_report.fallback);
@@ -127,6 +137,7 @@ int run(int argc, char** argv) {
       j.begin_object();
       j.field("level", int64_t(l)).field("width", lv[l].size.width).field("height", lv[l].size.height);
       j.field("bytes", int64_t(lv[l].bytes)).field("residual_rms_m", lv[l].residual_rms * mpu);
+      j.field("step_m", r.level_step_units[l] * mpu);
       j.field("error_rms_m", lv[l].error_rms * mpu).field("error_max_m", double(lv[l].error_max_abs) * mpu);
       j.end_object();
     }

@@ -99,8 +99,7 @@ int run(int argc, char** argv) {
   bo.level_count = file->level_count();
   bo.value_scale = map.info.vertical_scale / mpu;
   bo.use_fixed_filter = true;
-  std::copy(info.filter.begin(), info.filter.end(), bo.fixed_filter.taps.begin());
-  bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
+  bo.fixed_filter = file->downsample_filter();
   const ReferenceLevels source = reference_levels(map, bo);
 
   double zmin = INFINITY, zmax = -INFINITY;

@@ -2,6 +2,7 @@
 #include "build/ptc_coder.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -36,9 +37,22 @@ PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
                                 ", tile size " + std::to_string(options_.tile_size) + ")");
 }
 
+PtcCoderOptions PtcResidualCoder::level_options(int levels_above_finest) const {
+  PtcCoderOptions o = options_;
+  // Zero error (lossless, or a max error of 0) is zero in screen space too: every level stays exact.
+  if (!o.screen_level_error || levels_above_finest <= 0 ||
+      (o.bound_max_error ? o.max_error == 0 : o.step <= 1))
+    return o;
+  const double scale = std::ldexp(1.0, std::min(levels_above_finest, 40));
+  o.step = std::min(o.step * scale, kLargestStep);
+  if (o.bound_max_error)
+    o.max_error = uint32_t(std::min(double(o.max_error) * scale, double(codec::kMaxAbsSample)));
+  return o;
+}
+
 std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
-                                              int32_t* reconstructed) {
-  const codec::EncodeOptions copts = to_codec(options_);
+                                              int32_t* reconstructed, int levels_above_finest) {
+  const codec::EncodeOptions copts = to_codec(level_options(levels_above_finest));
   // The bound is ~16 bytes per sample and a band's stream ~0.3: a fresh zero-filled buffer per band
   // cost 8-14% of the build's CPU in page faults, so each thread keeps one and copies out the bytes.
   thread_local std::vector<uint8_t> buffer;

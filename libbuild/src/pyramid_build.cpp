@@ -22,11 +22,6 @@ namespace terrain::build {
 using namespace terrain::container;  // the stage below
 namespace {
 
-// libcodec quantises with steps up to its largest sample magnitude; a target so loose that the
-// calibration would go beyond it (a constant or all-void grid, --rms 1e6) gets that step, which
-// already codes every residual of such a grid as zero.
-constexpr double kLargestStep = double(codec::kMaxAbsSample);
-
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -183,6 +178,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
 
   PtcCoderOptions co;
   co.tile_size = o.tile_size;
+  co.screen_level_error = o.screen_level_error;
   const auto t_cal = std::chrono::steady_clock::now();
   switch (o.mode) {
     case ErrorMode::Lossless:
@@ -279,6 +275,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   ProgressSink psink(writer, progress);
   out.build = build_pyramid(preader, bo, coder, psink);
   out.seconds_build = seconds_since(t_build);
+  const int levels = int(out.build.levels.size());
+  for (int l = 0; l < levels; ++l) out.level_step_units.push_back(coder.level_options(levels - 1 - l).step);
 
   ContainerInfo info;
   info.spacing_x = g.spacing_x;
@@ -303,7 +301,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
        << ",\"source_format\":\"" << file_format_name(g.format) << "\",\"source_type\":\""
        << sample_type_name(g.sample_type) << "\",\"step_units\":" << co.step
        << ",\"max_error_units\":" << out.max_error_units << ",\"tile_size\":" << co.tile_size
-       << ",\"band_rows\":" << coder.band_rows()
+       << ",\"band_rows\":" << coder.band_rows() << ",\"level_error\":\""
+       << (co.screen_level_error ? "screen" : "absolute") << "\""
        << ",\"filter\":" << json_quote(out.build.filter_report.summary())
        << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
   writer.finish(out.build, info, meta.str());

@@ -229,6 +229,9 @@ class MaskRows {
   std::deque<std::vector<uint64_t>> rows_;
 };
 
+// Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
+constexpr int64_t kMinCoarseBandRows = 16;
+
 class StreamingBuilder {
  public:
   StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink)
@@ -241,10 +244,18 @@ class StreamingBuilder {
     if (finest_band_rows_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
     // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
     // until it is: halving the band height per coarser level keeps every level's lag near band_rows
-    // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)).
+    // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)). But bands of a
+    // few rows code badly (the codec pads them to 16 rows and every band restarts its tiles), so a
+    // coarse band gets up to kMinCoarseBandRows rows as long as its lag stays within 4 band_rows input
+    // rows: a constant 4096^2 grid's coarsest level costs 8 bands instead of 32.
     level_band_rows_.resize(size_t(level_count_));
-    for (int l = 0; l < level_count_; ++l)
-      level_band_rows_[size_t(l)] = std::max<int64_t>(1, finest_band_rows_ >> std::min(62, finest_ - l));
+    for (int l = 0; l < level_count_; ++l) {
+      const int shift = std::min(62, finest_ - l);
+      const int64_t halved = finest_band_rows_ >> shift;
+      const int64_t floor_rows =
+          std::min({kMinCoarseBandRows, finest_band_rows_, (4 * finest_band_rows_) >> shift});
+      level_band_rows_[size_t(l)] = std::max<int64_t>({int64_t(1), halved, floor_rows});
+    }
     levels_.resize(size_t(level_count_));
     reconstructed_.resize(size_t(level_count_));
     for (int l = 0; l < level_count_; ++l) {
@@ -528,7 +539,7 @@ class StreamingBuilder {
     if (with_mask)
       for (int64_t k = 0; k < n; ++k)
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
-    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data());
+    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l);
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;

@@ -84,7 +84,7 @@ TEST_CASE("uniform quantiser: error within step/2, exact at step 1, rejects bad 
   for (int32_t step : {1, 2, 3, 4, 7}) {
     UniformQuantizerCoder coder(step);
     std::vector<int32_t> rec(r.size()), dec(r.size());
-    auto bytes = coder.encode(r.data(), int64_t(r.size()), 1, rec.data());
+    auto bytes = coder.encode(r.data(), int64_t(r.size()), 1, rec.data(), 0);
     REQUIRE(coder.decode(bytes.data(), bytes.size(), int64_t(r.size()), 1, dec.data()));
     CHECK(rec == dec);
     for (size_t k = 0; k < r.size(); ++k) {  // the int32 extremes (9, 10) saturate
@@ -190,9 +190,13 @@ TEST_CASE("streamed == in-memory, bit-exact, whatever the chunking and thread co
     MemoryPyramid mem;
     build_pyramid(map, options(5, 2), coder, mem);
     CHECK(mem.mask.empty());  // no voids: nothing kept
-    // Coarser levels use shorter bands (band_rows >> (m - l)), so they do not hold back finer ones.
+    // Coarser levels use shorter bands (band_rows >> (m - l), but up to 16 rows while the lag stays
+    // within 4 band_rows input rows), so they do not hold back finer ones: 16, 16, 16, 8, 4 rows.
     CHECK(mem.bands[4].front().rows == 16);
-    CHECK(mem.bands[0].front().rows == 1);
+    CHECK(mem.bands[2].front().rows == 16);
+    CHECK(mem.bands[1].front().rows == 8);
+    CHECK(mem.bands[0].front().rows == 4);
+    for (int l = 0; l < 5; ++l) CHECK(mem.bands[size_t(l)].front().rows << (4 - l) <= 4 * 16);
   }
   SECTION("shared tiles read through open_band_reader") {
     for (const char* name : {"srtm3_N44E033_crimea_coast_mountains.hgt", "pugetsound_ps_height_1k.png"}) {

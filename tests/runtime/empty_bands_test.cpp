@@ -3,6 +3,7 @@
 // damaged band tables are rejected.
 #include <catch2/catch.hpp>
 #include <cstring>
+#include <filesystem>
 #include <random>
 
 #include "build/pyramid_build.h"
@@ -64,6 +65,30 @@ TEST_CASE("a constant grid: every residual level is a few bytes of band table", 
     const auto [lo, hi] = std::minmax_element(out.begin(), out.end());
     CHECK(*lo == *hi);  // still constant
     if (mode != ErrorMode::Rms) CHECK(std::abs(*lo - 57) <= int32_t(metres));
+  }
+}
+
+// Issue 17's floor: an all-constant 4096^2 grid costs under 0.001 bits per sample at any target (the
+// coarse bands are at least 16 rows, and the default D the fit falls back to is not stored).
+TEST_CASE("a constant 4096^2 grid costs under 0.001 bits per sample at every target", "[e2e]") {
+  iotest::TempDir dir;
+  Heightmap map = synthesize_terrain(SynthOptions{.seed = 1, .width = 16, .height = 16});
+  map.info.width = map.info.height = 4096;
+  map.values.assign(size_t(4096) * 4096, 123.0);
+  const std::string src = dir.file("flat4k.raw");
+  write_raw(src, map);
+  const std::pair<ErrorMode, double> targets[] = {
+      {ErrorMode::Lossless, 0}, {ErrorMode::Rms, 1}, {ErrorMode::Rms, 8}, {ErrorMode::MaxError, 0.5}};
+  for (const auto& [mode, metres] : targets) {
+    INFO("mode " << int(mode) << " target " << metres);
+    const std::string pyr = build_file(src, dir.file("flat4k.pyr"), mode, metres);
+    auto file = PyramidFile::open(pyr);
+    const double bits = 8.0 * double(std::filesystem::file_size(pyr)) / (4096.0 * 4096.0);
+    CHECK(bits < 0.001);
+    CHECK(file->info().filter_provenance == FilterProvenance::Fallback);
+    CHECK(file->info().filter_size == 0);
+    CHECK(file->downsample_filter().taps == DownsampleFilter::default_filter().taps);
+    for (const BandView& b : file->bands(0)) CHECK(b.rows >= 16);
   }
 }
 

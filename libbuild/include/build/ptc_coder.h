@@ -9,10 +9,20 @@
 
 namespace terrain {
 
+// libcodec quantises with steps up to its largest sample magnitude; a target so loose that the
+// calibration would go beyond it (a constant or all-void grid, --rms 1e6) gets that step, which
+// already codes every residual of such a grid as zero.
+inline constexpr double kLargestStep = double(1 << 20);
+
 struct PtcCoderOptions {
-  double step = 1.0;       // absolute quantiser step in level units, the same for every level
+  double step = 1.0;       // quantiser step in level units at the finest level (every level: absolute)
   uint32_t max_error = 0;  // with bound_max_error: |residual error| <= max_error at every sample
   bool bound_max_error = false;
+  // false (the paper): one absolute step and max error at every level. true: level l of m + 1 gets
+  // step and max error times 2^(m - l), its spacing over the finest one, so every level has the same
+  // error in screen space (a level is drawn at a distance proportional to its spacing); capped at
+  // kLargestStep and libcodec's largest max error.
+  bool screen_level_error = false;
   uint32_t tile_size = 64;  // libcodec tile side; also the band height unless band_rows says otherwise
   int64_t band_rows = 0;    // 0: 4 tile rows per band
 };
@@ -25,7 +35,10 @@ class PtcResidualCoder final : public ResidualCoder {
   // Thread-safe: the builder codes bands of a level in parallel (each thread has its own scratch).
   // Throws std::runtime_error naming the libcodec status if a band cannot be coded (e.g. a residual
   // beyond libcodec's +-2^20 range).
-  std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed) override;
+  std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
+                              int levels_above_finest) override;
+  // The step and max error a level gets (see screen_level_error).
+  PtcCoderOptions level_options(int levels_above_finest) const;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;
   const PtcCoderOptions& options() const { return options_; }
 

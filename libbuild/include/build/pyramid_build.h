@@ -26,11 +26,17 @@ struct BuildFileOptions {
   int64_t calibration_rows = 1024;  // rms/max-error calibration sample: this many rows (taller inputs: in
                                     // 4 bands spread from top to bottom) x up to calibration_cols columns
   int64_t calibration_cols = 2048;
+  // Level error schedule (PtcCoderOptions::screen_level_error): false, the paper's one absolute step
+  // (and max error) at every level; true, level l's step and max error grow with its spacing, 2^(m-l)
+  // times the finest level's, for the same screen-space error at every level. The rms / max-error
+  // target and its calibration always refer to the finest level.
+  bool screen_level_error = false;
 };
 
 struct BuildFileResult {
   BuildResult build;
-  double step_units = 1;  // quantiser step chosen, in level units
+  double step_units = 1;                 // quantiser step chosen, in level units (the finest level's)
+  std::vector<double> level_step_units;  // each level's step, coarsest first (screen_level_error)
   double metres_per_unit = 1;
   uint32_t max_error_units = 0;  // max-error mode: the bound in level units
   std::vector<std::string> calibration_log;

@@ -74,6 +74,10 @@ class PyramidFile {
   const ContainerInfo& info() const { return container_.info(); }
   int level_count() const { return int(container_.level_count()); }
   GridSize level_size(int level) const;
+  // The D filter the builder used: the stored 11x11 taps, or DownsampleFilter::default_filter()
+  // when the file stores none (the builder omits the default it fell back to; other sizes are not
+  // written by this builder and also give the default).
+  DownsampleFilter downsample_filter() const;
   // Bands of a level, top to bottom, covering every row exactly once (a run of all-zero bands is
   // one view without a stream).
   const std::vector<BandView>& bands(int level) const { return bands_.at(size_t(level)); }

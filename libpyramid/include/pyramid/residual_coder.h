@@ -21,8 +21,10 @@ class ResidualCoder {
   // Codes one band of integer residuals (w x h, row-major) and writes into `reconstructed` the exact
   // values decode() will produce from the returned bytes. A coder may return no bytes for a band
   // that reconstructs to all zeros (decode then gets n = 0); the pyramid file stores no stream for it.
-  virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h,
-                                      int32_t* reconstructed) = 0;
+  // levels_above_finest: 0 for the finest level, m - l for level l of m + 1 (a coder may scale its
+  // error with the level's spacing; decode() never needs it: streams carry their own step).
+  virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
+                                      int levels_above_finest) = 0;
   // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).
   virtual bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) = 0;
 };
@@ -33,7 +35,9 @@ class UniformQuantizerCoder final : public ResidualCoder {
  public:
   explicit UniformQuantizerCoder(int32_t step, int64_t band_rows = 64);
   int64_t band_rows() const override { return band_rows_; }
-  std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed) override;
+  // One step at every level (levels_above_finest is ignored).
+  std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
+                              int levels_above_finest) override;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;
   int32_t step() const { return step_; }
 
