@@ -12,6 +12,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "codec/codec.h"
 #include "core/bytes.h"
 
 namespace terrain::container {
@@ -163,6 +164,52 @@ std::shared_ptr<const PyramidFile> PyramidFile::open(const std::string& path) {
         parse_band_table(v.data, v.size, int64_t(v.height), path + ": level " + std::to_string(l));
   }
   return f;
+}
+
+void PyramidFile::verify() const {
+  container_.verify();
+  codec::Scratch scratch;
+  std::vector<int32_t> row;
+  for (int l = 0; l < level_count(); ++l) {
+    const LevelView blob = container_.level(uint32_t(l));
+    const uint64_t blob_offset = info().levels[size_t(l)].blob_offset;
+    const auto& views = bands(l);
+    for (size_t b = 0; b < views.size(); ++b) {
+      const BandView& v = views[b];
+      if (v.empty()) continue;
+      const uint64_t offset = blob_offset + uint64_t(v.data - blob.data);
+      const std::string what = path() + ": level " + std::to_string(l) + ", band record " +
+                               std::to_string(b) + " (rows " + std::to_string(v.y0) + ".." +
+                               std::to_string(v.y0 + v.rows - 1) + ", stream of " + std::to_string(v.size) +
+                               " bytes at file offset " + std::to_string(offset) + ")";
+      const auto fail = [&](codec::Status s, const std::string& why) {
+        return Error(
+            s == codec::Status::ChecksumMismatch ? ErrorCode::ChecksumMismatch : ErrorCode::CorruptData,
+            what + ": " + why + ": " + codec::status_name(s));
+      };
+      codec::Decoder d;
+      if (const codec::Status s = d.open(v.data, v.size); s != codec::Status::Ok)
+        throw fail(
+            s,
+            "the stream does not open (its size in the band table, or its header or tile index, is wrong)");
+      const codec::HeaderInfo& h = d.header();
+      if (h.width != level_size(l).width)
+        throw Error(ErrorCode::CorruptData, what + ": the stream codes width " + std::to_string(h.width) +
+                                                ", the level is " + std::to_string(level_size(l).width) +
+                                                " wide");
+      if (h.height != v.rows)
+        throw Error(ErrorCode::CorruptData, what + ": band table rows " + std::to_string(v.rows) +
+                                                ", but the stream codes " + std::to_string(h.height) +
+                                                " rows");
+      row.resize(size_t(h.width) * h.tile_size);
+      for (int64_t ty = 0; ty < h.tiles_y; ++ty) {
+        const int64_t rows = std::min<int64_t>(h.tile_size, h.height - ty * h.tile_size);
+        const codec::Status s =
+            d.decode_region(codec::Rect{0, ty * h.tile_size, h.width, rows}, row.data(), h.width, scratch);
+        if (s != codec::Status::Ok) throw fail(s, "tile row " + std::to_string(ty));
+      }
+    }
+  }
 }
 
 GridSize PyramidFile::level_size(int level) const {

@@ -501,7 +501,17 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
       if (!coarser_current || (spent > 0 && spent + cost > budget_)) {
         blocked = true;
       } else {
-        refill(l, L.desired.x0, L.desired.y0, stats);
+        try {
+          refill(l, L.desired.x0, L.desired.y0, stats);
+        } catch (...) {
+          // refill records the new clip region before filling it, and the toroidal storage now holds
+          // parts of the old and the new one: the level has no usable data. Its next update refills
+          // it whole; the finer levels wait for it (their own data stays valid).
+          L.has_data = false;
+          L.dirty.clear();
+          crop_active_regions();
+          throw;
+        }
         spent += cost;
         ++stats.levels_updated;
       }

@@ -79,8 +79,8 @@ GridSize checked_size(const PyramidFile& file, int level, const Rect& rect) {
 
 }  // namespace
 
-RegionDecoder::RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes)
-    : file_(std::move(file)), cache_capacity_(cache_bytes) {
+RegionDecoder::RegionDecoder(std::shared_ptr<const PyramidFile> file, size_t cache_bytes, DamagePolicy policy)
+    : file_(std::move(file)), cache_capacity_(cache_bytes), policy_(policy) {
   if (file_->level_count() > kMaxLevels)
     throw Error(ErrorCode::CorruptData,
                 file_->path() + ": more than " + std::to_string(kMaxLevels) + " levels");
@@ -118,17 +118,71 @@ void RegionDecoder::count_decoded(int level, uint64_t tiles, uint64_t samples) c
   by_level_[size_t(level)] += samples;
 }
 
-namespace {
-[[noreturn]] void throw_band_error(const PyramidFile& file, int level, size_t b, const BandView& band,
-                                   int64_t x0, int64_t width, codec::Status s) {
-  throw Error(s == codec::Status::ChecksumMismatch ? ErrorCode::ChecksumMismatch : ErrorCode::CorruptData,
-              file.path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
-                  std::to_string(band.y0) + ".." + std::to_string(band.y0 + band.rows - 1) + "), columns " +
-                  std::to_string(x0) + ".." + std::to_string(x0 + width - 1) + ": " + codec::status_name(s));
+std::vector<DamagedTile> RegionDecoder::damaged_tiles(size_t from) const {
+  std::lock_guard<std::mutex> lock(damage_mutex_);
+  if (from >= damaged_.size()) return {};
+  return std::vector<DamagedTile>(damaged_.begin() + std::ptrdiff_t(from), damaged_.end());
 }
-}  // namespace
 
-const RegionDecoder::Band& RegionDecoder::band(int level, size_t b) const {
+size_t RegionDecoder::damaged_count() const {
+  std::lock_guard<std::mutex> lock(damage_mutex_);
+  return damaged_.size();
+}
+
+// The damaged part: the whole stream (ty < 0), a tile row (tx < 0; its payload CRC failed) or one
+// tile, located in the band and in the file.
+void RegionDecoder::damaged(int level, size_t b, const Band* bd, int64_t tx, int64_t ty,
+                            codec::Status s) const {
+  const BandView& view = file_->bands(level)[b];
+  const int64_t width = file_->level_size(level).width;
+  DamagedTile d;
+  d.level = level;
+  d.band = b;
+  d.code = s == codec::Status::ChecksumMismatch ? ErrorCode::ChecksumMismatch : ErrorCode::CorruptData;
+  const uint64_t stream_offset = file_->info().levels[size_t(level)].blob_offset +
+                                 uint64_t(view.data - file_->container().level(uint32_t(level)).data);
+  std::string where;
+  if (ty < 0 || !bd) {
+    d.area = Rect{0, view.y0, width, view.rows};
+    d.file_offset = stream_offset;
+    d.bytes = view.size;
+    where = "stream header or tile index";
+  } else {
+    const codec::HeaderInfo& h = bd->decoder.header();
+    const int64_t ts = h.tile_size, rows = std::min<int64_t>(ts, h.height - ty * ts);
+    // Payload bytes of tiles [t0, t1): the index holds one entry per non-empty tile or empty run.
+    const int64_t t0 = ty * h.tiles_x + std::max<int64_t>(tx, 0), t1 = tx < 0 ? t0 + h.tiles_x : t0 + 1;
+    uint64_t first = 0, last = 0;
+    bool any = false;
+    for (const codec::TileEntry& e : bd->decoder.index()) {
+      if (e.first_tile + e.count <= t0 || e.first_tile >= t1 || e.size == 0) continue;
+      if (!any) first = e.offset;
+      last = e.offset + e.size;
+      any = true;
+    }
+    d.tile_x = tx;
+    d.tile_y = ty;
+    d.file_offset = stream_offset + first;
+    d.bytes = any ? last - first : 0;
+    if (tx < 0) {
+      d.area = Rect{0, view.y0 + ty * ts, width, rows};
+      where = "tile row " + std::to_string(ty);
+    } else {
+      d.area = Rect{tx * ts, view.y0 + ty * ts, std::min<int64_t>(ts, h.width - tx * ts), rows};
+      where = "tile " + std::to_string(tx) + "," + std::to_string(ty);
+    }
+  }
+  d.message = file_->path() + ": level " + std::to_string(level) + ", band " + std::to_string(b) + " (rows " +
+              std::to_string(view.y0) + ".." + std::to_string(view.y0 + view.rows - 1) + "), " + where +
+              " (samples " + std::to_string(d.area.x0) + "," + std::to_string(d.area.y0) + " " +
+              std::to_string(d.area.width) + "x" + std::to_string(d.area.height) + ", file offset " +
+              std::to_string(d.file_offset) + "): " + codec::status_name(s);
+  if (policy_ == DamagePolicy::Throw) throw Error(d.code, d.message);
+  std::lock_guard<std::mutex> lock(damage_mutex_);
+  if (damage_keys_.emplace(level, b, d.tile_x, d.tile_y).second) damaged_.push_back(std::move(d));
+}
+
+const RegionDecoder::Band* RegionDecoder::band(int level, size_t b) const {
   Band& band = *bands_[size_t(level)][b];
   std::call_once(band.once, [&] {
     const BandView& v = file_->bands(level)[b];
@@ -137,10 +191,9 @@ const RegionDecoder::Band& RegionDecoder::band(int level, size_t b) const {
                                              band.decoder.header().height != v.rows))
       band.status = codec::Status::Corrupt;
   });
-  if (band.status != codec::Status::Ok)
-    throw_band_error(*file_, level, b, file_->bands(level)[b], 0, file_->level_size(level).width,
-                     band.status);
-  return band;
+  if (band.status == codec::Status::Ok) return &band;
+  damaged(level, b, nullptr, -1, -1, band.status);
+  return nullptr;
 }
 
 std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int level, size_t b, const Band& bd,
@@ -161,7 +214,11 @@ std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int leve
   const codec::Rect r{tx * ts, ty * ts, std::min(ts, h.width - tx * ts), std::min(ts, h.height - ty * ts)};
   std::shared_ptr<Tile> t = std::make_shared_for_overwrite<Tile>(size_t(r.width * r.height));
   const codec::Status s = bd.decoder.decode_region(r, t.get(), r.width, thread_codec_scratch());
-  if (s != codec::Status::Ok) throw_band_error(*file_, level, b, file_->bands(level)[b], r.x0, r.width, s);
+  if (s != codec::Status::Ok) {
+    // Degrade (Throw has thrown): a zero residual, cached like a good tile so it is met once.
+    damaged(level, b, &bd, s == codec::Status::ChecksumMismatch ? -1 : tx, ty, s);
+    std::fill_n(t.get(), size_t(r.width * r.height), 0);
+  }
   count_decoded(level, 1, uint64_t(r.width * r.height));
   std::lock_guard<std::mutex> lock(mutex_);
   if (map_.find(key) == map_.end()) {
@@ -184,7 +241,9 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
     const BandView& view = views[b];
     if (view.y0 >= rect.y0 + rect.height) break;
     if (view.empty()) continue;  // an all-zero residual band: nothing to decode or add
-    const Band& bd = band(level, b);
+    const Band* opened = band(level, b);
+    if (!opened) continue;  // Degrade: a stream that does not open adds no residual
+    const Band& bd = *opened;
     const int64_t y0 = std::max(rect.y0, view.y0), y1 = std::min(rect.y0 + rect.height, view.y0 + view.rows);
     const codec::Rect cr{rect.x0, y0 - view.y0, rect.width, y1 - y0};
     const codec::HeaderInfo& h = bd.decoder.header();
@@ -196,7 +255,20 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
       thread_local std::vector<int32_t> residual;
       residual.resize(size_t(cr.width * cr.height));
       const codec::Status s = bd.decoder.decode_region(cr, residual.data(), cr.width, thread_codec_scratch());
-      if (s != codec::Status::Ok) throw_band_error(*file_, level, b, view, cr.x0, cr.width, s);
+      if (s != codec::Status::Ok) {
+        // Tile by tile, so that each damaged part is found (and reported) and the good ones kept.
+        for (int64_t ty = ty0; ty <= ty1; ++ty)
+          for (int64_t tx = tx0; tx <= tx1; ++tx) {
+            const int64_t xa = std::max(cr.x0, tx * ts), xb = std::min(cr.x0 + cr.width, (tx + 1) * ts);
+            const int64_t ya = std::max(cr.y0, ty * ts), yb = std::min(cr.y0 + cr.height, (ty + 1) * ts);
+            int32_t* dst = residual.data() + (ya - cr.y0) * cr.width + (xa - cr.x0);
+            const codec::Status st = bd.decoder.decode_region(codec::Rect{xa, ya, xb - xa, yb - ya}, dst,
+                                                              cr.width, thread_codec_scratch());
+            if (st == codec::Status::Ok) continue;
+            damaged(level, b, &bd, st == codec::Status::ChecksumMismatch ? -1 : tx, ty, st);
+            for (int64_t y = 0; y < yb - ya; ++y) std::fill_n(dst + y * cr.width, xb - xa, 0);
+          }
+      }
       count_decoded(level, uint64_t((tx1 - tx0 + 1) * (ty1 - ty0 + 1)),
                     uint64_t(tiles_extent(tx0, tx1, ts, h.width) * tiles_extent(ty0, ty1, ts, h.height)));
       add_rows(band_out, out_stride, residual.data(), cr.width, cr.width, cr.height);

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <stdexcept>
+#include <string>
 
 #include "runtime/clipmap.h"
 #include "runtime/height_source.h"
@@ -174,6 +176,58 @@ TEST_CASE("clipmap: incremental update equals a fill from scratch after a random
       CHECK(walk.enabled(l) == fresh.enabled(l));
       if (!walk.enabled(l)) continue;  // switched-off levels keep stale (but correct) data
       const bool same = same_level(walk, fresh, l, why);
+      INFO(why);
+      CHECK(same);
+    }
+  }
+}
+
+namespace {
+// A source whose fill throws for one level while `fail_level` names it (a damaged file under a
+// strict decoder), otherwise the hashed heights.
+class FlakySource final : public HeightSource {
+ public:
+  int level_count() const override { return inner_.level_count(); }
+  GridSize level_size(int level) const override { return inner_.level_size(level); }
+  double spacing_m() const override { return inner_.spacing_m(); }
+  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override {
+    if (level == fail_level) throw std::runtime_error("damaged level " + std::to_string(level));
+    inner_.fill(level, rect, out, out_stride);
+  }
+  int fail_level = -1;
+
+ private:
+  FunctionHeightSource inner_ = hashed_source();
+};
+}  // namespace
+
+TEST_CASE("clipmap: an update whose source throws leaves the clipmap usable, and the next one catches up",
+          "[clipmap]") {
+  // refill() used to record the new clip region before filling it: after a throw the level looked
+  // current with half-old samples, and later updates never refilled it.
+  FlakySource flaky;
+  auto src = hashed_source();
+  const ClipmapOptions o = whole_updates(31);
+  Clipmap cm(flaky, o), fresh(src, o);
+  cm.update(100, 200, 10);
+  for (const double dx : {7.0, 500.0}) {  // an incremental refill, then a full one
+    INFO("move " << dx);
+    flaky.fail_level = cm.source_level(3);
+    CHECK_THROWS_WITH(cm.update(100 + dx, 200, 10), Catch::Contains("damaged level"));
+    for (int l = 0; l < cm.level_count(); ++l) {
+      INFO("level " << l);
+      CHECK(cm.has_data(l) == (l != 3));
+      if (l < 3) CHECK(cm.clip_region(l).x0 == cm.desired_region(l).x0);  // refilled before the throw
+      if (l >= 3) CHECK(cm.active_region(l).empty());                     // nothing of it is drawn
+      if (l == 3) CHECK(cm.dirty_rects(l).empty());
+    }
+    flaky.fail_level = -1;
+    cm.update(100 + dx, 200, 10);
+    fresh.update(100 + dx, 200, 10);
+    for (int l = 0; l < cm.level_count(); ++l) {
+      INFO("level " << l);
+      std::string why;
+      const bool same = same_level(cm, fresh, l, why);
       INFO(why);
       CHECK(same);
     }

@@ -5,9 +5,12 @@
 
 #include <chrono>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "render/leak_check.h"
@@ -22,6 +25,20 @@ inline double since(Clock::time_point t0) { return std::chrono::duration<double>
 
 // p-quantile of v by nearest rank (0 for an empty v); p = 0.5 is the median, 0 the minimum.
 double percentile(std::vector<double> v, double p);
+
+// The damaged parts of the pyramid the flight's decoders met (DamagePolicy::Degrade), each logged
+// once on stderr ("clipmap-view: damaged: ..."), whichever decoder met it first.
+class DamageLog {
+ public:
+  // Logs what `decoder` met since the last poll of it and no decoder reported before.
+  void poll(const terrain::runtime::RegionDecoder& decoder);
+  const std::vector<terrain::runtime::DamagedTile>& parts() const { return parts_; }
+
+ private:
+  std::map<const terrain::runtime::RegionDecoder*, size_t> seen_;  // damaged_count() at the last poll
+  std::set<std::tuple<int, size_t, int64_t, int64_t>> keys_;       // level, band, tile_x, tile_y
+  std::vector<terrain::runtime::DamagedTile> parts_;
+};
 
 // The command line, as far as the flight needs it (clipmap options go in ClipmapOptions).
 struct ViewOptions {
@@ -46,7 +63,8 @@ struct Flight {
 };
 
 // Plays the flight: PNG frames, stats.csv and stats.json in options.out_dir, a summary on stdout.
-// Returns the exit status; throws Error when an output cannot be written.
+// Returns the exit status (cli::kExitDamaged when the pyramid's decoder met damaged tiles, which are
+// logged once each); throws Error when an output cannot be written.
 int run_flight(const Flight& flight);
 
 // The reference flight's height source: --reference's pyramid or --original's levels (then also
@@ -58,9 +76,11 @@ struct Reference {
 // Fills `out`; when the reference does not match the pyramid, prints why and returns the exit status.
 std::optional<int> open_reference(const Flight& flight, Reference& out);
 // Screen-space geometric error (L&H 2004 Table 2) of the pyramid's levels from first_level on against
-// the original, for triangles of s_px pixels; printed as a table on stdout and returned.
+// the original, for triangles of s_px pixels; printed as a table on stdout and returned. Damaged tiles
+// are shown from coarser levels (and go to `damage`), as in the flight.
 std::vector<terrain::runtime::LevelScreenError> report_screen_space_error(
-    const Flight& flight, const terrain::runtime::GridHeightSource& original, int first_level, double s_px);
+    const Flight& flight, const terrain::runtime::GridHeightSource& original, int first_level, double s_px,
+    DamageLog& damage);
 // Image PSNR of two RGBA frames of equal size over the colour channels; 99 dB when identical.
 double image_psnr(const std::vector<uint8_t>& pixels, const std::vector<uint8_t>& reference);
 

@@ -13,6 +13,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "cli.h"
 #include "clipmap_view.h"
 #include "core/file.h"
 #include "json_writer.h"
@@ -23,6 +24,17 @@ namespace clipmap_view {
 using namespace terrain;
 using namespace terrain::runtime;
 using namespace terrain::render;
+
+void DamageLog::poll(const RegionDecoder& decoder) {
+  size_t& seen = seen_[&decoder];
+  for (DamagedTile& d : decoder.damaged_tiles(seen)) {
+    ++seen;
+    if (!keys_.emplace(d.level, d.band, d.tile_x, d.tile_y).second) continue;
+    // Logged even with -q: the exit status alone does not say where the file is damaged.
+    std::cerr << "clipmap-view: damaged: " << d.message << "; shown from a coarser level\n";
+    parts_.push_back(std::move(d));
+  }
+}
 
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
@@ -126,7 +138,8 @@ const char* const kPartNames[] = {"decode", "upsample", "residual", "zc", "norma
 
 void write_stats_json(const std::string& json_path, const Flight& flight, const Clipmap& clipmap,
                       const std::string& renderer_name, const FlightLog& log,
-                      const std::vector<LevelScreenError>& sse, double s_px) {
+                      const std::vector<LevelScreenError>& sse, double s_px,
+                      const std::vector<DamagedTile>& damaged) {
   const ViewOptions& o = flight.options;
   const double med = percentile(log.frame_ms, 0.5), p99 = percentile(log.frame_ms, 0.99);
   std::ofstream js(json_path + ".tmp");
@@ -174,6 +187,22 @@ void write_stats_json(const std::string& json_path, const Flight& flight, const 
     }
     j.end_array();
   }
+  j.key("damaged_tiles").begin_array();
+  for (const DamagedTile& d : damaged) {
+    j.begin_object();
+    j.field("level", d.level)
+        .field("band", int64_t(d.band))
+        .field("tile_x", d.tile_x)
+        .field("tile_y", d.tile_y);
+    j.field("x0", d.area.x0)
+        .field("y0", d.area.y0)
+        .field("width", d.area.width)
+        .field("height", d.area.height);
+    j.field("file_offset", int64_t(d.file_offset)).field("bytes", int64_t(d.bytes));
+    j.field("message", d.message);
+    j.end_object();
+  }
+  j.end_array();
   j.end_object();
   j.finish();
   js.close();
@@ -211,6 +240,7 @@ int run_flight(const Flight& flight) {
   RegionDecoderSource& source = flight.source;
   Clipmap clipmap(flight.heights, copt);
   const int finest_level = source.level_count() - 1;
+  DamageLog damage;
 
   // The reference flight: same clipmap options over another pyramid or the original input.
   Reference reference;
@@ -235,7 +265,7 @@ int run_flight(const Flight& flight) {
   const double s_px = triangle_size_px(o.width, o.height, o.fov, copt.n);
   std::vector<LevelScreenError> sse;
   if (reference.original)
-    sse = report_screen_space_error(flight, *reference.original, clipmap.source_level(0), s_px);
+    sse = report_screen_space_error(flight, *reference.original, clipmap.source_level(0), s_px, damage);
 
   // Every GL call runs under a GlLeakCheckPause: Mesa's process-lifetime allocations would otherwise
   // fail an ASan build at exit.
@@ -285,6 +315,7 @@ int run_flight(const Flight& flight) {
     }
     const double total = since(t0);
     const RegionStats after = flight.decoder->stats();
+    damage.poll(*flight.decoder);
     double frame_psnr = std::nan("");
     if (ref_clipmap) {
       ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
@@ -340,11 +371,15 @@ int run_flight(const Flight& flight) {
   if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
   std::filesystem::rename(csv_path + ".tmp", csv_path);
 
-  write_stats_json(json_path, flight, clipmap, gl.renderer_name(), log, sse, s_px);
+  damage.poll(*flight.decoder);
+  write_stats_json(json_path, flight, clipmap, gl.renderer_name(), log, sse, s_px, damage.parts());
   print_summary(flight, log);
   if (!written.empty() && !o.quiet)
     std::cerr << "clipmap-view: " << written.size() << " PNG frames in " << o.out_dir << "\n";
-  return 0;
+  if (damage.parts().empty()) return cli::kExitOk;
+  std::cerr << "clipmap-view: finished with " << damage.parts().size()
+            << " damaged tile(s), shown from coarser levels (exit " << cli::kExitDamaged << ")\n";
+  return cli::kExitDamaged;
 }
 
 }  // namespace clipmap_view

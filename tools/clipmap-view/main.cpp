@@ -155,7 +155,8 @@ int run(int argc, char** argv) {
   const ContainerInfo& info = file->info();
   // Arc-second grids: about 30.87 m per arc-second (the terrain is rendered flat, as in the paper).
   const double spacing = info.horizontal_units == "arc-second" ? info.spacing_x * 30.87 : info.spacing_x;
-  auto decoder = std::make_shared<const RegionDecoder>(file);
+  // A damaged tile must not end the flight: its region shows the coarser level, and it is reported.
+  auto decoder = std::make_shared<const RegionDecoder>(file, size_t(256) << 20, DamagePolicy::Degrade);
   RegionDecoderSource source(decoder, spacing);
   std::unique_ptr<SynthesisSource> synth;
   if (synth_levels > 0) {

@@ -57,10 +57,13 @@ std::optional<int> open_reference(const Flight& flight, Reference& out) {
 
 std::vector<LevelScreenError> report_screen_space_error(const Flight& flight,
                                                         const GridHeightSource& original, int first_level,
-                                                        double s_px) {
+                                                        double s_px, DamageLog& damage) {
   const ViewOptions& o = flight.options;
-  RegionDecoderSource table_source(std::make_shared<const RegionDecoder>(flight.file), flight.spacing);
+  const auto decoder =
+      std::make_shared<const RegionDecoder>(flight.file, size_t(256) << 20, DamagePolicy::Degrade);
+  RegionDecoderSource table_source(decoder, flight.spacing);
   std::vector<LevelScreenError> sse = screen_space_error(table_source, original, first_level, s_px);
+  damage.poll(*decoder);
   std::printf("screen-space geometric error, %dx%d, vertical fov %g deg, n=%d: s = %.2f px per grid cell\n",
               o.width, o.height, o.fov, flight.clipmap.n, s_px);
   std::printf("%6s %12s %10s %10s %10s %12s %10s\n", "level", "spacing_m", "rms_m", "max_m", "rms_px",

@@ -36,6 +36,9 @@ const std::vector<ExitStatus>& exit_table() {
       {10,
        "corrupted compressed data (bad checksum, bad bitstream, unknown version)",
        {C::CorruptData, C::ChecksumMismatch, C::UnsupportedVersion}},
+      {kExitDamaged,
+       "finished with damaged tiles (clipmap-view: each logged once, its region shown from a coarser level)",
+       {}},
       {kExitInternal, "internal error", {}},
   };
   return table;

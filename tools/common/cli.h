@@ -19,6 +19,9 @@ namespace cli {
 // (core/error.h) to the statuses exit_codes_help() documents.
 constexpr int kExitOk = 0;
 constexpr int kExitUsage = 1;
+// A viewer (clipmap-view) that met damaged tiles, showed their regions from coarser levels and
+// finished: "finished with damaged tiles".
+constexpr int kExitDamaged = 11;
 constexpr int kExitInternal = 70;
 int exit_status(terrain::ErrorCode code);
 // The exit-status table, for the end of every tool's --help.

@@ -84,6 +84,14 @@ class PyramidFile {
   // Index of the band holding row y of the level.
   size_t band_of_row(int level, int64_t y) const;
   const std::string& path() const { return container_.path(); }
+  // Everything open() leaves to the decoder, for `terrain-info --verify`: every level blob's CRC
+  // (Container::verify), then for every band record with a stream that the stream opens (libcodec
+  // header, tile index, stream CRC), that it codes the level's width and the record's rows, that
+  // every tile row's payload CRC holds and that every tile decodes. A band table that is consistent
+  // in itself but wrong (resealed after forging) fails here. Throws Error (CorruptData, or
+  // ChecksumMismatch for a CRC) naming the file, level, band record and the field or libcodec status.
+  // Memory: one tile row of one band.
+  void verify() const;
 
  private:
   explicit PyramidFile(Container&& c) : container_(std::move(c)) {}

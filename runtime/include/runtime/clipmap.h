@@ -106,8 +106,10 @@ class Clipmap {
 
   // Moves the clipmap to a viewer at (x, y, z) metres: desired regions, budgeted coarse-to-fine
   // refill, level switching by height, cropping of the active regions. Throws what the source's
-  // fill throws (RegionDecoderSource: Error on damaged data); the clipmap is then unusable
-  // (the level already records its new clip region, so later updates would not refill it): discard it.
+  // fill throws (RegionDecoderSource: Error on damaged data, under DamagePolicy::Throw). The clipmap
+  // stays usable: the level whose refill failed has no data (has_data false, its active region and
+  // those of the finer levels empty), the coarser levels hold this update's data, and the next
+  // update refills that level whole, giving what a fresh clipmap would.
   ClipmapUpdateStats update(double x_m, double y_m, double z_m);
 
   // The accessors of a level's state (has_data .. dirty_rects, z_bounds) throw std::out_of_range

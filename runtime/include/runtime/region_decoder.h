@@ -14,7 +14,22 @@
 // Thread-safe: any number of threads may call the decode functions (and stats, reset_stats,
 // clear_cache) concurrently.
 // Untrusted input: safe on any file PyramidFile::open accepts; damaged band streams are caught by
-// libcodec and thrown as Error, never read out of bounds.
+// libcodec, never read out of bounds.
+//
+// Damage contract. What a decode does on damaged data (a band stream whose header or tile index
+// fails to open, a tile row whose payload CRC fails, a tile whose bitstream is malformed) is the
+// decoder's DamagePolicy, fixed at construction:
+//   Throw (the default, for tools that extract or measure data: pyramid-extract, terrain-report,
+//     the Python module) throws Error naming the file, level, band, tile and libcodec status.
+//   Degrade (for viewers: clipmap-view) adds no residual for the damaged part, so its samples are
+//     U of the coarser level: the region shows the next coarser level that decodes there (a damaged
+//     coarser level degrades the same way, down to level 0), finer residuals are still added. Each
+//     damaged part is recorded once, in the order met, with its level, tiles, samples and file
+//     offset (damaged_tiles()); it is cached like a good tile, so it is neither decoded nor reported
+//     again. A decode under Degrade throws only for misuse (std::out_of_range, invalid_argument).
+// Damage is localised as finely as libcodec can: a tile whose bitstream is bad is one tile; a
+// payload CRC covers a whole tile row of the band's stream, so a row that fails it is one report for
+// all its tiles; a stream that does not open is one report for the whole band.
 #pragma once
 
 #include <array>
@@ -23,9 +38,13 @@
 #include <list>
 #include <memory>
 #include <mutex>
+#include <set>
+#include <string>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
+#include "codec/codec.h"
 #include "container/pyramid_file.h"
 
 namespace terrain::runtime {
@@ -38,22 +57,43 @@ struct RegionStats {
   std::vector<uint64_t> residual_samples_by_level;  // residual_samples_decoded split by level
 };
 
+// See "Damage contract" above.
+enum class DamagePolicy {
+  Throw,    // throw Error (the default)
+  Degrade,  // leave the damaged residual out (the coarser level shows there) and record it once
+};
+
+// A damaged part of one level met under DamagePolicy::Degrade.
+struct DamagedTile {
+  int level = 0;
+  size_t band = 0;           // index into PyramidFile::bands(level)
+  int64_t tile_x = -1;       // the tile column in the band's stream; -1: every tile of the row(s)
+  int64_t tile_y = -1;       // the tile row in the band's stream; -1: the whole stream (it did not open)
+  Rect area;                 // the level's samples whose residual is left out (level coordinates)
+  uint64_t file_offset = 0;  // first byte of the damaged payload (tile, tile row or stream) in the file
+  uint64_t bytes = 0;        // its size
+  ErrorCode code = ErrorCode::CorruptData;  // ChecksumMismatch (a CRC failed) or CorruptData
+  std::string message;  // "<file>: level L, band b (rows ..), tile ..: <libcodec status>", as Throw would say
+};
+
 class RegionDecoder {
  public:
   static constexpr int kMaxLevels = 64;
 
   // cache_bytes bounds the decoded-residual cache (0 disables it: each call decodes exactly the
   // libcodec tiles its rectangles intersect, and nothing is kept); any other bound keeps at least the
-  // most recent tile. `file` must not be null. Throws Error(Corrupt) for a
-  // file of more than kMaxLevels levels. Band streams are opened on first use, not here.
-  explicit RegionDecoder(std::shared_ptr<const container::PyramidFile> file, size_t cache_bytes = size_t(256)
-                                                                                                  << 20);
+  // most recent tile. `file` must not be null. policy: what damaged data does (the damage contract
+  // above). Throws Error(Corrupt) for a file of more than kMaxLevels levels. Band streams are opened
+  // on first use, not here.
+  explicit RegionDecoder(std::shared_ptr<const container::PyramidFile> file,
+                         size_t cache_bytes = size_t(256) << 20, DamagePolicy policy = DamagePolicy::Throw);
   ~RegionDecoder();
 
   // T^_level on rect in level units (int32) into out (row stride out_stride); rect must lie inside
   // the level, and level inside 0 .. level_count() - 1 (else std::out_of_range; an empty rect
   // writes nothing). Throws Error naming the file, level, band and libcodec status when data
-  // is damaged (out then holds unspecified values).
+  // is damaged (out then holds unspecified values); under DamagePolicy::Degrade it leaves the
+  // damaged residual out instead and records it (damaged_tiles).
   void decode_units(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
   // T^_level on rect from the caller's own T^_{level-1}: U(coarser) + the decoded residual, no
   // recursion (the clipmap's update, paper §5: the coarser level is already in the clipmap).
@@ -73,6 +113,12 @@ class RegionDecoder {
   double metres_offset() const { return file_->info().vertical_offset; }
 
   const container::PyramidFile& file() const { return *file_; }
+  DamagePolicy policy() const { return policy_; }
+  // DamagePolicy::Degrade: the damaged parts met so far, each once, in the order met, from the
+  // `from`-th on (so a caller that remembers how many it has seen gets only the new ones).
+  // Always empty under Throw. Not cleared by clear_cache or reset_stats.
+  std::vector<DamagedTile> damaged_tiles(size_t from = 0) const;
+  size_t damaged_count() const;
   RegionStats stats() const;  // counts since construction or the last reset_stats
   void reset_stats();
   void clear_cache();  // drops every cached tile (the next requests decode again)
@@ -80,7 +126,10 @@ class RegionDecoder {
  private:
   struct Band;             // a band's libcodec stream, opened (header + tile index parsed) on first use
   using Tile = int32_t[];  // a decoded tile's samples, row-major (allocated uninitialised: decode writes all)
-  const Band& band(int level, size_t b) const;
+  // The band's opened stream; null when it does not open (Degrade: recorded; Throw: thrown).
+  const Band* band(int level, size_t b) const;
+  // Throw: throws Error. Degrade: records the damage (once per part) and returns.
+  void damaged(int level, size_t b, const Band* bd, int64_t tx, int64_t ty, codec::Status s) const;
   void add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
   std::shared_ptr<const Tile> residual_tile(int level, size_t b, const Band& band, int64_t tx,
                                             int64_t ty) const;
@@ -88,6 +137,10 @@ class RegionDecoder {
 
   std::shared_ptr<const container::PyramidFile> file_;
   size_t cache_capacity_;
+  DamagePolicy policy_;
+  mutable std::mutex damage_mutex_;
+  mutable std::vector<DamagedTile> damaged_;                                 // guarded by damage_mutex_
+  mutable std::set<std::tuple<int, size_t, int64_t, int64_t>> damage_keys_;  // level, band, tile_x, tile_y
   std::vector<std::vector<std::unique_ptr<Band>>> bands_;
   // LRU of decoded residual tiles: most recent at the front; the map points into the list.
   struct Entry {
