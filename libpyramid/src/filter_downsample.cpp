@@ -113,12 +113,16 @@ int64_t DownsampleEngine::min_row_needed(int64_t j) const {
   return lo;
 }
 
-int64_t DownsampleEngine::rows_needed_through(int64_t j_end) const {
+int64_t DownsampleEngine::rows_needed_through(int64_t j_end) {
+  if (needed_from_ == next_coarse_ && needed_to_ == j_end) return needed_rows_;
+  needed_from_ = next_coarse_;
+  needed_to_ = j_end;
   int64_t hi = -1;
   for (int64_t j = next_coarse_; j < j_end; ++j)
     for (int dy = -DownsampleFilter::kRadius; dy <= DownsampleFilter::kRadius; ++dy)
       hi = std::max(hi, reflect_index(2 * j + dy, fine_.height));
-  return hi + 1;
+  needed_rows_ = hi + 1;
+  return needed_rows_;
 }
 
 void DownsampleEngine::push_rows(const int32_t* rows, int64_t count, const Emit& emit) {
