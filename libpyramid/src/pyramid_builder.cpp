@@ -16,6 +16,7 @@
 // contiguous, coarsest first) is the container writer's job, so builds into memory or into a
 // counting sink write nothing.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -267,7 +268,7 @@ class StreamingBuilder {
     row_scratch_.resize(size_t(info.width));
     next_band_.assign(size_t(level_count_), 0);
     acc_.resize(size_t(level_count_));
-    work_.resize(size_t(opt.threads));
+    work_.resize(size_t(level_count_));
     result_.levels.resize(size_t(level_count_));
     header_.levels = sizes_;
     header_.band_rows = finest_band_rows_;
@@ -451,58 +452,111 @@ class StreamingBuilder {
     return l == 0 || reconstructed_[size_t(l - 1)].end() >= coarse_rows_needed(l, y0, y0 + rows);
   }
 
-  // Codes every band that can be coded now, coarse levels first (they unlock the finer ones). Bands
-  // go in groups of `threads`; before the end a partial group waits for more rows.
+  // One level's bands [gy0, gy1) in a batch, with the coarse rows U needs for them.
+  struct Group {
+    int level = 0;
+    int64_t gy0 = 0, gy1 = 0;
+    size_t tasks = 0;  // its bands, in work_[level][0 .. tasks)
+    CoarseWindow window;
+  };
+
+  // Codes every band that can be coded now. Each round takes, at every level, the bands ready at
+  // its start (a band whose coarser rows are coded in the same round waits for the next), and codes
+  // all of them at once on `threads` workers, largest first: the coarse levels' bands then run beside
+  // the finest level's instead of one at a time between them (the 2-thread build had one core idle
+  // for half its time). Results are committed level by level, top to bottom, so the output and the
+  // statistics do not depend on the thread count. The finest level codes in groups of `threads`
+  // bands; before the end a partial group waits for more rows (a coarse level never waits: it
+  // would delay all finer ones).
   void pump(bool final) {
-    for (int l = 0; l < level_count_; ++l) {
-      const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
-      // Only the finest level waits to fill a group: waiting at coarse levels would delay all finer ones.
-      const int group = l == finest_ ? opt_.threads : 1;
-      for (;;) {
+    for (;;) {
+      std::vector<Group> groups;
+      for (int l = 0; l < level_count_; ++l) {
+        const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
         const int64_t y0 = next_band_[size_t(l)];
-        if (y0 >= h) break;
+        if (y0 >= h) continue;
+        const int limit = opt_.threads;
         int64_t nb = 0;
-        while (nb < group && y0 + nb * S < h && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
+        while (nb < limit && y0 + nb * S < h && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
           ++nb;
         const bool more_after = y0 + nb * S < h;
-        if (nb == 0 || (!final && nb < group && more_after)) break;
-        code_group(l, y0, std::min(h, y0 + nb * S));
+        if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
+        Group g;
+        g.level = l;
+        g.gy0 = y0;
+        g.gy1 = std::min(h, y0 + nb * S);
+        g.tasks = size_t(nb);
+        groups.push_back(g);
       }
+      if (groups.empty()) return;
+      code_groups(groups);
     }
   }
 
-  void code_group(int l, int64_t gy0, int64_t gy1) {
-    const GridSize fs = sizes_[size_t(l)];
-    const int64_t fw = fs.width;
-    const bool finest = l == finest_;
-    const int64_t S = level_band_rows_[size_t(l)];
-    const int64_t nb = (gy1 - gy0 + S - 1) / S;
-    GridSize cs{0, 0};
-    Rect need{0, 0, 0, 0};
-    if (l > 0) {
-      cs = sizes_[size_t(l - 1)];
-      need = upsample_required_window(Rect{0, gy0, fw, gy1 - gy0}, fs);
-      coarse_window_.resize(size_t(need.height * cs.width));
-      reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, coarse_window_.data());
+  void code_groups(std::vector<Group>& groups) {
+    if (windows_.size() < groups.size()) windows_.resize(groups.size());
+    // Per level, so that each slot's buffers keep the size of that level's bands.
+    for (const Group& g : groups)
+      if (work_[size_t(g.level)].size() < g.tasks) work_[size_t(g.level)].resize(g.tasks);
+    struct Task {
+      size_t group;
+      int64_t band;
+      int64_t samples;
+    };
+    std::vector<Task> order;
+    for (size_t gi = 0; gi < groups.size(); ++gi) {
+      Group& g = groups[gi];
+      const int l = g.level;
+      const GridSize fs = sizes_[size_t(l)];
+      if (l > 0) {
+        const GridSize cs = sizes_[size_t(l - 1)];
+        const Rect need = upsample_required_window(Rect{0, g.gy0, fs.width, g.gy1 - g.gy0}, fs);
+        std::vector<int32_t>& window = windows_[gi];
+        window.resize(size_t(need.height * cs.width));
+        reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, window.data());
+        g.window = CoarseWindow{window.data(), cs.width, need, cs};
+      } else {
+        g.window = CoarseWindow{nullptr, 0, Rect{0, 0, 0, 0}, GridSize{0, 0}};
+      }
+      const int64_t S = level_band_rows_[size_t(l)];
+      for (size_t b = 0; b < g.tasks; ++b) {
+        const int64_t y0 = g.gy0 + int64_t(b) * S;
+        order.push_back({gi, int64_t(b), std::min(S, g.gy1 - y0) * fs.width});
+      }
     }
-    const CoarseWindow cwin{coarse_window_.data(), cs.width, need, cs};
-    const LevelRows& tin = levels_[size_t(l)];
-    detail::parallel_chunks(opt_.threads, nb, [&](int, int64_t b0, int64_t b1) {
-      for (int64_t b = b0; b < b1; ++b) {
-        BandWork& bw = work_[size_t(b)];
-        bw.y0 = gy0 + b * S;
-        bw.rows = std::min(S, gy1 - bw.y0);
+    // Largest bands first, so the small coarse ones fill the gaps at the end.
+    std::stable_sort(order.begin(), order.end(),
+                     [](const Task& a, const Task& b) { return a.samples > b.samples; });
+    std::atomic<size_t> next{0};
+    detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
+      for (size_t i; (i = next.fetch_add(1)) < order.size();) {
+        const Group& g = groups[order[i].group];
+        const int l = g.level;
+        const int64_t fw = sizes_[size_t(l)].width, S = level_band_rows_[size_t(l)];
+        const bool finest = l == finest_;
+        BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
+        bw.y0 = g.gy0 + order[i].band * S;
+        bw.rows = std::min(S, g.gy1 - bw.y0);
         const int64_t n = bw.rows * fw;
         bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)),
             bw.rhat.resize(size_t(n));
-        tin.copy_rows(bw.y0, bw.rows, bw.t.data());
+        levels_[size_t(l)].copy_rows(bw.y0, bw.rows, bw.t.data());
         bw.valid.resize(finest ? size_t(n) : 0);
         if (finest) mask_.copy_rows(bw.y0, bw.rows, bw.valid.data());
-        code_band(l, cwin, bw);
+        code_band(l, g.window, bw);
       }
     });
-    for (int64_t b = 0; b < nb; ++b) {
-      BandWork& bw = work_[size_t(b)];
+    for (const Group& g : groups) commit_group(g);
+  }
+
+  // Hands a group's bands to the sink in order and drops the rows nothing needs any more.
+  void commit_group(const Group& g) {
+    const int l = g.level;
+    const GridSize fs = sizes_[size_t(l)];
+    const int64_t fw = fs.width;
+    const bool finest = l == finest_;
+    for (size_t b = 0; b < g.tasks; ++b) {
+      BandWork& bw = work_[size_t(l)][b];
       if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
       LevelBuildStats& st = result_.levels[size_t(l)];
       st.bytes += bw.bytes.size();
@@ -515,12 +569,12 @@ class StreamingBuilder {
       if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
       if (!finest) reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
     }
-    next_band_[size_t(l)] = gy1;
-    levels_[size_t(l)].drop_before(gy1);
-    if (finest) mask_.drop_before(gy1);
+    next_band_[size_t(l)] = g.gy1;
+    levels_[size_t(l)].drop_before(g.gy1);
+    if (finest) mask_.drop_before(g.gy1);
     if (l > 0) {
-      const int64_t keep = gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0
-                                           : reconstructed_[size_t(l - 1)].end();
+      const int64_t keep = g.gy1 < fs.height ? upsample_required_window(Rect{0, g.gy1, fw, 1}, fs).y0
+                                             : reconstructed_[size_t(l - 1)].end();
       reconstructed_[size_t(l - 1)].drop_before(keep);
     }
   }
@@ -588,8 +642,8 @@ class StreamingBuilder {
   std::vector<std::vector<int32_t>> emitted_;
   std::vector<int64_t> next_band_;  // per level: first row not yet coded
   std::vector<Acc> acc_;
-  std::vector<BandWork> work_;
-  std::vector<int32_t> coarse_window_;
+  std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
+  std::vector<std::vector<int32_t>> windows_;  // per group of a round: the coarse rows U reads
   BuildResult result_;
 };
 
