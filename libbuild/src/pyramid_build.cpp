@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -130,14 +131,26 @@ struct Trial {
 };
 
 // Only the figures of a trial matter: it keeps no output and writes no file. Over several windows:
-// the rms of all their samples, the largest error, the bytes of all.
-Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const PtcCoderOptions& co) {
+// the rms of all their samples, the largest error, the bytes of all. Each window's D is fitted by its
+// first trial and then given to the later ones as a fixed filter (the same taps, so the same trial
+// results): the fit does not depend on the step, and refitting it was a third of the calibration's
+// CPU time. filters: one per window, empty until fitted.
+Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const PtcCoderOptions& co,
+                  std::vector<std::optional<DownsampleFilter>>& filters) {
   PtcResidualCoder coder(co);
   Trial t{co.step, 0, 0, 0};
   double squares = 0, samples = 0;
-  for (const Heightmap& window : windows) {
+  filters.resize(windows.size());
+  for (size_t k = 0; k < windows.size(); ++k) {
+    const Heightmap& window = windows[k];
     CountingSink sink;
-    const BuildResult r = build_pyramid(window, bo, coder, sink);
+    BuildOptions wo = bo;
+    if (filters[k]) {
+      wo.use_fixed_filter = true;
+      wo.fixed_filter = *filters[k];
+    }
+    const BuildResult r = build_pyramid(window, wo, coder, sink);
+    if (!filters[k]) filters[k] = r.header.filter;
     const double n = double(window.width() * window.height());
     squares += r.levels.back().error_rms * r.levels.back().error_rms * n;
     samples += n;
@@ -173,6 +186,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   // the calibration sample's mid-range. Ordinary DEMs keep their native units (offset 0).
   const std::vector<Heightmap> window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
+  std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
       LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
 
@@ -211,7 +225,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       double step = std::clamp(codec::step_for_target_rms(target), 1.0, kLargestStep);
       for (int i = 0; i < 10; ++i) {
         co.step = step;
-        const Trial t = trial_build(window, bo, co);
+        const Trial t = trial_build(window, bo, co, window_filters);
         out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " +
                                       std::to_string(t.rms * mpu) + " m, " + std::to_string(t.bytes) +
                                       " bytes");
@@ -254,7 +268,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
         Trial best{};
         for (double f : {1.0, 1.5, 2.0, 3.0, 4.0}) {
           co.step = std::clamp(f * out.max_error_units, 1.0, kLargestStep);
-          const Trial t = trial_build(window, bo, co);
+          const Trial t = trial_build(window, bo, co, window_filters);
           out.calibration_log.push_back("step " + std::to_string(t.step) + " units: max " +
                                         std::to_string(t.max_abs) + " units, " + std::to_string(t.bytes) +
                                         " bytes");
