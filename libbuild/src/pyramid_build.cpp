@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <filesystem>
 #include <optional>
 #include <sstream>
@@ -137,25 +138,49 @@ struct Trial {
 // CPU time. filters: one per window, empty until fitted.
 Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const PtcCoderOptions& co,
                   std::vector<std::optional<DownsampleFilter>>& filters) {
-  PtcResidualCoder coder(co);
+  PtcResidualCoder coder(co);  // thread-safe: each thread has its own libcodec scratch
+  const size_t n = windows.size();
+  filters.resize(n);
+  // The windows are small pyramids that use few threads well: build them side by side, the threads
+  // shared out, and add their figures in window order (the same sums for any thread count).
+  std::vector<BuildResult> results(n);
+  std::vector<uint64_t> bytes(n, 0);
+  std::vector<std::exception_ptr> errors(n);
+  const int parallel = int(std::clamp<size_t>(size_t(bo.threads), 1, std::max<size_t>(n, 1)));
+  const auto build_window = [&](size_t k) {
+    try {
+      CountingSink sink;
+      BuildOptions wo = bo;
+      wo.threads = std::max(1, bo.threads / parallel);
+      if (filters[k]) {
+        wo.use_fixed_filter = true;
+        wo.fixed_filter = *filters[k];
+      }
+      results[k] = build_pyramid(windows[k], wo, coder, sink);
+      bytes[k] = sink.band_bytes;
+    } catch (...) {
+      errors[k] = std::current_exception();
+    }
+  };
+  for (size_t first = 0; first < n; first += size_t(parallel)) {
+    const size_t last = std::min(n, first + size_t(parallel));
+    std::vector<std::thread> pool;
+    for (size_t k = first + 1; k < last; ++k) pool.emplace_back(build_window, k);
+    build_window(first);
+    for (std::thread& th : pool) th.join();
+  }
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
   Trial t{co.step, 0, 0, 0};
   double squares = 0, samples = 0;
-  filters.resize(windows.size());
-  for (size_t k = 0; k < windows.size(); ++k) {
-    const Heightmap& window = windows[k];
-    CountingSink sink;
-    BuildOptions wo = bo;
-    if (filters[k]) {
-      wo.use_fixed_filter = true;
-      wo.fixed_filter = *filters[k];
-    }
-    const BuildResult r = build_pyramid(window, wo, coder, sink);
+  for (size_t k = 0; k < n; ++k) {
+    const BuildResult& r = results[k];
     if (!filters[k]) filters[k] = r.header.filter;
-    const double n = double(window.width() * window.height());
-    squares += r.levels.back().error_rms * r.levels.back().error_rms * n;
-    samples += n;
+    const double count = double(windows[k].width() * windows[k].height());
+    squares += r.levels.back().error_rms * r.levels.back().error_rms * count;
+    samples += count;
     t.max_abs = std::max(t.max_abs, r.levels.back().error_max_abs);
-    t.bytes += sink.band_bytes;
+    t.bytes += bytes[k];
   }
   t.rms = samples > 0 ? std::sqrt(squares / samples) : 0;
   return t;
