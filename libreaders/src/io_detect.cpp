@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstring>
 
+#include "core/text.h"
 #include "readers/internal/io_internal.h"
 
 namespace terrain {
@@ -58,6 +59,11 @@ const GridInfo& checked(const GridInfo& g, const std::string& path) {
     if (static_cast<unsigned char>(c) < 0x20) bad("horizontal_units", "must be printable text");
   if (g.origin_x && !std::isfinite(*g.origin_x)) bad("origin_x", "must be finite");
   if (g.origin_y && !std::isfinite(*g.origin_y)) bad("origin_y", "must be finite");
+  if (!is_crs_text(g.crs_text))
+    bad("crs_text", "must be at most " + std::to_string(kMaxCrsTextBytes) +
+                        " bytes of text without control characters (it has " +
+                        std::to_string(g.crs_text.size()) + " bytes)");
+  if (g.crs_epsg && !(*g.crs_epsg >= 1 && *g.crs_epsg <= 999999)) bad("crs_epsg", "must be 1..999999");
   return g;
 }
 

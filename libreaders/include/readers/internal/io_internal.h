@@ -52,6 +52,10 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
 GridInfo probe_image(const std::string& path, const ReadOptions& options);
 std::unique_ptr<BandReader> open_image_reader(const std::string& path, const ReadOptions& options);
 
+// The EPSG code a WKT text names for its outermost CRS: its AUTHORITY["EPSG","n"] / ID["EPSG",n],
+// else the ESRI names GCS_WGS_1984 (4326) and WGS_1984_UTM_Zone_nN/S (326nn/327nn); nullopt otherwise.
+std::optional<int> epsg_from_wkt(const std::string& wkt);
+
 // Shortest decimal text that reads back as exactly the same double (locale independent).
 std::string format_double(double v);
 
