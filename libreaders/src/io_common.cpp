@@ -32,8 +32,8 @@ std::optional<SampleType> sample_type_from_name(const std::string& name) {
 }
 
 const char* file_format_name(FileFormat f) {
-  static constexpr const char* kNames[] = {"srtm-hgt", "raw",   "esri-bil",
-                                           "esri-flt", "image", "terrain-rgb-image"};
+  static constexpr const char* kNames[] = {"srtm-hgt",          "raw",       "esri-bil", "esri-flt", "image",
+                                           "terrain-rgb-image", "esri-ascii"};
   return enum_name(f, kNames);
 }
 

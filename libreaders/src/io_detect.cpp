@@ -9,12 +9,13 @@
 namespace terrain {
 namespace {
 
-enum class Kind { Hgt, Esri, Image, Raw };
+enum class Kind { Hgt, Esri, Ascii, Image, Raw };
 
 Kind detect_kind(const std::string& path, const ReadOptions& options) {
   using io::ends_with_ci;
   if (ends_with_ci(path, ".hgt") || ends_with_ci(path, ".hgt.gz")) return Kind::Hgt;
   if (ends_with_ci(path, ".bil") || ends_with_ci(path, ".flt")) return Kind::Esri;
+  if (ends_with_ci(path, ".asc")) return Kind::Ascii;
   for (const char* ext : {".png", ".tif", ".tiff", ".exr"})
     if (ends_with_ci(path, ext)) return Kind::Image;
   for (const char* ext : {".raw", ".bin", ".r16", ".r32", ".dat"})
@@ -38,7 +39,7 @@ Kind detect_kind(const std::string& path, const ReadOptions& options) {
   if (options.width || options.height || options.sample_type || io::file_exists(path + ".json"))
     return Kind::Raw;
   io::fail(ErrorCode::UnknownType, path,
-           "unknown format: expected .hgt[.gz], .bil/.flt, .png/.tif/.exr, or a raw grid with a .json "
+           "unknown format: expected .hgt[.gz], .bil/.flt, .asc, .png/.tif/.exr, or a raw grid with a .json "
            "sidecar or --type/--width/--height");
 }
 
@@ -75,6 +76,8 @@ GridInfo probe(const std::string& path, const ReadOptions& options) {
       return checked(io::probe_hgt_layout(path, options).info, path);
     case Kind::Esri:
       return checked(io::probe_esri_layout(path, options).info, path);
+    case Kind::Ascii:
+      return checked(io::probe_ascii_grid(path, options), path);
     case Kind::Image:
       return checked(io::probe_image(path, options), path);
     case Kind::Raw:
@@ -91,6 +94,9 @@ std::unique_ptr<BandReader> open_band_reader(const std::string& path, const Read
       break;
     case Kind::Esri:
       reader = io::open_raw_stream(path, io::probe_esri_layout(path, options));
+      break;
+    case Kind::Ascii:
+      reader = io::open_ascii_grid(path, options);
       break;
     case Kind::Image:
       reader = io::open_image_reader(path, options);

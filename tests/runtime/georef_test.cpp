@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "runtime/gdal_test_util.h"
 
@@ -52,14 +53,18 @@ std::string rainier_utm(const iotest::TempDir& dir, const std::string& options, 
   return out;
 }
 
-// input -> .pyr (lossless) -> GeoTIFF; gdalinfo of input and output agree on origin and pixel size,
-// gdalsrsinfo on the CRS (as PROJ.4 text). Returns terrain-info --json of the .pyr.
-std::string round_trip(const iotest::TempDir& dir, const std::string& input, const std::string& tag) {
+// input -> .pyr (lossless; float input on a `quantum` grid) -> GeoTIFF of `type`; gdalinfo of input and
+// output agree on origin and pixel size, gdalsrsinfo on the CRS (as PROJ.4 text). Returns terrain-info --json
+// of the .pyr.
+std::string round_trip(const iotest::TempDir& dir, const std::string& input, const std::string& tag,
+                       const std::string& type = "int16", const std::string& quantum = "") {
   const std::string pyr = dir.file(tag + ".pyr"), tif = dir.file(tag + "_out.tif");
-  const auto built = run_tool(dir, {"pyramid-build", {input, "-o", pyr, "--lossless", "-q"}});
+  std::vector<std::string> build = {input, "-o", pyr, "--lossless", "-q"};
+  if (!quantum.empty()) build.insert(build.end(), {"--quantum", quantum});
+  const auto built = run_tool(dir, {"pyramid-build", build});
   INFO(built.err);
   REQUIRE(built.status == 0);
-  const auto extracted = run_tool(dir, {"pyramid-extract", {pyr, "-o", tif, "--type", "int16", "-q"}});
+  const auto extracted = run_tool(dir, {"pyramid-extract", {pyr, "-o", tif, "--type", type, "-q"}});
   INFO(extracted.err);
   REQUIRE(extracted.status == 0);
   const std::string in_info = gdal(dir, "gdalinfo " + shell_quote(input));
@@ -95,15 +100,45 @@ TEST_CASE("georeference: a UTM GeoTIFF keeps EPSG 32610 and its geotransform thr
   CHECK_THAT(text.out, Catch::Contains("geotransform: 500000, 30, 0, 5200000, 0, -30"));
 }
 
-TEST_CASE("georeference: an ESRI .bil with .hdr and .prj keeps its WKT and origin",
+TEST_CASE("georeference: ESRI .bil + .hdr + .prj and ASCII grid + .prj keep their WKT and origin",
           "[runtime][georef][gdal]") {
   iotest::TempDir dir;
-  const std::string bil = rainier_utm(dir, "-of EHdr", "utm.bil");
-  if (bil.empty()) return;
-  const std::string info = round_trip(dir, bil, "bil");
-  CHECK_THAT(info, Catch::Contains("\"crs_epsg\": 32610"));  // from the ESRI name WGS_1984_UTM_Zone_10N
-  CHECK_THAT(info, Catch::Contains("\"crs_text\": \"PROJCS[\\\"WGS_1984_UTM_Zone_10N\\\""));
-  CHECK_THAT(squeezed(info), Catch::Contains(kUtmGeotransform));
+  for (const char* format : {"EHdr", "AAIGrid"}) {
+    const std::string tag = std::string(format) == "EHdr" ? "bil" : "asc";
+    const std::string input = rainier_utm(dir, std::string("-of ") + format, "utm." + tag);
+    if (input.empty()) return;
+    INFO(input);
+    const std::string info = round_trip(dir, input, tag);
+    CHECK_THAT(info, Catch::Contains("\"crs_epsg\": 32610"));  // the ESRI name WGS_1984_UTM_Zone_10N
+    CHECK_THAT(info, Catch::Contains("\"crs_text\": \"PROJCS[\\\"WGS_1984_UTM_Zone_10N\\\""));
+    CHECK_THAT(squeezed(info), Catch::Contains(kUtmGeotransform));
+  }
+}
+
+TEST_CASE("georeference: an ASCII grid with xllcenter, float values and an OGC WKT .prj",
+          "[runtime][georef][gdal]") {
+  if (!have_gdal()) return;
+  iotest::TempDir dir;
+  // Cell centres given, float values, a void: GDAL places the corner half a cell out.
+  const std::string centre = dir.file("centre.asc");
+  {
+    std::ofstream a(centre);
+    a << "ncols 4\nnrows 3\nxllcenter 1000\nyllcenter 2000\ncellsize 10\nNODATA_value -9999\n"
+         "1.5 2 3 4\n5 -9999 7 8.25\n9 10 11 12\n";
+  }
+  {
+    // An OGC WKT 1 .prj, whose outermost AUTHORITY names the EPSG code.
+    std::ofstream prj(dir.file("centre.prj"));
+    const std::string wkt = gdal(dir, "gdalsrsinfo -o wkt1 EPSG:25832");
+    prj << wkt.substr(wkt.find_first_not_of(" \n"));  // GDAL's .prj reader wants WKT on line 1
+  }
+  const auto probe = run_tool(dir, {"terrain-info", {centre, "--json"}});
+  REQUIRE(probe.status == 0);
+  CHECK_THAT(probe.out, Catch::Contains("\"crs_epsg\": 25832"));
+  CHECK_THAT(probe.out,
+             Catch::Contains("\"sample_type\": \"float32\"") && Catch::Contains("\"nodata_count\": 1"));
+  CHECK_THAT(squeezed(round_trip(dir, centre, "centre", "float32", "0.25")),
+             Catch::Contains("\"geotransform\":[995,10,0,2025,0,-10]"));
 }
 
 TEST_CASE("georeference: an SRTM tile stays EPSG 4326 with its north-west corner",

@@ -34,7 +34,7 @@ const char* sample_type_name(SampleType t);
 // case); nullopt if unknown.
 std::optional<SampleType> sample_type_from_name(const std::string& name);
 
-enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage };
+enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage, EsriAscii };
 const char* file_format_name(FileFormat f);  // e.g. "srtm-hgt", "raw"; static storage
 
 // Everything known about a grid except its samples.
