@@ -167,6 +167,9 @@ int run(int argc, char** argv) {
     map.info.spacing_y = info.spacing_y * std::ldexp(1.0, file->level_count() - 1 - l);
     map.info.horizontal_units = info.horizontal_units;
     if (gt) map.info.origin_x = gt->x0 + 0.5 * gt->dx, map.info.origin_y = gt->y0 - 0.5 * gt->dy;
+    if (info.georeference && info.georeference->crs_epsg)
+      map.info.crs_epsg = int(info.georeference->crs_epsg);
+    if (info.georeference) map.info.crs_text = info.georeference->crs_text;
     const bool png = ends_with(output, ".png");
     map.info.sample_type = png || int16 ? terrain::SampleType::Int16 : terrain::SampleType::Float32;
     if (png) map.info.sample_type = terrain::SampleType::UInt16;

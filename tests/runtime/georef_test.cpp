@@ -98,6 +98,13 @@ TEST_CASE("georeference: a UTM GeoTIFF keeps EPSG 32610 and its geotransform thr
   const auto text = run_tool(dir, {"terrain-info", {dir.file("utm.pyr")}});
   CHECK_THAT(text.out, Catch::Contains("crs:          EPSG:32610"));
   CHECK_THAT(text.out, Catch::Contains("geotransform: 500000, 30, 0, 5200000, 0, -30"));
+  // The raw output's sidecar keeps origin and CRS too.
+  const std::string raw = dir.file("utm_out.raw");
+  REQUIRE(run_tool(dir, {"pyramid-extract", {dir.file("utm.pyr"), "-o", raw, "-q"}}).status == 0);
+  const auto raw_info = run_tool(dir, {"terrain-info", {raw, "--json"}});
+  REQUIRE(raw_info.status == 0);
+  CHECK_THAT(raw_info.out, Catch::Contains("\"crs_epsg\": 32610"));
+  CHECK_THAT(squeezed(raw_info.out), Catch::Contains(kUtmGeotransform));
 }
 
 TEST_CASE("georeference: ESRI .bil + .hdr + .prj and ASCII grid + .prj keep their WKT and origin",
@@ -197,6 +204,12 @@ TEST_CASE("georeference: bad georeferences are exit 8 naming the file and the fi
   gdal(dir, "gdal_translate -q -a_srs EPSG:32610 -a_ullr 500000 5200000 500000 5199100 " + shell_quote(base) +
                 " " + shell_quote(zero));
   refused(zero, "ModelPixelScale");
+  const std::string gcps = dir.file("gcps.tif");  // three tiepoints: ground control points
+  gdal(dir,
+       "gdal_translate -q -a_srs EPSG:32610 -gcp 0 0 500000 5200000 -gcp 40 0 501200 5200000 -gcp 0 30 "
+       "500000 5199100 " +
+           shell_quote(base) + " " + shell_quote(gcps));
+  refused(gcps, "ground control points");
   // An ESRI grid whose .prj is larger than the CRS text limit (8192 bytes).
   const std::string bil = dir.file("w.bil");
   gdal(dir, "gdal_translate -q -of EHdr " + shell_quote(base) + " " + shell_quote(bil));
