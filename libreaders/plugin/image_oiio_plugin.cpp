@@ -11,6 +11,7 @@
 #include <exception>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "readers/internal/image_plugin_abi.h"
 
@@ -144,7 +145,24 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_read_rows(terrain_image_reader* reade
     // OpenImageIO can return success for strips libtiff failed to decode (a truncated file, a strip
     // past its end, an unknown compression) and keep only an error message: those rows would read
     // as zeros. Any error it recorded is a failed read.
-    const bool read = in.read_scanlines(0, 0, y0, y0 + (row_end - row_begin), 0, 0, channels, type, pixels);
+    const OIIO::ImageSpec& spec = in.spec();
+    bool read = false;
+    if (spec.tile_width > 0) {
+      // Tiled files: OpenImageIO 2.4's read_scanlines divides by a RowsPerStrip they lack (SIGFPE).
+      // Whole tile rows are read instead, full width, and the rows asked for copied out.
+      const int th = std::max(1, spec.tile_height);
+      const int tb = row_begin - row_begin % th;
+      const int te = std::min(spec.height, (row_end + th - 1) / th * th);
+      const size_t row_bytes = size_t(spec.width) * size_t(channels) * type.size();
+      std::vector<unsigned char> tiles(size_t(te - tb) * row_bytes);
+      read = in.read_tiles(0, 0, spec.x, spec.x + spec.width, spec.y + tb, spec.y + te, spec.z,
+                           spec.z + std::max(1, spec.depth), 0, channels, type, tiles.data());
+      if (read)
+        std::memcpy(pixels, tiles.data() + size_t(row_begin - tb) * row_bytes,
+                    size_t(row_end - row_begin) * row_bytes);
+    } else {
+      read = in.read_scanlines(0, 0, y0, y0 + (row_end - row_begin), 0, 0, channels, type, pixels);
+    }
     if (!read || in.has_error())
       return report(TERRAIN_IMAGE_READ_FAILED, or_unknown(in.geterror()), message, message_size);
     return TERRAIN_IMAGE_OK;

@@ -160,6 +160,32 @@ TEST_CASE("georeference: an SRTM tile stays EPSG 4326 with its north-west corner
              Catch::Contains("Origin = (-122.000416666666666,47.000416666666666)"));
 }
 
+TEST_CASE("georeference: tiled int16 and float32 GeoTIFFs (nodata tag) stream and round-trip exactly",
+          "[runtime][georef][gdal]") {
+  iotest::TempDir dir;
+  // 1201 rows and columns: the last tile row and column are partial.
+  for (const char* type : {"Int16", "Float32"}) {
+    const std::string tag = std::string("tiled_") + type;
+    const std::string tif = rainier_utm(
+        dir,
+        std::string("-ot ") + type + " -a_nodata -32768 -co TILED=YES -co BLOCKXSIZE=256 -co BLOCKYSIZE=128",
+        tag + ".tif");
+    if (tif.empty()) return;
+    INFO(tif);
+    const auto probe = run_tool(dir, {"terrain-info", {tif, "--json"}});
+    REQUIRE(probe.status == 0);
+    CHECK_THAT(probe.out, Catch::Contains("\"nodata_value\": -32768"));
+    const std::string info = round_trip(dir, tif, tag, "int16", std::string(type) == "Float32" ? "1" : "");
+    CHECK_THAT(squeezed(info), Catch::Contains(kUtmGeotransform));
+    // The same samples as GDAL reads from the input.
+    const std::string a = dir.file(tag + "_in.bil"), b = dir.file(tag + "_out.bil");
+    gdal(dir, "gdal_translate -q -of ENVI -ot Int16 " + shell_quote(tif) + " " + shell_quote(a));
+    gdal(dir, "gdal_translate -q -of ENVI -ot Int16 " + shell_quote(dir.file(tag + "_out.tif")) + " " +
+                  shell_quote(b));
+    CHECK(iotest::read_file(a) == iotest::read_file(b));
+  }
+}
+
 TEST_CASE("georeference: a PixelIsPoint GeoTIFF is shifted half a pixel to its corner",
           "[runtime][georef][gdal]") {
   iotest::TempDir dir;
