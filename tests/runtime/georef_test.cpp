@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "runtime/gdal_test_util.h"
@@ -244,4 +245,21 @@ TEST_CASE("georeference: bad georeferences are exit 8 naming the file and the fi
     prj << "PROJCS[\"" << std::string(9000, 'x') << "\"]";
   }
   refused(bil, "crs_text");
+  // Rotated and south-up geotransforms: GDAL writes them as ModelTransformation (through a VRT
+  // that gives the geotransform).
+  for (const auto& [gt, field] :
+       {std::pair<std::string, std::string>{"500000, 30, 2, 5200000, 2, -30", "rotation"},
+        {"500000, 30, 0, 5190000, 0, 30", "flipped"}}) {
+    const std::string vrt = dir.file("t.vrt"), tif = dir.file(field + ".tif");
+    {
+      std::ofstream v(vrt);
+      v << "<VRTDataset rasterXSize=\"40\" rasterYSize=\"30\"><GeoTransform>" << gt
+        << "</GeoTransform><VRTRasterBand dataType=\"Int16\" band=\"1\"><SimpleSource><SourceFilename>"
+        << base
+        << "</SourceFilename><SourceBand>1</SourceBand></SimpleSource></VRTRasterBand></VRTDataset>\n";
+    }
+    gdal(dir, "gdal_translate -q " + shell_quote(vrt) + " " + shell_quote(tif));
+    refused(tif, "ModelTransformation");
+    refused(tif, field);
+  }
 }
