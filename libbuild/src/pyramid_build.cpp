@@ -324,9 +324,14 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   info.vertical_units = "m";
   info.vertical_scale = mpu;
   info.vertical_offset = stored.offset_metres;
-  if (g.origin_x && g.origin_y)
-    info.georeference = Georeference{*g.origin_x, *g.origin_y,
-                                     g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
+  if (const auto gt = geotransform(g)) {
+    Georeference geo;
+    geo.geotransform = *gt;
+    geo.units = g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units;
+    geo.crs_epsg = g.crs_epsg ? uint32_t(*g.crs_epsg) : 0;
+    geo.crs_text = g.crs_text;
+    info.georeference = std::move(geo);
+  }
   info.quantisation.step_units = co.step;
   info.quantisation.step_metres = co.step * mpu;
   info.quantisation.mode = o.mode;

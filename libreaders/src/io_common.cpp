@@ -3,8 +3,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <system_error>
@@ -30,12 +32,52 @@ std::optional<SampleType> sample_type_from_name(const std::string& name) {
 }
 
 const char* file_format_name(FileFormat f) {
-  static constexpr const char* kNames[] = {"srtm-hgt", "raw",   "esri-bil",
-                                           "esri-flt", "image", "terrain-rgb-image"};
+  static constexpr const char* kNames[] = {"srtm-hgt",          "raw",       "esri-bil", "esri-flt", "image",
+                                           "terrain-rgb-image", "esri-ascii"};
   return enum_name(f, kNames);
 }
 
+std::optional<std::array<double, 6>> geotransform(const GridInfo& info) {
+  if (!info.origin_x || !info.origin_y) return std::nullopt;
+  const double per_unit = info.horizontal_units == "arc-second" ? 1.0 / 3600.0 : 1.0;
+  const double dx = info.spacing_x * per_unit, dy = info.spacing_y * per_unit;
+  return std::array<double, 6>{*info.origin_x - 0.5 * dx, dx, 0.0, *info.origin_y + 0.5 * dy, 0.0, -dy};
+}
+
 namespace io {
+
+std::optional<int> epsg_from_wkt(const std::string& wkt) {
+  // The outermost object's identifier is the last one, followed only by closing brackets.
+  for (const char* tag : {"AUTHORITY[\"EPSG\",", "ID[\"EPSG\","}) {
+    const size_t at = wkt.rfind(tag);
+    if (at == std::string::npos) continue;
+    size_t i = at + std::strlen(tag);
+    if (i < wkt.size() && wkt[i] == '"') ++i;
+    int code = 0;
+    const auto res = std::from_chars(wkt.data() + i, wkt.data() + wkt.size(), code);
+    if (res.ec != std::errc() || code <= 0) continue;
+    size_t j = size_t(res.ptr - wkt.data());
+    if (j < wkt.size() && wkt[j] == '"') ++j;
+    if (j >= wkt.size() || wkt[j] != ']') continue;
+    bool outermost = true;
+    for (size_t k = j + 1; k < wkt.size(); ++k)
+      if (wkt[k] != ']' && !std::isspace(static_cast<unsigned char>(wkt[k]))) outermost = false;
+    if (outermost) return code;
+  }
+  // ESRI WKT (what GDAL writes to .prj files) names instead of identifying: the common names.
+  const bool projected = wkt.find("PROJCS[") != std::string::npos;
+  if (!projected && wkt.rfind("GEOGCS[\"GCS_WGS_1984\"", 0) == 0) return 4326;
+  const std::string utm = "PROJCS[\"WGS_1984_UTM_Zone_";
+  if (wkt.rfind(utm, 0) == 0) {
+    int zone = 0;
+    const char* p = wkt.data() + utm.size();
+    const auto res = std::from_chars(p, wkt.data() + wkt.size(), zone);
+    if (res.ec == std::errc() && zone >= 1 && zone <= 60 && res.ptr + 1 < wkt.data() + wkt.size() &&
+        res.ptr[1] == '"' && (res.ptr[0] == 'N' || res.ptr[0] == 'S'))
+      return (res.ptr[0] == 'N' ? 32600 : 32700) + zone;
+  }
+  return std::nullopt;
+}
 
 void fail(ErrorCode code, const std::string& path, const std::string& problem) {
   throw Error(code, path + ": " + problem);

@@ -260,6 +260,13 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     auto units = obj->find("horizontal_units");
     if (units != obj->end() && units->second.kind == JsonScalar::Kind::String)
       g.horizontal_units = units->second.text;
+    if (auto v = number_member(*obj, "crs_epsg", *sidecar)) {
+      if (!(*v >= 1 && *v <= 999999) || *v != std::floor(*v))
+        fail(ErrorCode::MissingField, *sidecar, "field \"crs_epsg\" must be an integer 1..999999");
+      g.crs_epsg = int(*v);
+    }
+    auto crs = obj->find("crs_text");
+    if (crs != obj->end() && crs->second.kind == JsonScalar::Kind::String) g.crs_text = crs->second.text;
   }
   if (!type) {
     if (ends_with_ci(path, ".r16"))
@@ -380,6 +387,8 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
     js << format_double(*g.nodata);
   if (g.origin_x) js << ",\n  \"origin_x\": " << format_double(*g.origin_x);
   if (g.origin_y) js << ",\n  \"origin_y\": " << format_double(*g.origin_y);
+  if (g.crs_epsg) js << ",\n  \"crs_epsg\": " << *g.crs_epsg;
+  if (!g.crs_text.empty()) js << ",\n  \"crs_text\": " << json_quote(g.crs_text);
   js << "\n}\n";
   std::string text = js.str();
   AtomicOutput side(path + ".json");

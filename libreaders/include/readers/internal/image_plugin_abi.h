@@ -11,7 +11,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define TERRAIN_IMAGE_PLUGIN_ABI_VERSION 1
+#define TERRAIN_IMAGE_PLUGIN_ABI_VERSION 2
 
 #ifdef __cplusplus
 extern "C" {
@@ -61,6 +61,31 @@ int32_t terrain_image_read_rows(terrain_image_reader* reader, int32_t row_begin,
                                 int32_t channels, int32_t pixel, void* pixels, char* message,
                                 size_t message_size);
 void terrain_image_close(terrain_image_reader* reader);
+
+// The GeoTIFF tags of an opened TIFF as stored (version 2), read with libtiff/libgeotiff; the reader
+// (libreaders' io_image.cpp) interprets and validates them. Counts are those of the file, the arrays
+// hold their first values. For a file that is not a TIFF every count and flag is 0.
+#define TERRAIN_IMAGE_CITATION_SIZE 8192
+struct terrain_image_georef {
+  int32_t pixel_scale_count;  // ModelPixelScaleTag (33550) values; pixel_scale holds up to 3
+  double pixel_scale[3];
+  int32_t tiepoint_count;  // ModelTiepointTag (33922) values (6 per tiepoint); tiepoint: the first
+  double tiepoint[6];
+  int32_t transformation_count;  // ModelTransformationTag (34264) values; 16 when present
+  double transformation[16];
+  int32_t has_geokeys;         // GeoKeyDirectoryTag (34735) present
+  int32_t model_type;          // GTModelTypeGeoKey (1 projected, 2 geographic, 3 geocentric); 0 absent
+  int32_t raster_type;         // GTRasterTypeGeoKey (1 PixelIsArea, 2 PixelIsPoint); 0 absent
+  int32_t geographic_type;     // GeographicTypeGeoKey (EPSG code, 32767 user-defined); 0 absent
+  int32_t projected_type;      // ProjectedCSTypeGeoKey (EPSG code, 32767 user-defined); 0 absent
+  int32_t citation_truncated;  // 1 when the citation below did not fit
+  char citation[TERRAIN_IMAGE_CITATION_SIZE];  // PCSCitation, else GeogCitation, else GTCitation;
+                                               // NUL-terminated
+  int32_t has_nodata;                          // GDAL_NODATA (42113) present
+  char nodata[64];                             // its text, NUL-terminated (truncated)
+};
+int32_t terrain_image_read_georef(terrain_image_reader* reader, struct terrain_image_georef* georef,
+                                  char* message, size_t message_size);
 
 // Bit of terrain_image_create's flags: write an empty DateTime (otherwise some writers stamp the
 // current time), so that the output is byte-reproducible.

@@ -42,6 +42,10 @@ std::unique_ptr<BandReader> open_raw_stream(const std::string& path, const RawLa
 std::string read_small_text_file(const std::string& path, size_t limit);
 inline constexpr size_t kSideFileLimit = size_t(1) << 16;
 
+// The ESRI .prj beside a grid (ignored when missing): its WKT becomes crs_text (and crs_epsg where
+// it names one, epsg_from_wkt); a geographic CRS turns spacing (degrees) into arc-seconds.
+void apply_prj(const std::string& prj, GridInfo& g);
+
 // Overrides every format honours: spacing, vertical scale/offset, nodata.
 void apply_common_overrides(GridInfo& info, const ReadOptions& options);
 
@@ -50,7 +54,14 @@ RawLayout probe_hgt_layout(const std::string& path, const ReadOptions& options);
 RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options);
 RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options);
 GridInfo probe_image(const std::string& path, const ReadOptions& options);
+// ESRI ASCII grids (.asc): header keywords, then whitespace-separated values, streamed.
+GridInfo probe_ascii_grid(const std::string& path, const ReadOptions& options);
+std::unique_ptr<BandReader> open_ascii_grid(const std::string& path, const ReadOptions& options);
 std::unique_ptr<BandReader> open_image_reader(const std::string& path, const ReadOptions& options);
+
+// The EPSG code a WKT text names for its outermost CRS: its AUTHORITY["EPSG","n"] / ID["EPSG",n],
+// else the ESRI names GCS_WGS_1984 (4326) and WGS_1984_UTM_Zone_nN/S (326nn/327nn); nullopt otherwise.
+std::optional<int> epsg_from_wkt(const std::string& wkt);
 
 // Shortest decimal text that reads back as exactly the same double (locale independent).
 std::string format_double(double v);
