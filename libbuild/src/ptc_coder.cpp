@@ -39,14 +39,24 @@ PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
 std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
                                               int32_t* reconstructed) {
   const codec::EncodeOptions copts = to_codec(options_);
-  // The bound is ~16 bytes per sample and a band's stream ~0.3: a fresh zero-filled buffer per band
-  // cost 8-14% of the build's CPU in page faults, so each thread keeps one and copies out the bytes.
+  // A fresh zero-filled buffer per band cost 8-14% of the build's CPU in page faults, so each thread
+  // keeps one and copies out the bytes. The bound is ~16 bytes per sample and a band's stream ~0.3:
+  // a buffer of the bound was most of a wide input's memory (a 4194304-column band of 64 rows, 4 GiB
+  // per thread). The buffer starts at kGuessBytesPerSample; a stream that does not fit (noise coded
+  // losslessly) is coded again into the bound, with the same result.
+  constexpr size_t kGuessBytesPerSample = 2;
   thread_local std::vector<uint8_t> buffer;
   const size_t bound = codec::encode_bound(w, h, copts);
-  if (buffer.size() < bound) buffer.resize(bound);
+  const size_t guess = std::min(bound, (size_t(1) << 16) + kGuessBytesPerSample * size_t(w) * size_t(h));
+  if (buffer.size() < guess) buffer.resize(guess);
   size_t written = 0;
-  const codec::Status s = codec::encode(residual, w, w, h, copts, buffer.data(), bound, &written,
-                                        thread_scratch(), reconstructed, w);
+  codec::Status s = codec::encode(residual, w, w, h, copts, buffer.data(), buffer.size(), &written,
+                                  thread_scratch(), reconstructed, w);
+  if (s == codec::Status::BufferTooSmall && buffer.size() < bound) {
+    buffer.resize(bound);
+    s = codec::encode(residual, w, w, h, copts, buffer.data(), buffer.size(), &written, thread_scratch(),
+                      reconstructed, w);
+  }
   if (s != codec::Status::Ok) {
     int64_t largest = 0;
     for (int64_t i = 0; i < w * h; ++i) largest = std::max<int64_t>(largest, std::abs(int64_t(residual[i])));
