@@ -53,13 +53,11 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
       else
         heat_colour(scale_max > 0 ? m / scale_max : 0, p);
     }
-  const std::string tmp = path + ".tmp.png";
   try {
-    write_image8(tmp, int(ow), int(oh), 3, rgb.data());
+    write_image8(path, int(ow), int(oh), 3, rgb.data());  // through a temporary, renamed when whole
   } catch (const Error& e) {
-    throw Error(ErrorCode::WriteFailed, path + ": cannot write the heat-map (" + e.what() + ")");
+    throw Error(ErrorCode::WriteFailed, std::string("cannot write the heat-map: ") + e.what());
   }
-  std::filesystem::rename(tmp, path);
 }
 
 int run(int argc, char** argv) {

@@ -39,15 +39,8 @@ ContainerWriter::LevelRecord& ContainerWriter::LevelRecord::operator=(LevelRecor
 
 ContainerWriter::ContainerWriter(std::string path) : path_(std::move(path)), directory_(directory_of(path_)) {
   check_output_path(path_);
-  const std::string base = path_ + ".tmp." + std::to_string(::getpid());
-  // O_EXCL so two writers in one process aimed at the same target cannot share a temp file.
-  for (int attempt = 0; attempt < 100 && fd_ < 0; ++attempt) {
-    temp_path_ = attempt == 0 ? base : base + "." + std::to_string(attempt);
-    fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (fd_ < 0 && errno != EEXIST) break;
-  }
-  if (fd_ < 0) fail("cannot create");
-  const uint8_t zeros[sb::kSizeV1] = {};  // superblock placeholder, overwritten by finish()
+  fd_ = create_temp_beside(path_, "", &temp_path_);  // exclusive, random name: no two writers share it
+  const uint8_t zeros[sb::kSizeV1] = {};             // superblock placeholder, overwritten by finish()
   try {
     write_bytes(zeros, sizeof zeros);
   } catch (...) {

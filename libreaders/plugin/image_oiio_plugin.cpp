@@ -1,12 +1,16 @@
 // The image plugin (CMake MODULE terrain_image_oiio): image_plugin_abi.h implemented with
 // OpenImageIO. Built apart from libpyramid so that only processes that touch an image file load
 // OpenImageIO and its dependencies.
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <geotiffio.h>
 #include <tiffio.h>
 #include <xtiffio.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <memory>
@@ -22,7 +26,40 @@ struct terrain_image_reader {
   std::string path;
 };
 
+namespace {
+
+// The file an OpenImageIO writer writes through, remembering the first short write: its PNG writer
+// ignores what its writes return, so a full disk (or a file-size limit) left a truncated PNG that
+// was reported as written.
+class CheckedFile final : public OIIO::Filesystem::IOFile {
+ public:
+  explicit CheckedFile(std::FILE* file) : IOFile(file, Write) {}
+  size_t write(const void* buf, size_t size) override { return note(IOFile::write(buf, size), size); }
+  size_t pwrite(const void* buf, size_t size, int64_t offset) override {
+    return note(IOFile::pwrite(buf, size, offset), size);
+  }
+  const std::string& failure() const { return failure_; }
+
+ private:
+  size_t note(size_t done, size_t size) {
+    if (done != size && failure_.empty())
+      failure_ = std::string("short write: ") + (errno ? std::strerror(errno) : "no space");
+    return done;
+  }
+  std::string failure_;
+};
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+
+}  // namespace
+
+// Members in this order so that the output, which may still write while it is destroyed, goes
+// before its proxy and the file under it.
 struct terrain_image_writer {
+  std::unique_ptr<std::FILE, FileCloser> file;  // under proxy, for formats that take one
+  std::unique_ptr<CheckedFile> proxy;
   std::unique_ptr<OIIO::ImageOutput> output;
   OIIO::TypeDesc type;
 };
@@ -103,6 +140,52 @@ int32_t guarded(char* message, size_t message_size, int32_t failure_status, Body
   }
 }
 
+// The PNG header's interlace method (IHDR byte 12, at file offset 28): OpenImageIO decodes an
+// interlaced (Adam7) PNG whole on its first row read, and its spec does not say so.
+bool png_is_interlaced(const char* path) {
+  std::FILE* f = std::fopen(path, "rb");
+  if (!f) return false;
+  unsigned char head[29] = {};
+  const bool whole = std::fread(head, 1, sizeof head, f) == sizeof head;
+  std::fclose(f);
+  return whole && std::memcmp(head + 12, "IHDR", 4) == 0 && head[28] != 0;
+}
+
+// Rows OpenEXR decodes together in a scanline file, by compression (OpenEXR's own table).
+int64_t exr_chunk_rows(const std::string& compression) {
+  if (compression == "zip" || compression == "pxr24") return 16;
+  if (compression == "piz" || compression == "b44" || compression == "b44a" || compression == "dwaa")
+    return 32;
+  if (compression == "dwab") return 256;
+  return 1;  // none, rle, zips
+}
+
+// What decoding one row costs OpenImageIO at least, from the header alone (no pixel is read): the
+// native bytes of the rows it decodes together. Saturates at INT64_MAX (a forged header may claim
+// 2^31 x 2^31 pixels of 65535 channels).
+int64_t decode_unit_bytes(const char* path, OIIO::ImageInput& input) {
+  const OIIO::ImageSpec& spec = input.spec();
+  const std::string format = input.format_name();
+  const int64_t width = std::max(1, spec.width), height = std::max(1, spec.height);
+  int64_t rows = 1, row_width = width;
+  if (spec.tile_width > 0) {
+    rows = int64_t(std::max(1, spec.tile_height)) * std::max(1, spec.tile_depth);
+    row_width = (width + spec.tile_width - 1) / spec.tile_width * int64_t(spec.tile_width);
+  } else if (format == "tiff") {
+    // Absent, the tag means one strip for the whole image (libtiff's default of 2^32-1, which
+    // reads back as -1 through an int).
+    rows = spec.get_int_attribute("tiff:RowsPerStrip", 0);
+    if (rows <= 0 || rows > height) rows = height;
+  } else if (format == "png") {
+    if (png_is_interlaced(path)) rows = height;
+  } else if (format == "openexr") {
+    rows = std::min(height, exr_chunk_rows(spec.get_string_attribute("compression")));
+  }
+  const unsigned __int128 bytes =
+      (unsigned __int128)rows * (unsigned __int128)row_width * (unsigned __int128)spec.pixel_bytes(true);
+  return bytes > (unsigned __int128)INT64_MAX ? INT64_MAX : int64_t(bytes);
+}
+
 }  // namespace
 
 TERRAIN_IMAGE_EXPORT int32_t terrain_image_abi_version(void) { return TERRAIN_IMAGE_PLUGIN_ABI_VERSION; }
@@ -120,6 +203,8 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_open(const char* path, terrain_image_
     config.attribute("oiio:UnassociatedAlpha", 1);
     auto input = OIIO::ImageInput::open(path, &config);
     if (!input) return report(TERRAIN_IMAGE_OPEN_FAILED, or_unknown(OIIO::geterror()), message, message_size);
+    if (input->has_error())
+      return report(TERRAIN_IMAGE_OPEN_FAILED, or_unknown(input->geterror()), message, message_size);
     const OIIO::ImageSpec& spec = input->spec();
     *header = terrain_image_header{};
     header->width = spec.width;
@@ -128,6 +213,7 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_open(const char* path, terrain_image_
     header->channels = spec.nchannels;
     header->pixel = pixel_for_type(spec.format);
     std::strncpy(header->pixel_name, spec.format.c_str(), sizeof header->pixel_name - 1);
+    header->decode_unit_bytes = decode_unit_bytes(path, *input);
     *reader = new terrain_image_reader{std::move(input), path};
     return TERRAIN_IMAGE_OK;
   });
@@ -279,9 +365,22 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_create(const char* path, int32_t widt
     if (compression) spec.attribute("compression", compression);
     // OIIO stamps the current time when DateTime is absent; a fixed value keeps output byte-reproducible.
     if (flags & TERRAIN_IMAGE_NO_TIMESTAMP) spec.attribute("DateTime", "");
-    if (!output->open(path, spec))
-      return report(TERRAIN_IMAGE_CREATE_FAILED, output->geterror(), message, message_size);
-    *writer = new terrain_image_writer{std::move(output), type};
+    auto w = std::make_unique<terrain_image_writer>();
+    w->output = std::move(output);
+    w->type = type;
+    OIIO::ImageOutput* out = w->output.get();
+    if (out->supports("ioproxy")) {
+      w->file.reset(std::fopen(path, "wb"));
+      if (!w->file)
+        return report(TERRAIN_IMAGE_CREATE_FAILED, std::string("cannot open: ") + std::strerror(errno),
+                      message, message_size);
+      w->proxy = std::make_unique<CheckedFile>(w->file.get());
+      if (!out->set_ioproxy(w->proxy.get()))
+        return report(TERRAIN_IMAGE_CREATE_FAILED, or_unknown(out->geterror()), message, message_size);
+    }
+    if (!out->open(path, spec))
+      return report(TERRAIN_IMAGE_CREATE_FAILED, or_unknown(out->geterror()), message, message_size);
+    *writer = w.release();
     return TERRAIN_IMAGE_OK;
   });
 }
@@ -302,7 +401,19 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_finish(terrain_image_writer* writer, 
   return guarded(message, message_size, TERRAIN_IMAGE_WRITE_FAILED, [&]() -> int32_t {
     if (!writer) return report(TERRAIN_IMAGE_BAD_ARGUMENT, "null writer", message, message_size);
     if (!writer->output->close())
-      return report(TERRAIN_IMAGE_WRITE_FAILED, writer->output->geterror(), message, message_size);
+      return report(TERRAIN_IMAGE_WRITE_FAILED, or_unknown(writer->output->geterror()), message,
+                    message_size);
+    if (writer->proxy && !writer->proxy->failure().empty())
+      return report(TERRAIN_IMAGE_WRITE_FAILED, writer->proxy->failure(), message, message_size);
+    // stdio may still hold the last bytes: only a checked fflush and fclose show they reached the file.
+    if (writer->file) {
+      std::FILE* f = writer->file.release();
+      const bool flushed = std::fflush(f) == 0 && !std::ferror(f);
+      const int err = errno;
+      if (std::fclose(f) != 0 || !flushed)
+        return report(TERRAIN_IMAGE_WRITE_FAILED, std::string("cannot write: ") + std::strerror(err), message,
+                      message_size);
+    }
     return TERRAIN_IMAGE_OK;
   });
 }

@@ -144,6 +144,7 @@ uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
   if (g.width <= 0 || g.height <= 0 || g.width > kMaxSide || g.height > kMaxSide)
     fail(ErrorCode::DimensionMismatch, path,
          "invalid dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height));
+  check_row_width(path, g.width);
   const unsigned __int128 bytes = (unsigned __int128)g.width * (unsigned __int128)g.height *
                                   (unsigned __int128)stored_bytes(layout.stored);
   if (bytes > (unsigned __int128)(uint64_t(1) << 56))  // 64 PiB: beyond any grid, and no 64-bit wrap
@@ -151,6 +152,13 @@ uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
          "dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height) +
              " need more than 2^56 bytes");
   return uint64_t(bytes);
+}
+
+void check_row_width(const std::string& path, int64_t width) {
+  if (width > kMaxRowSamples)
+    fail(ErrorCode::DimensionMismatch, path,
+         "rows of " + std::to_string(width) + " samples are wider than the limit of " +
+             std::to_string(kMaxRowSamples) + " (2^20; docs/io.md, \"Limits\")");
 }
 
 void apply_common_overrides(GridInfo& info, const ReadOptions& o) {
@@ -185,14 +193,9 @@ std::string read_small_text_file(const std::string& path, size_t limit) {
 
 AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
   check_output_path(target_);
-  static std::atomic<unsigned> counter{0};
-  std::filesystem::path p(target_);
-  // Keep the extension so OpenImageIO chooses the writer from the temporary name too.
-  std::string ext = p.extension().string();
-  std::string stem = p.stem().string();
-  std::string temp_name = "." + stem + ".partial-" + std::to_string(::getpid()) + "-" +
-                          std::to_string(counter.fetch_add(1)) + ext;
-  temp_ = (p.parent_path() / temp_name).string();
+  // Keep the extension last so that OpenImageIO chooses the writer from the temporary name too.
+  const std::string ext = std::filesystem::path(target_).extension().string();
+  ::close(create_temp_beside(target_, ext, &temp_));  // created exclusively; writers reopen it by name
 }
 
 AtomicOutput::~AtomicOutput() {

@@ -142,6 +142,14 @@ ImagePlan plan_image(const std::string& path, const OpenedImage& image, const Re
   g.format = FileFormat::Image;
   if (header.width <= 0 || header.height <= 0 || header.depth > 1)
     fail(ErrorCode::DimensionMismatch, path, "image has no usable 2-D size");
+  check_row_width(path, header.width);
+  if (header.decode_unit_bytes > kMaxImageDecodeBytes)
+    fail(ErrorCode::DimensionMismatch, path,
+         "decoding it needs " + std::to_string(header.decode_unit_bytes) +
+             " bytes at once (one strip or row of tiles, or the whole of an interlaced PNG); the limit "
+             "is " +
+             std::to_string(kMaxImageDecodeBytes) +
+             " (docs/io.md, \"Limits\"): store it in smaller strips or tiles, or not interlaced");
   const int32_t fmt = header.pixel;
   const std::string fmt_name = header.pixel_name;
   const bool rgb8 = fmt == TERRAIN_PIXEL_UINT8 && (header.channels == 3 || header.channels == 4);
@@ -211,10 +219,14 @@ class ImageBandReader final : public BandReader {
     int64_t n = std::min(rows, g.height - rows_read_);
     if (n <= 0) return 0;
     const size_t row_bytes = plan_.read_bytes * size_t(plan_.channels) * size_t(g.width);
-    if (rows_read_ < buffer_y0_ || rows_read_ + n > buffer_y1_) {
+    if (rows_read_ < buffer_y0_ || rows_read_ >= buffer_y1_) {
       // Read ahead: a plugin call per row costs the image library a buffer allocation (and under
       // ASan a page-faulted mmap) each time; callers that read one row at a time were 35 s per DEM.
-      const int64_t ahead = std::max<int64_t>(n, int64_t(std::max<size_t>(1, kReadAheadBytes / row_bytes)));
+      // At most kReadAheadRows rows, whatever the caller asks for (fewer rows come back then): the
+      // buffer stays small, and so does OpenImageIO's log of an error per row it fails to decode,
+      // which aborts the process past 16 MB within one call.
+      const int64_t ahead =
+          std::min(kReadAheadRows, int64_t(std::max<size_t>(1, kReadAheadBytes / row_bytes)));
       const int64_t m = std::min(ahead, g.height - rows_read_);
       if (buffer_.size() < size_t(m) * row_bytes) buffer_.resize(size_t(m) * row_bytes);
       if (image_.plugin->read_rows(image_.reader.get(), int32_t(rows_read_), int32_t(rows_read_ + m),
@@ -226,6 +238,7 @@ class ImageBandReader final : public BandReader {
       buffer_y0_ = rows_read_;
       buffer_y1_ = rows_read_ + m;
     }
+    n = std::min(n, buffer_y1_ - rows_read_);
     const int64_t count = n * g.width;
     const bool has_nodata = g.nodata.has_value();
     const double nodata = has_nodata ? *g.nodata : 0.0;
@@ -283,6 +296,7 @@ class ImageBandReader final : public BandReader {
   OpenedImage image_;
   ImagePlan plan_;
   static constexpr size_t kReadAheadBytes = size_t(1) << 20;
+  static constexpr int64_t kReadAheadRows = 1024;
   std::vector<uint8_t> buffer_;  // rows [buffer_y0_, buffer_y1_) as the plugin delivered them
   int64_t buffer_y0_ = 0, buffer_y1_ = 0;
   Message message_{};
@@ -416,10 +430,15 @@ void write_exr(const std::string& path, const Heightmap& map) {
 void write_image8(const std::string& path, int width, int height, int channels, const uint8_t* pixels) {
   if (width < 1 || height < 1 || channels < 1 || channels > 4 || !pixels)
     io::fail(ErrorCode::WriteFailed, path, "no pixels, or not 1 to 4 channels");
-  io::PluginImageWriter out(io::image_plugin(ErrorCode::WriteFailed, path));
-  if (out.create(path, width, height, channels, TERRAIN_PIXEL_UINT8, nullptr, 0) != TERRAIN_IMAGE_OK ||
-      out.write_rows(0, height, pixels) != TERRAIN_IMAGE_OK || out.finish() != TERRAIN_IMAGE_OK)
-    io::fail(ErrorCode::WriteFailed, path, out.message());
+  io::AtomicOutput target(path);  // a failed write leaves no partial picture under the final name
+  {
+    io::PluginImageWriter out(io::image_plugin(ErrorCode::WriteFailed, path));
+    if (out.create(target.temp_path(), width, height, channels, TERRAIN_PIXEL_UINT8, nullptr, 0) !=
+            TERRAIN_IMAGE_OK ||
+        out.write_rows(0, height, pixels) != TERRAIN_IMAGE_OK || out.finish() != TERRAIN_IMAGE_OK)
+      io::fail(ErrorCode::WriteFailed, path, out.message());
+  }
+  target.commit();
 }
 
 }  // namespace terrain

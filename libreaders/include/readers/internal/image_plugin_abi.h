@@ -11,7 +11,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define TERRAIN_IMAGE_PLUGIN_ABI_VERSION 2
+#define TERRAIN_IMAGE_PLUGIN_ABI_VERSION 3
 
 #ifdef __cplusplus
 extern "C" {
@@ -45,6 +45,9 @@ struct terrain_image_header {
   int32_t width, height, depth, channels;
   int32_t pixel;        // enum terrain_image_pixel of the stored samples
   char pixel_name[32];  // OpenImageIO's name of the stored type ("uint8", "half", ...), for messages
+  // Bytes OpenImageIO must hold at once to decode any one row: a strip or a row of tiles as the file
+  // groups them, the whole image for an interlaced PNG. From the header, before any allocation.
+  int64_t decode_unit_bytes;
 };
 
 typedef struct terrain_image_reader terrain_image_reader;
@@ -52,7 +55,8 @@ typedef struct terrain_image_writer terrain_image_writer;
 
 int32_t terrain_image_abi_version(void);
 
-// Opens `path` (RGB kept as stored: alpha is not premultiplied) and fills `header`.
+// Opens `path` (RGB kept as stored: alpha is not premultiplied) and fills `header`. An error that
+// OpenImageIO records while opening is a failure even when it returns an input.
 int32_t terrain_image_open(const char* path, terrain_image_reader** reader,
                            struct terrain_image_header* header, char* message, size_t message_size);
 // Decodes rows [row_begin, row_end) (0 = first row), `channels` channels from the first, converted
