@@ -151,6 +151,56 @@ bool png_is_interlaced(const char* path) {
   return whole && std::memcmp(head + 12, "IHDR", 4) == 0 && head[28] != 0;
 }
 
+// An OpenEXR header is a list of attributes (name, type, int32 size, value) that OpenEXR reads by
+// allocating each declared size first: a 64-byte file declaring a 1.7 GB string took 2 GB before
+// failing. Every size must fit in the bytes that follow it, checked before OpenEXR sees the file.
+// Empty when the file is not EXR or its headers are consistent; else what is wrong.
+std::string exr_header_problem(const char* path) {
+  std::FILE* f = std::fopen(path, "rb");
+  if (!f) return {};
+  std::vector<uint8_t> data;
+  uint8_t buffer[65536];
+  size_t got = 0;
+  // Headers are small; 16 MiB of them is beyond any real file (the checks below use the file size).
+  while ((got = std::fread(buffer, 1, sizeof buffer, f)) > 0 && data.size() < (size_t(16) << 20))
+    data.insert(data.end(), buffer, buffer + got);
+  std::fseek(f, 0, SEEK_END);
+  const long file_size = std::ftell(f);
+  std::fclose(f);
+  static const uint8_t kMagic[4] = {0x76, 0x2f, 0x31, 0x01};
+  if (data.size() < 8 || std::memcmp(data.data(), kMagic, 4) != 0) return {};
+  const bool multipart = (data[5] & 0x10) != 0;  // version field bit 12
+  size_t p = 8;
+  const auto c_string = [&](std::string& out) {
+    const size_t start = p;
+    while (p < data.size() && data[p] != 0 && p - start < 256) ++p;
+    if (p >= data.size() || data[p] != 0) return false;
+    out.assign(reinterpret_cast<const char*>(data.data() + start), p - start);
+    ++p;
+    return true;
+  };
+  for (int header = 0; header < 1024; ++header) {
+    for (;;) {
+      std::string name, type;
+      if (!c_string(name)) return "EXR header ends inside an attribute name";
+      if (name.empty()) break;  // end of this header
+      if (!c_string(type)) return "EXR attribute " + name + ": no type";
+      if (p + 4 > data.size()) return "EXR attribute " + name + ": no size";
+      const int32_t size = int32_t(uint32_t(data[p]) | uint32_t(data[p + 1]) << 8 |
+                                   uint32_t(data[p + 2]) << 16 | uint32_t(data[p + 3]) << 24);
+      p += 4;
+      if (size < 0 || int64_t(size) > int64_t(file_size) - int64_t(p))
+        return "EXR attribute " + name + " declares " + std::to_string(size) +
+               " bytes, more than the file holds";
+      if (p + size_t(size) > data.size()) return {};  // beyond what was read: OpenEXR checks the rest
+      p += size_t(size);
+    }
+    // A multi-part file ends its list of headers with an empty one.
+    if (!multipart || p >= data.size() || data[p] == 0) return {};
+  }
+  return {};
+}
+
 // Rows OpenEXR decodes together in a scanline file, by compression (OpenEXR's own table).
 int64_t exr_chunk_rows(const std::string& compression) {
   if (compression == "zip" || compression == "pxr24") return 16;
@@ -201,6 +251,8 @@ TERRAIN_IMAGE_EXPORT int32_t terrain_image_open(const char* path, terrain_image_
     // Keep RGB exactly as stored: by default OIIO premultiplies by alpha, which would corrupt Terrain-RGB
     // codes.
     config.attribute("oiio:UnassociatedAlpha", 1);
+    const std::string exr_problem = exr_header_problem(path);
+    if (!exr_problem.empty()) return report(TERRAIN_IMAGE_OPEN_FAILED, exr_problem, message, message_size);
     auto input = OIIO::ImageInput::open(path, &config);
     if (!input) return report(TERRAIN_IMAGE_OPEN_FAILED, or_unknown(OIIO::geterror()), message, message_size);
     if (input->has_error())

@@ -8,6 +8,7 @@
 
 #include <array>
 #include <catch2/catch.hpp>
+#include <cstring>
 #include <filesystem>
 #include <set>
 
@@ -191,6 +192,22 @@ TEST_CASE("tiny images claiming huge sizes are refused from the header, in bound
   CHECK(run_measured(dir, "terrain-info", {dir.file("wide.tif")}).err.find("2^20") != std::string::npos);
   CHECK(run_measured(dir, "terrain-info", {dir.file("huge.png")}).err.find("interlaced") !=
         std::string::npos);
+}
+
+// fuzz_read_image found it: OpenEXR allocates every header attribute's declared size before reading
+// it, so 60 bytes declaring a 1.7 GB string took 2 GB. The plugin checks the sizes first.
+TEST_CASE("an EXR attribute larger than its file is refused before OpenEXR allocates it", "[io][hostile]") {
+  TempDir dir;
+  std::vector<uint8_t> exr = {0x76, 0x2f, 0x31, 0x01, 0x02, 0x00, 0x00, 0x00};
+  for (const char* text : {"capDate", "string"}) exr.insert(exr.end(), text, text + std::strlen(text) + 1);
+  for (uint8_t b : {0x46, 0x72, 0x65, 0x65}) exr.push_back(b);  // 0x65657246 bytes
+  for (int i = 0; i < 24; ++i) exr.push_back(uint8_t(i));
+  iotest::write_file(dir.file("attr.exr"), exr);
+  const Measured r = run_measured(dir, "terrain-info", {dir.file("attr.exr")});
+  INFO(r.err << " peak " << r.peak_mib << " MiB");
+  CHECK(r.status == 10);
+  CHECK(r.err.find("capDate") != std::string::npos);
+  CHECK(r.peak_mib < 200);
 }
 
 TEST_CASE("interlaced and plain PNGs read back exactly within the decode limit", "[io][hostile]") {
