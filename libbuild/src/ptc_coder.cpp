@@ -3,8 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <memory>
 #include <cstdlib>
+#include <memory>
 #include <stdexcept>
 #include <string>
 

@@ -36,20 +36,20 @@ void DamageLog::poll(const RegionDecoder& decoder) {
   }
 }
 
+RenderOptions render_options(const ViewOptions& o) {
+  RenderOptions r;
+  r.transitions = !o.no_transitions;
+  r.culling = !o.no_culling;
+  r.shading = o.shading;
+  return r;
+}
+
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
   const double k = std::clamp(std::ceil(p * double(v.size())) - 1, 0.0, double(v.size() - 1));
   return v[size_t(k)];
 }
-
-namespace {
-
-// One keyframe: position in metres (x east along columns, y along rows), height above the ground,
-// heading and pitch in degrees.
-struct Key {
-  double frame, x, y, above, yaw_deg, pitch_deg;
-};
 
 std::vector<Key> read_path(const std::string& path) {
   // A camera path is a small text file: anything else (a FIFO, /dev/zero) is refused before reading.
@@ -106,6 +106,7 @@ Key interpolate(const std::vector<Key>& keys, double frame) {
   if (frame >= keys.back().frame) return keys.back();
   size_t i = 1;
   while (keys[i].frame < frame) ++i;
+  if (keys[i].frame == frame) return keys[i];  // exactly the keyframe (a recorded path replays exactly)
   const Key &a = keys[i - 1], &b = keys[i];
   const double t = (frame - a.frame) / (b.frame - a.frame);
   auto mix = [t](double u, double v) { return u + (v - u) * t; };
@@ -116,6 +117,30 @@ Key interpolate(const std::vector<Key>& keys, double frame) {
              mix(a.yaw_deg, b.yaw_deg),
              mix(a.pitch_deg, b.pitch_deg)};
 }
+
+float ground_height(RegionDecoderSource& source, double x, double y) {
+  const int finest_level = source.level_count() - 1;
+  const double spacing = source.spacing_m();
+  const GridSize fs = source.level_size(finest_level);
+  const int64_t gx = std::clamp<int64_t>(int64_t(std::llround(x / spacing)), 0, fs.width - 1);
+  const int64_t gy = std::clamp<int64_t>(int64_t(std::llround(y / spacing)), 0, fs.height - 1);
+  float ground = 0;
+  source.fill(finest_level, Rect{gx, gy, 1, 1}, &ground, 1);
+  return ground;
+}
+
+Camera camera_at(RegionDecoderSource& source, const Key& k, double fov_deg) {
+  Camera cam;
+  cam.position[0] = k.x;
+  cam.position[1] = k.y;
+  cam.position[2] = double(ground_height(source, k.x, k.y)) + k.above;
+  cam.yaw = k.yaw_deg * M_PI / 180.0;
+  cam.pitch = k.pitch_deg * M_PI / 180.0;
+  cam.fov_y_deg = fov_deg;
+  return cam;
+}
+
+namespace {
 
 // CPU seconds of the whole process (all threads, llvmpipe's included): on a shared machine a steadier
 // measure of the work per frame than wall time.
@@ -239,7 +264,6 @@ int run_flight(const Flight& flight) {
   const double spacing = flight.spacing;
   RegionDecoderSource& source = flight.source;
   Clipmap clipmap(flight.heights, copt);
-  const int finest_level = source.level_count() - 1;
   DamageLog damage;
 
   // The reference flight: same clipmap options over another pyramid or the original input.
@@ -281,28 +305,15 @@ int run_flight(const Flight& flight) {
     std::cerr << "clipmap-view: " << gl.renderer_name() << " (EGL " << gl.platform() << "), n=" << copt.n
               << ", " << clipmap.level_count() << " levels, " << o.width << "x" << o.height << ", spacing "
               << spacing << " m\n";
-  RenderOptions ropt;
-  ropt.transitions = !o.no_transitions;
-  ropt.culling = !o.no_culling;
+  const RenderOptions ropt = render_options(o);
   std::vector<uint8_t> pixels;
   FlightLog log;
-  float ground_scratch = 0;
   std::vector<std::string> written;
   const double cpu0 = cpu_seconds();
   for (int f = 0; f < o.frames; ++f) {
     const Key k = interpolate(keys, double(f));
     // Ground under the camera from the finest level (one sample, decoded through the tile cache).
-    const GridSize fs = source.level_size(finest_level);
-    const int64_t gx = std::clamp<int64_t>(int64_t(std::llround(k.x / spacing)), 0, fs.width - 1);
-    const int64_t gy = std::clamp<int64_t>(int64_t(std::llround(k.y / spacing)), 0, fs.height - 1);
-    source.fill(finest_level, Rect{gx, gy, 1, 1}, &ground_scratch, 1);
-    Camera cam;
-    cam.position[0] = k.x;
-    cam.position[1] = k.y;
-    cam.position[2] = double(ground_scratch) + k.above;
-    cam.yaw = k.yaw_deg * M_PI / 180.0;
-    cam.pitch = k.pitch_deg * M_PI / 180.0;
-    cam.fov_y_deg = o.fov;
+    const Camera cam = camera_at(source, k, o.fov);
     const RegionStats before = flight.decoder->stats();
     const auto t0 = Clock::now();
     const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
