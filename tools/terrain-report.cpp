@@ -86,7 +86,7 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
 
 // Per-level error plot: rms, 99.9th percentile and max |error| (metres, log axis) against the level.
 void write_plot(const std::string& path, const std::vector<ErrorStats>& per_level, const std::string& title) {
-  const int W = 720, H = 480, left = 78, right = 20, top = 36, bottom = 58;
+  const int W = 760, H = 480, left = 78, right = 110, top = 36, bottom = 58;
   cli::Canvas c(W, H);
   const cli::Rgba ink{0, 0, 0, 255}, grid{215, 215, 215, 255};
   const int levels = int(per_level.size());
@@ -135,8 +135,8 @@ void write_plot(const std::string& path, const std::vector<ErrorStats>& per_leve
       if (l > 0) c.line(px(l - 1), py(per_level[size_t(l - 1)].*s.field), px(l), py(v), s.colour, 2);
       c.fill_rect(int(px(l)) - 3, int(py(v)) - 3, 7, 7, s.colour);
     }
-    c.fill_rect(W - right - 110, legend_y + 3, 20, 3, s.colour);
-    c.text(W - right - 84, legend_y, s.name, ink, 2);
+    c.fill_rect(W - right + 12, legend_y + 5, 20, 3, s.colour);  // the legend, right of the plot
+    c.text(W - right + 38, legend_y, s.name, ink, 2);
     legend_y += 20;
   }
   const std::string tmp = path + ".tmp.png";

@@ -11,38 +11,13 @@
 #include <sstream>
 
 #include "io/io_test_util.h"
-#include "readers/internal/image_plugin.h"
+#include "png_test_util.h"
 #include "readers/terrain_generator.h"
 #include "shared_data.h"
 
 using namespace terrain;
 
 namespace {
-
-// RGBA8 pixels of a PNG through the project's image plugin (OpenImageIO).
-std::vector<uint8_t> read_rgba(const std::string& path, int& width, int& height) {
-  const io::ImagePlugin& plugin = io::image_plugin(ErrorCode::NotFound, path);
-  terrain_image_reader* raw = nullptr;
-  terrain_image_header header{};
-  char message[io::kImageMessageSize] = {};
-  REQUIRE(plugin.open(path.c_str(), &raw, &header, message, sizeof message) == 0);
-  io::ImageReaderHandle reader(raw, io::ImageReaderCloser{plugin.close});
-  width = header.width, height = header.height;
-  std::vector<uint8_t> pixels(size_t(width) * size_t(height) * 4);
-  REQUIRE(plugin.read_rows(reader.get(), 0, height, 4, TERRAIN_PIXEL_UINT8, pixels.data(), message,
-                           sizeof message) == 0);
-  return pixels;
-}
-
-double psnr_rgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
-  double sq = 0;
-  size_t count = 0;
-  for (size_t i = 0; i < a.size(); i += 4)
-    for (size_t c = 0; c < 3; ++c, ++count)
-      sq += (double(a[i + c]) - b[i + c]) * (double(a[i + c]) - b[i + c]);
-  if (sq == 0) return 99;
-  return 10 * std::log10(255.0 * 255.0 / (sq / double(count)));
-}
 
 bool have_program(const std::string& name) {
   return std::system(("command -v " + name + " >/dev/null 2>&1").c_str()) == 0;
@@ -111,18 +86,19 @@ TEST_CASE("render: clipmap-view --window under Xvfb matches the headless render 
   char name[32];
   std::snprintf(name, sizeof name, "/frame_%05d.png", frames - 1);
   int w1 = 0, h1 = 0, w2 = 0, h2 = 0;
-  const std::vector<uint8_t> window_px = read_rgba(shot, w1, h1), headless_px = read_rgba(out + name, w2, h2);
+  const std::vector<uint8_t> window_px = pngtest::read_rgba(shot, w1, h1),
+                             headless_px = pngtest::read_rgba(out + name, w2, h2);
   REQUIRE(w1 == 320);
   REQUIRE(h1 == 240);
   REQUIRE(w2 == w1);
   REQUIRE(h2 == h1);
-  const double psnr = psnr_rgb(window_px, headless_px);
+  const double psnr = pngtest::psnr_rgb(window_px, headless_px);
   INFO("PSNR window vs headless " << psnr << " dB");
   CHECK(psnr >= 40);
   // The flight moved: the first headless frame differs from the last.
   int w0 = 0, h0 = 0;
-  const std::vector<uint8_t> first = read_rgba(out + "/frame_00000.png", w0, h0);
-  CHECK(psnr_rgb(first, headless_px) < 30);
+  const std::vector<uint8_t> first = pngtest::read_rgba(out + "/frame_00000.png", w0, h0);
+  CHECK(pngtest::psnr_rgb(first, headless_px) < 30);
 
   // Script errors are usage-level input errors (8), before any window opens.
   iotest::write_file(script, std::string("0.0 key NOPE down\n"));

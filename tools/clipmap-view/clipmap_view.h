@@ -56,7 +56,7 @@ struct ViewOptions {
   // --window: a desktop window (GLFW) instead of the headless flight; --script drives it with timed
   // events, --screenshot writes its last frame, --record-path its camera per frame as keyframes.
   bool window = false;
-  std::string script, screenshot, record_path;
+  std::string script, screenshot, screenshot_window, record_path;
 };
 
 // The renderer's options from the command line.

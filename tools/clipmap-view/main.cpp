@@ -168,6 +168,8 @@ int run(int argc, char** argv) {
            &o.script);
   p.option("--screenshot", "FILE.png", "--window: write the last frame (without the overlay) on exit",
            &o.screenshot);
+  p.option("--screenshot-window", "FILE.png", "--window: write the window as last shown, overlay included",
+           &o.screenshot_window);
   p.option("--record-path", "FILE",
            "--window: write the camera of every frame as --path keyframes (replay it headless)",
            &o.record_path);
@@ -184,8 +186,9 @@ int run(int argc, char** argv) {
 
   if (!o.reference.empty() && !o.original.empty())
     throw cli::UsageError("give --reference or --original, not both");
-  if (!o.window && (!o.script.empty() || !o.screenshot.empty() || !o.record_path.empty()))
-    throw cli::UsageError("--script, --screenshot and --record-path need --window");
+  if (!o.window &&
+      (!o.script.empty() || !o.screenshot.empty() || !o.screenshot_window.empty() || !o.record_path.empty()))
+    throw cli::UsageError("--script, --screenshot, --screenshot-window and --record-path need --window");
   if (o.window && (!o.reference.empty() || !o.original.empty() || bench > 0))
     throw cli::UsageError("--window cannot be combined with --reference, --original or --bench");
   std::shared_ptr<const PyramidFile> file, ref_file;

@@ -371,6 +371,8 @@ int run_window(const Flight& flight) {
       });
     }
 
+    std::vector<uint8_t> window_pixels;
+    int window_w = 0, window_h = 0;
     size_t next_event = 0;
     double fps = 0;
     auto last = Clock::now();
@@ -407,7 +409,7 @@ int run_window(const Flight& flight) {
       glfwGetFramebufferSize(window, &fb_w, &fb_h);
       if (fb_w > 0 && fb_h > 0) {
         renderer.blit_to_default_framebuffer(fb_w, fb_h);
-        if (wall_dt > 0) fps = fps == 0 ? 1 / wall_dt : 0.9 * fps + 0.1 / wall_dt;
+        if (f > 0 && wall_dt > 0) fps = fps == 0 ? 1 / wall_dt : 0.9 * fps + 0.1 / wall_dt;  // wall clock
         double worst = -1;
         for (const LevelScreenError& e : sse)
           if (e.level >= first_level && e.level < first_level + us.active_levels)
@@ -430,6 +432,13 @@ int run_window(const Flight& flight) {
                  on_off(viewer.render.culling) + "  L levels " + on_off(viewer.render.level_colours) +
                  "  F wireframe " + on_off(viewer.render.wireframe)},
             fb_w, fb_h);
+        if (!o.screenshot_window.empty()) {  // the window as shown, overlay included (bottom row first)
+          window_pixels.resize(size_t(fb_w) * size_t(fb_h) * 4);
+          glPixelStorei(GL_PACK_ALIGNMENT, 1);
+          glReadBuffer(GL_BACK);
+          glReadPixels(0, 0, fb_w, fb_h, GL_RGBA, GL_UNSIGNED_BYTE, window_pixels.data());
+          window_w = fb_w, window_h = fb_h;
+        }
         glfwSwapBuffers(window);
       }
     }
@@ -438,6 +447,15 @@ int run_window(const Flight& flight) {
       renderer.read_rgba(pixels);
       write_png_rgba(o.screenshot, o.width, o.height, pixels);
       if (!o.quiet) std::cerr << "clipmap-view: screenshot " << o.screenshot << "\n";
+    }
+    if (!o.screenshot_window.empty() && !window_pixels.empty()) {
+      const size_t row = size_t(window_w) * 4;
+      for (int y = 0; y < window_h / 2; ++y)
+        std::swap_ranges(window_pixels.begin() + ptrdiff_t(size_t(y) * row),
+                         window_pixels.begin() + ptrdiff_t(size_t(y + 1) * row),
+                         window_pixels.begin() + ptrdiff_t(size_t(window_h - 1 - y) * row));
+      for (size_t i = 3; i < window_pixels.size(); i += 4) window_pixels[i] = 255;
+      write_png_rgba(o.screenshot_window, window_w, window_h, window_pixels);
     }
   }
   glfwDestroyWindow(window);
