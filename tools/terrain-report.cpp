@@ -32,6 +32,17 @@ void heat_colour(double e, uint8_t* rgb) {
   for (int c = 0; c < 3; ++c) rgb[c] = uint8_t(stops[i][c] + f * (stops[i + 1][c] - stops[i][c]) + 0.5);
 }
 
+// Writes under a temporary name, renamed when complete.
+void write_picture(const cli::Canvas& canvas, const std::string& path, const char* what) {
+  const std::string tmp = path + ".tmp.png";
+  try {
+    canvas.write_png(tmp);
+  } catch (const Error& e) {
+    throw Error(ErrorCode::WriteFailed, path + ": cannot write the " + what + " (" + e.what() + ")");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
 // The heat map of |error| with a colour scale bar below it (0 .. scale_max metres, labelled).
 void write_heatmap(const std::string& path, const std::vector<float>& abs_err, int64_t w, int64_t h,
                    double scale_max) {
@@ -75,13 +86,7 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
   }
   canvas.text(canvas.width() - cli::Canvas::text_width(units, scale) - 8 * scale, bar_y + bar_h + 12 * scale,
               units, ink, scale);
-  const std::string tmp = path + ".tmp.png";
-  try {
-    canvas.write_png(tmp);
-  } catch (const Error& e) {
-    throw Error(ErrorCode::WriteFailed, path + ": cannot write the heat-map (" + e.what() + ")");
-  }
-  std::filesystem::rename(tmp, path);
+  write_picture(canvas, path, "heat-map");
 }
 
 // Per-level error plot: rms, 99.9th percentile and max |error| (metres, log axis) against the level.
@@ -139,13 +144,7 @@ void write_plot(const std::string& path, const std::vector<ErrorStats>& per_leve
     c.text(W - right + 38, legend_y, s.name, ink, 2);
     legend_y += 20;
   }
-  const std::string tmp = path + ".tmp.png";
-  try {
-    c.write_png(tmp);
-  } catch (const Error& e) {
-    throw Error(ErrorCode::WriteFailed, path + ": cannot write the plot (" + e.what() + ")");
-  }
-  std::filesystem::rename(tmp, path);
+  write_picture(c, path, "plot");
 }
 
 int run(int argc, char** argv) {

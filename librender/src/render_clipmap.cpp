@@ -189,17 +189,22 @@ void main() {
 }
 )";
 
+// Throws with the info log when a shader's compile or a program's link status is false.
+template <typename GetIv, typename GetLog>
+void check_status(GLuint object, GLenum status, GetIv get_iv, GetLog get_log, const char* what) {
+  GLint ok = 0;
+  get_iv(object, status, &ok);
+  if (ok) return;
+  char log[4096];
+  get_log(object, GLsizei(sizeof log), nullptr, log);
+  throw std::runtime_error(std::string("clipmap renderer: ") + what + " failed: " + log);
+}
+
 GLuint compile(GLenum kind, const char* src) {
   GLuint s = glCreateShader(kind);
   glShaderSource(s, 1, &src, nullptr);
   glCompileShader(s);
-  GLint ok = 0;
-  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    char log[4096];
-    glGetShaderInfoLog(s, sizeof log, nullptr, log);
-    throw std::runtime_error(std::string("clipmap renderer: shader compile failed: ") + log);
-  }
+  check_status(s, GL_COMPILE_STATUS, glGetShaderiv, glGetShaderInfoLog, "shader compile");
   return s;
 }
 
@@ -211,13 +216,7 @@ GLuint link(const char* vertex, const char* fragment) {
   glLinkProgram(program);
   glDeleteShader(vs);
   glDeleteShader(fs);
-  GLint ok = 0;
-  glGetProgramiv(program, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    char log[4096];
-    glGetProgramInfoLog(program, sizeof log, nullptr, log);
-    throw std::runtime_error(std::string("clipmap renderer: program link failed: ") + log);
-  }
+  check_status(program, GL_LINK_STATUS, glGetProgramiv, glGetProgramInfoLog, "program link");
   return program;
 }
 

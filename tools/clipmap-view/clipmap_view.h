@@ -67,6 +67,9 @@ terrain::render::RenderOptions render_options(const ViewOptions& o);
 struct Key {
   double frame, x, y, above, yaw_deg, pitch_deg;
 };
+// The lines of a small text file (at most 16 MiB, a regular file) with their 1-based numbers, '#'
+// comments cut off; `what` names it in errors. Throws Error.
+std::vector<std::pair<int, std::string>> read_small_text(const std::string& path, const std::string& what);
 // A --path file's keyframes (frame numbers increasing); throws Error.
 std::vector<Key> read_path(const std::string& path);
 // The built-in flight over `source`'s terrain for `frames` frames.

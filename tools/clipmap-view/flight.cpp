@@ -51,21 +51,27 @@ double percentile(std::vector<double> v, double p) {
   return v[size_t(k)];
 }
 
-std::vector<Key> read_path(const std::string& path) {
-  // A camera path is a small text file: anything else (a FIFO, /dev/zero) is refused before reading.
-  constexpr uint64_t kMaxPathBytes = uint64_t(16) << 20;
+std::vector<std::pair<int, std::string>> read_small_text(const std::string& path, const std::string& what) {
+  // A small text file: anything else (a FIFO, /dev/zero) is refused before reading.
+  constexpr uint64_t kMaxBytes = uint64_t(16) << 20;
   uint64_t bytes = 0;
   ::close(terrain::open_regular_file(path, &bytes));
-  if (bytes > kMaxPathBytes) throw Error(ErrorCode::Oversized, path + ": camera path larger than 16 MiB");
+  if (bytes > kMaxBytes) throw Error(ErrorCode::Oversized, path + ": " + what + " larger than 16 MiB");
   std::ifstream in(path);
-  if (!in) throw Error(ErrorCode::NotFound, "cannot open camera path " + path);
-  std::vector<Key> keys;
+  if (!in) throw Error(ErrorCode::NotFound, "cannot open " + what + " " + path);
+  std::vector<std::pair<int, std::string>> lines;
   std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
+  for (int number = 1; std::getline(in, line); ++number) {
     const auto hash = line.find('#');
     if (hash != std::string::npos) line.resize(hash);
+    lines.emplace_back(number, line);
+  }
+  return lines;
+}
+
+std::vector<Key> read_path(const std::string& path) {
+  std::vector<Key> keys;
+  for (const auto& [number, line] : read_small_text(path, "camera path")) {
     std::istringstream s(line);
     Key k{};
     if (!(s >> k.frame)) continue;  // blank or comment line

@@ -158,7 +158,7 @@ int run(int argc, char** argv) {
            });
   p.flag("--window",
          "fly interactively in a desktop window (GLFW) instead of the headless flight:\n"
-         "WASD move, E/Q up/down, mouse look (drag or captured), +/- speed, T transitions,\n"
+         "WASD move, E/Q up/down, mouse look (left-button drag), +/- speed, T transitions,\n"
          "C culling, L level colours, F wireframe, Esc quits. Exit 12 when this build has\n"
          "no GLFW or no display can be opened",
          &o.window);

@@ -16,7 +16,6 @@
 
 #include "cli.h"
 #include "clipmap_view.h"
-#include "core/file.h"
 #include "raster.h"
 #include "render/renderer.h"
 
@@ -25,7 +24,6 @@
 #include <GLFW/glfw3.h>
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
-#include <unistd.h>
 #endif
 
 namespace clipmap_view {
@@ -73,17 +71,8 @@ int key_code(const std::string& name) {
 }
 
 std::vector<ScriptEvent> read_script(const std::string& path) {
-  uint64_t bytes = 0;
-  ::close(open_regular_file(path, &bytes));  // a FIFO or device is refused before reading
-  if (bytes > (uint64_t(16) << 20)) throw Error(ErrorCode::Oversized, path + ": script larger than 16 MiB");
-  std::ifstream in(path);
-  if (!in) throw Error(ErrorCode::NotFound, "cannot open script " + path);
   std::vector<ScriptEvent> events;
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    if (const auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+  for (const auto& [number, line] : read_small_text(path, "script")) {
     std::istringstream s(line);
     ScriptEvent e;
     std::string what;
@@ -127,33 +116,16 @@ struct Viewer {
   void key(int k, bool down) {
     held[k] = down;
     if (!down) return;
-    switch (k) {
-      case GLFW_KEY_ESCAPE:
-        quit = true;
-        break;
-      case GLFW_KEY_T:
-        render.transitions = !render.transitions;
-        break;
-      case GLFW_KEY_C:
-        render.culling = !render.culling;
-        break;
-      case GLFW_KEY_L:
-        render.level_colours = !render.level_colours;
-        break;
-      case GLFW_KEY_F:
-        render.wireframe = !render.wireframe;
-        break;
-      case GLFW_KEY_EQUAL:
-      case GLFW_KEY_KP_ADD:
-        speed *= 2;
-        break;
-      case GLFW_KEY_MINUS:
-      case GLFW_KEY_KP_SUBTRACT:
-        speed = std::max(speed / 2, 0.01);
-        break;
-      default:
-        break;
-    }
+    // The toggles; Esc quits, +/- change the speed.
+    const std::pair<int, bool*> toggles[] = {{GLFW_KEY_T, &render.transitions},
+                                             {GLFW_KEY_C, &render.culling},
+                                             {GLFW_KEY_L, &render.level_colours},
+                                             {GLFW_KEY_F, &render.wireframe}};
+    for (const auto& [code, flag] : toggles)
+      if (k == code) *flag = !*flag;
+    if (k == GLFW_KEY_ESCAPE) quit = true;
+    if (k == GLFW_KEY_EQUAL || k == GLFW_KEY_KP_ADD) speed *= 2;
+    if (k == GLFW_KEY_MINUS || k == GLFW_KEY_KP_SUBTRACT) speed = std::max(speed / 2, 0.01);
   }
   // Mouse look: right turns right, up looks up (0.003 radians per pixel).
   void mouse(double dx, double dy) {
