@@ -100,6 +100,39 @@ TEST_CASE("render: clipmap-view --window under Xvfb matches the headless render 
   const std::vector<uint8_t> first = pngtest::read_rgba(out + "/frame_00000.png", w0, h0);
   CHECK(pngtest::psnr_rgb(first, headless_px) < 30);
 
+  // The toggles reach the renderer: level colours (L) and wireframe (F) change the frame against the
+  // headless render of the same cameras; --screenshot-window keeps the overlay's dark panel.
+  iotest::write_file(script,
+                     std::string("0.0 key L down\n0.0 key L up\n0.1 key F down\n0.1 key F up\n0.2 quit\n"));
+  const std::string shot2 = dir.file("toggled.png"), win2 = dir.file("window2.png"),
+                    path2 = dir.file("cam2.txt");
+  const int raw2 = std::system(
+      ("xvfb-run -a -s '-screen 0 640x480x24' " + iotest::shell_quote(iotest::tool_path("clipmap-view")) +
+       " " + iotest::shell_quote(pyr) + " --window --script " + iotest::shell_quote(script) +
+       " --screenshot " + iotest::shell_quote(shot2) + " --screenshot-window " + iotest::shell_quote(win2) +
+       " --record-path " + iotest::shell_quote(path2) + " --width 320 --height 240 --n 63 -q >/dev/null 2>&1")
+          .c_str());
+  REQUIRE(WEXITSTATUS(raw2) == 0);
+  const std::string out2 = dir.file("headless2");
+  REQUIRE(iotest::run_tool(dir, {"clipmap-view",
+                                 {pyr, "--path", path2, "--frames", "6", "--png-every", "5", "--out", out2,
+                                  size[0], size[1], size[2], size[3], size[4], size[5], "-q"}})
+              .status == 0);
+  int w3 = 0, h3 = 0, w4 = 0, h4 = 0;
+  const std::vector<uint8_t> toggled = pngtest::read_rgba(shot2, w3, h3),
+                             plain = pngtest::read_rgba(out2 + "/frame_00005.png", w4, h4),
+                             shown = pngtest::read_rgba(win2, w4, h4);
+  CHECK(pngtest::psnr_rgb(toggled, plain) < 25);
+  REQUIRE(w4 == 320);
+  double panel = 0, frame_there = 0;  // the overlay's corner against the same pixels without it
+  for (int y = 10; y < 40; ++y)
+    for (int x = 10; x < 120; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const size_t i = (size_t(y) * 320 + size_t(x)) * 4 + size_t(c);
+        panel += shown[i], frame_there += toggled[i];
+      }
+  CHECK(panel < 0.8 * frame_there);
+
   // Script errors are usage-level input errors (8), before any window opens.
   iotest::write_file(script, std::string("0.0 key NOPE down\n"));
   const int bad = std::system(("xvfb-run -a " + iotest::shell_quote(iotest::tool_path("clipmap-view")) + " " +
