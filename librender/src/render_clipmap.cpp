@@ -99,6 +99,9 @@ uniform float u_haze_max;
 uniform int u_level_colours;     // tint each level (viewer toggle)
 uniform vec3 u_hillshade_light;  // hypsometric: towards the sun
 uniform float u_relief;          // hypsometric: slope exaggeration of the hillshade
+uniform int u_drape;             // hypsometric: colours from the draped image where it covers
+uniform vec4 u_drape_rect;       // its world x0, y0 (metres) and 1 / its width, 1 / its height
+uniform sampler2D u_drape_image;
 out vec4 o_colour;
 
 vec3 ramp(float t) {
@@ -154,6 +157,14 @@ void main() {
     vec3 relief = normalize(vec3(-u_relief * s, 1.0));
     float hill = max(dot(relief, normalize(u_hillshade_light)), 0.0);
     float shade = v_height <= 0.0 ? 0.85 : 0.22 + 0.95 * hill;
+    if (u_drape != 0) {
+      vec2 uv = (v_world.xy - u_drape_rect.xy) * u_drape_rect.zw;
+      if (all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)))) {
+        vec4 d = texture(u_drape_image, uv);
+        tint = mix(tint, d.rgb, d.a);  // transparent pixels keep the height tint
+        shade = mix(shade, 0.45 + 0.6 * hill, d.a);  // an image has its own shadows: a milder hillshade
+      }
+    }
     colour = tint * shade;
   }
   if (u_level_colours != 0) colour *= level_tint(u_level);
@@ -364,7 +375,10 @@ struct ClipmapRenderer::Gl {
         u_viewer = -1, u_active = -1, u_w = -1, u_transitions = -1, u_mvp = -1, u_coarse_layer = -1,
         u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1, u_shading = -1,
         u_eye = -1, u_haze_rgb = -1, u_haze_distance = -1, u_haze_max = -1, u_level_colours = -1,
-        u_hillshade_light = -1, u_relief = -1;
+        u_hillshade_light = -1, u_relief = -1, u_drape = -1, u_drape_rect = -1;
+  // The draped image (set_drape): an RGBA8 texture with mipmaps and the world rectangle it covers.
+  GLuint drape = 0;
+  double drape_rect[4] = {0, 0, 0, 0};
   // The sky gradient (hypsometric shading): a full-screen triangle drawn before the terrain.
   GLuint sky_program = 0, sky_vao = 0;
   GLint s_forward = -1, s_right = -1, s_up = -1, s_tan_half = -1, s_zenith = -1, s_horizon = -1;
@@ -395,7 +409,9 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   g.u_haze_distance = loc("u_haze_distance"), g.u_haze_max = loc("u_haze_max");
   g.u_level_colours = loc("u_level_colours");
   g.u_hillshade_light = loc("u_hillshade_light"), g.u_relief = loc("u_relief");
+  g.u_drape = loc("u_drape"), g.u_drape_rect = loc("u_drape_rect");
   glUseProgram(g.program);
+  glUniform1i(loc("u_drape_image"), 3);
   glUniform1i(loc("u_z"), 0);
   glUniform1i(loc("u_zc"), 1);
   glUniform1i(loc("u_normal"), 2);
@@ -481,6 +497,7 @@ ClipmapRenderer::~ClipmapRenderer() {
   glDeleteVertexArrays(1, &g.sky_vao);
   glDeleteProgram(g.program);
   glDeleteProgram(g.sky_program);
+  if (g.drape) glDeleteTextures(1, &g.drape);
 }
 
 void ClipmapRenderer::upload(const Clipmap& cm, bool everything) {
@@ -604,6 +621,13 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
   glUniform1f(g.u_haze_max, opt.haze_max);
   glUniform3f(g.u_hillshade_light, opt.hillshade_dir[0], opt.hillshade_dir[1], opt.hillshade_dir[2]);
   glUniform1f(g.u_relief, opt.relief);
+  const bool drape = opt.drape && g.drape != 0;
+  glUniform1i(g.u_drape, drape ? 1 : 0);
+  if (drape) {
+    glBindTextureUnit(3, g.drape);
+    glUniform4f(g.u_drape_rect, float(g.drape_rect[0]), float(g.drape_rect[1]), float(1 / g.drape_rect[2]),
+                float(1 / g.drape_rect[3]));
+  }
   if (opt.z_hi > opt.z_lo) {
     glUniform2f(g.u_zrange, opt.z_lo, opt.z_hi);
   } else {
@@ -728,6 +752,30 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
   check_gl("render");
   stats.seconds_render = since(t0);
   return stats;
+}
+
+void ClipmapRenderer::set_drape(const std::vector<uint8_t>& rgba, int width, int height, double x0_m,
+                                double y0_m, double width_m, double height_m) {
+  if (width < 1 || height < 1 || width > 16384 || height > 16384 ||
+      rgba.size() != size_t(width) * size_t(height) * 4 || !(width_m > 0) || !(height_m > 0))
+    throw std::invalid_argument(
+        "clipmap renderer: drape image must be 1..16384 pixels a side, RGBA8, over a "
+        "positive area");
+  Gl& g = *gl_;
+  if (g.drape) glDeleteTextures(1, &g.drape);
+  int mip_levels = 1;
+  while ((std::max(width, height) >> mip_levels) > 0) ++mip_levels;
+  glCreateTextures(GL_TEXTURE_2D, 1, &g.drape);
+  glTextureStorage2D(g.drape, mip_levels, GL_RGBA8, width, height);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  glTextureSubImage2D(g.drape, 0, 0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+  glGenerateTextureMipmap(g.drape);
+  glTextureParameteri(g.drape, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+  glTextureParameteri(g.drape, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTextureParameteri(g.drape, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(g.drape, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  g.drape_rect[0] = x0_m, g.drape_rect[1] = y0_m, g.drape_rect[2] = width_m, g.drape_rect[3] = height_m;
+  check_gl("drape upload");
 }
 
 void ClipmapRenderer::blit_to_default_framebuffer(int width, int height) const {

@@ -3,6 +3,7 @@
 // headless EGL render of the same camera path; the path is the one the window recorded
 // (--record-path), replayed with --path. Skipped with a message where xvfb-run or GLFW is missing;
 // in CI (CI=true) that is a failure, like missing shared data.
+#include <array>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdlib>
@@ -12,6 +13,7 @@
 
 #include "io/io_test_util.h"
 #include "png_test_util.h"
+#include "readers/image8.h"
 #include "readers/terrain_generator.h"
 #include "shared_data.h"
 
@@ -156,4 +158,41 @@ TEST_CASE("render: clipmap-view --window without a display exits 12", "[render][
   // Window-only options without --window are usage errors.
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--screenshot", dir.file("x.png")}}).status == 1);
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--shading", "glossy"}}).status == 1);
+}
+
+TEST_CASE("render: clipmap-view --drape colours the terrain from an RGB image", "[render]") {
+  iotest::TempDir dir;
+  const Heightmap map = synthesize_terrain(SynthOptions{.seed = 9, .width = 1201, .height = 1201});
+  const std::string in = dir.file("N10E010.hgt"), pyr = dir.file("t.pyr");
+  iotest::write_file(in, iotest::hgt_bytes(map));
+  REQUIRE(iotest::run_tool(dir, {"pyramid-build", {in, "-o", pyr, "--rms", "1", "-q"}}).status == 0);
+  // A red image (with a transparent corner) and a grey one, which is no drape.
+  std::vector<uint8_t> red(64 * 64 * 4), grey(64 * 64, 128);
+  for (size_t i = 0; i < red.size(); i += 4) red[i] = 220, red[i + 1] = 30, red[i + 2] = 30, red[i + 3] = 255;
+  write_image8(dir.file("red.png"), 64, 64, 4, red.data());
+  write_image8(dir.file("grey.png"), 64, 64, 1, grey.data());
+  auto bottom_mean = [&](const std::string& out) {
+    int w = 0, h = 0;
+    const std::vector<uint8_t> px = pngtest::read_rgba(out + "/frame_00002.png", w, h);
+    std::array<double, 3> m{};
+    for (int y = h / 2; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 3; ++c) m[size_t(c)] += px[(size_t(y) * size_t(w) + size_t(x)) * 4 + size_t(c)];
+    return m;
+  };
+  const std::vector<std::string> common = {pyr,   "--frames", "3",   "--png-every", "2",  "--width",
+                                           "160", "--height", "120", "--n",         "63", "-q"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = common;
+    args.insert(args.end(), extra.begin(), extra.end());
+    return iotest::run_tool(dir, {"clipmap-view", args});
+  };
+  REQUIRE(with({"--out", dir.file("plain")}).status == 0);
+  const auto r = with({"--out", dir.file("draped"), "--drape", dir.file("red.png")});
+  INFO(r.err);
+  REQUIRE(r.status == 0);
+  const auto plain = bottom_mean(dir.file("plain")), draped = bottom_mean(dir.file("draped"));
+  CHECK(draped[0] > 2 * draped[1]);  // red terrain
+  CHECK(plain[0] < 1.5 * plain[1]);  // the height tints are not
+  CHECK(with({"--out", dir.file("g"), "--drape", dir.file("grey.png")}).status == 6);
 }

@@ -57,6 +57,7 @@ struct ViewOptions {
   // events, --screenshot writes its last frame, --record-path its camera per frame as keyframes.
   bool window = false;
   std::string script, screenshot, screenshot_window, record_path;
+  std::string drape;  // --drape: an 8-bit RGB(A) image over the terrain's extent
 };
 
 // The renderer's options from the command line.
@@ -100,6 +101,12 @@ std::vector<terrain::runtime::LevelScreenError> screen_error_bound(
     const ViewOptions& o, const terrain::container::ContainerInfo& info,
     terrain::runtime::RegionDecoderSource& source, int first_level, double s_px,
     std::optional<terrain::container::LevelError>& finest_error);
+
+// --drape: reads the image (any 8-bit RGB or RGBA file the readers take, through their Terrain-RGB
+// path, which keeps R, G, B exactly) and hands it to the renderer over the finest level's area
+// (samples -0.5 .. size - 0.5, pixel-is-area). Nothing without --drape. Throws Error (UnknownType for
+// an image that is not 8-bit RGB).
+void apply_drape(terrain::render::ClipmapRenderer& renderer, const Flight& flight);
 
 // --window: the interactive (or --script driven) viewer; the same clipmap, renderer and shaders as
 // run_flight, in a GLFW window. Returns the exit status; cli::kExitUnavailable when this build has no

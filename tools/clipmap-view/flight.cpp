@@ -17,6 +17,7 @@
 #include "clipmap_view.h"
 #include "core/file.h"
 #include "json_writer.h"
+#include "readers/heightmap.h"
 #include "render/renderer.h"
 
 namespace clipmap_view {
@@ -41,7 +42,31 @@ RenderOptions render_options(const ViewOptions& o) {
   r.transitions = !o.no_transitions;
   r.culling = !o.no_culling;
   r.shading = o.shading;
+  r.drape = !o.drape.empty();
   return r;
+}
+
+void apply_drape(ClipmapRenderer& renderer, const Flight& flight) {
+  const ViewOptions& o = flight.options;
+  if (o.drape.empty()) return;
+  ReadOptions ro;
+  ro.terrain_rgb = true;  // value = R * 65536 + G * 256 + B, exactly
+  const Heightmap image = read_heightmap(o.drape, ro);
+  if (image.info.sample_type != SampleType::TerrainRGB)
+    throw Error(ErrorCode::UnknownType, o.drape + ": --drape needs an 8-bit RGB or RGBA image");
+  if (image.width() > 16384 || image.height() > 16384)
+    throw Error(ErrorCode::Oversized, o.drape + ": --drape image larger than 16384 pixels a side");
+  std::vector<uint8_t> rgba(size_t(image.width()) * size_t(image.height()) * 4);
+  for (size_t i = 0; i < image.values.size(); ++i) {
+    const auto v = uint32_t(image.values[i]);
+    rgba[4 * i] = uint8_t(v >> 16), rgba[4 * i + 1] = uint8_t(v >> 8), rgba[4 * i + 2] = uint8_t(v);
+    rgba[4 * i + 3] = image.valid.empty() || image.valid[i] ? 255 : 0;
+  }
+  const GridSize fs = flight.source.level_size(flight.source.level_count() - 1);
+  const double g = flight.spacing;
+  const GlLeakCheckPause gl_pause;
+  renderer.set_drape(rgba, int(image.width()), int(image.height()), -0.5 * g, -0.5 * g, double(fs.width) * g,
+                     double(fs.height) * g);
 }
 
 double percentile(std::vector<double> v, double p) {
@@ -306,6 +331,8 @@ int run_flight(const Flight& flight) {
   if (ref_clipmap)
     ref_renderer = std::make_unique<ClipmapRenderer>(copt.n, clipmap.level_count(), o.width, o.height);
   gl_setup_pause.reset();
+  apply_drape(renderer, flight);
+  if (ref_renderer) apply_drape(*ref_renderer, flight);
   std::vector<uint8_t> ref_pixels;
   if (!o.quiet)
     std::cerr << "clipmap-view: " << gl.renderer_name() << " (EGL " << gl.platform() << "), n=" << copt.n

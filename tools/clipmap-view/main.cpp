@@ -156,6 +156,10 @@ int run(int argc, char** argv) {
              else
                throw cli::UsageError("--shading must be flat or hypsometric, got " + v);
            });
+  p.option("--drape", "IMAGE",
+           "an 8-bit RGB(A) image (e.g. an orthophoto) draped over the terrain with --shading hypsometric:\n"
+           "it covers the pyramid's whole extent (same georeferencing; transparent pixels keep the tints)",
+           &o.drape);
   p.flag("--window",
          "fly interactively in a desktop window (GLFW) instead of the headless flight:\n"
          "WASD move, E/Q up/down, mouse look (left-button drag), +/- speed, T transitions,\n"

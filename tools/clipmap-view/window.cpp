@@ -312,6 +312,7 @@ int run_window(const Flight& flight) {
   int status = cli::kExitOk;
   {
     ClipmapRenderer renderer(copt.n, clipmap.level_count(), o.width, o.height);
+    apply_drape(renderer, flight);
     Overlay overlay;
     const auto* gl_name = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
     if (!o.quiet)

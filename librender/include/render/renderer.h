@@ -65,6 +65,7 @@ struct RenderOptions {
   // north-west light; north is -y) and the slope exaggeration of the shading normal.
   float hillshade_dir[3] = {-0.5f, -0.5f, 0.7071f};
   float relief = 2.0f;
+  bool drape = false;          // Hypsometric: colour from the image set_drape() gave, where it covers
   bool level_colours = false;  // tint each clipmap level (viewer toggle)
   bool wireframe = false;      // triangle edges only (viewer toggle)
 };
@@ -115,6 +116,12 @@ class ClipmapRenderer {
   // Draws the clipmap's active regions into the framebuffer and waits for the GPU (the textures are
   // what the last upload() put there). Throws as upload().
   RenderStats render(const runtime::Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
+  // An image draped over the terrain (RenderOptions::drape, Hypsometric shading): RGBA8, top row first,
+  // covering world x0_m .. x0_m + width_m, y0_m .. y0_m + height_m (its first row at y0_m); its alpha
+  // blends it over the height tints. Replaces an earlier drape. Throws std::invalid_argument for an
+  // image outside 1..16384 pixels a side or not width * height * 4 bytes, std::runtime_error on GL errors.
+  void set_drape(const std::vector<uint8_t>& rgba, int width, int height, double x0_m, double y0_m,
+                 double width_m, double height_m);
   // Copies the last frame to the default framebuffer of the current context (a window), scaled to
   // width x height pixels. Throws std::runtime_error on GL errors.
   void blit_to_default_framebuffer(int width, int height) const;
