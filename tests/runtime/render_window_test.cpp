@@ -155,6 +155,8 @@ TEST_CASE("render: clipmap-view --window without a display exits 12", "[render][
   const auto r = iotest::run_tool(dir, {"clipmap-view", {pyr, "--window", "--frames", "1"}});
   INFO(r.err);
   CHECK(r.status == 12);
+  CHECK(iotest::run_tool(dir, {"clipmap-view", {"--help"}}).out.find("12  not available here") !=
+        std::string::npos);
   // Window-only options without --window are usage errors.
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--screenshot", dir.file("x.png")}}).status == 1);
   CHECK(iotest::run_tool(dir, {"clipmap-view", {pyr, "--shading", "glossy"}}).status == 1);
