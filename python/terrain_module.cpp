@@ -72,12 +72,8 @@ class Pyramid {
   py::object geotransform() const {
     const container::ContainerInfo& i = file_->info();
     if (!i.georeference) return py::none();
-    // Spacing is stored in the grid's horizontal units; the origin in the georeference's.
-    const double to_origin_units =
-        i.horizontal_units == "arc-second" && i.georeference->units == "degree" ? 1.0 / 3600.0 : 1.0;
-    const double dx = i.spacing_x * to_origin_units, dy = i.spacing_y * to_origin_units;
-    return py::make_tuple(i.georeference->origin_x - 0.5 * dx, dx, 0.0, i.georeference->origin_y + 0.5 * dy,
-                          0.0, -dy);
+    const std::array<double, 6>& t = i.georeference->geotransform;  // the stored one (2.0: derived)
+    return py::make_tuple(t[0], t[1], t[2], t[3], t[4], t[5]);
   }
 
   py::dict info() const {
@@ -96,8 +92,10 @@ class Pyramid {
     d["target"] = i.quantisation.target;
     d["step_metres"] = i.quantisation.step_metres;
     if (i.georeference) {
-      d["origin"] = py::make_tuple(i.georeference->origin_x, i.georeference->origin_y);
+      d["origin"] = py::make_tuple(i.georeference->origin_x(), i.georeference->origin_y());
       d["origin_units"] = i.georeference->units;
+      d["crs_epsg"] = i.georeference->crs_epsg ? py::object(py::int_(i.georeference->crs_epsg)) : py::none();
+      d["crs_text"] = i.georeference->crs_text;
     }
     py::list levels;
     for (size_t l = 0; l < i.levels.size(); ++l) {

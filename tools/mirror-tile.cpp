@@ -41,8 +41,9 @@ int run(int argc, char** argv) {
       "streamed to disk; memory is the tile plus one output row. Voids stay voids (-32768).");
   parser.positional("TILE", "heightmap tile to repeat (any format terrain-info reads)", &input);
   parser.option("-o,--output", "OUT", "raw grid to write (required)", &output);
-  parser.option("--out-width", "W", "output width in samples",
-                [&](const std::string& v) { width = cli::parse_int("--out-width", v, 1, int64_t(1) << 31); });
+  // 2^20: the widest row the readers take (docs/io.md, "Limits"); a wider grid could not be read back.
+  parser.option("--out-width", "W", "output width in samples (at most 2^20)",
+                [&](const std::string& v) { width = cli::parse_int("--out-width", v, 1, int64_t(1) << 20); });
   parser.option("--out-height", "H", "output height in samples", [&](const std::string& v) {
     height = cli::parse_int("--out-height", v, 1, int64_t(1) << 31);
   });
@@ -82,9 +83,14 @@ int run(int argc, char** argv) {
                          output + ": needs " + std::to_string(double(need) / (1 << 30)) +
                              " GiB, the file system has " +
                              std::to_string(double(space.available) / (1 << 30)) + " GiB free");
-  const std::string temp = output + ".tmp." + std::to_string(::getpid());
-  std::FILE* f = std::fopen(temp.c_str(), "wbx");
-  if (!f) throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ": cannot create");
+  std::string temp;
+  const int fd = terrain::create_temp_beside(output, "", &temp);
+  std::FILE* f = ::fdopen(fd, "wb");
+  if (!f) {
+    ::close(fd);
+    std::remove(temp.c_str());
+    throw terrain::Error(terrain::ErrorCode::WriteFailed, output + ": cannot create");
+  }
   std::setvbuf(f, nullptr, _IOFBF, size_t(1) << 20);
   std::vector<int16_t> row(static_cast<size_t>(width));
   try {

@@ -36,7 +36,7 @@ int run(int argc, char** argv) {
       "the whole input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; "
       "integer "
       "input).\n"
-      "The output is written to OUT.pyr.tmp.<pid> and renamed when complete.");
+      "The output is written to OUT.pyr.tmp.XXXXXX (a new random name) and renamed when complete.");
   parser.positional("INPUT", "heightmap to read", &input);
   parser.option("-o,--output", "OUT", "pyramid file to write (required)", &output);
   parser.option("--rms", "M", "target rms error in metres",

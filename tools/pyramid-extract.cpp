@@ -2,6 +2,7 @@
 // in bands, georeferenced, float32 or int16 with nodata), 16-bit PNG, float32 EXR or raw + JSON
 // sidecar. Decoding goes through the region decoder, so only the tiles the window needs are read.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -43,14 +44,15 @@ bool ends_with(const std::string& s, const std::string& suffix) {
 std::optional<terrain::GeoTransform> level_geotransform(const terrain::container::ContainerInfo& info,
                                                         int level) {
   if (!info.georeference) return std::nullopt;
-  const double to_crs =
-      info.horizontal_units == "arc-second" && info.georeference->units == "degree" ? 1.0 / 3600.0 : 1.0;
+  // The stored geotransform is the finest level's; level l's samples are 2^(m-l) times larger, and
+  // its sample (0, 0) is centred where the finest level's is (D is centred on even samples).
+  const std::array<double, 6>& t = info.georeference->geotransform;
   const double f = std::ldexp(1.0, int(info.levels.size()) - 1 - level);  // level spacing / finest spacing
   terrain::GeoTransform g;
-  g.dx = info.spacing_x * to_crs * f;
-  g.dy = info.spacing_y * to_crs * f;
-  g.x0 = info.georeference->origin_x - 0.5 * g.dx;
-  g.y0 = info.georeference->origin_y + 0.5 * g.dy;
+  g.dx = t[1] * f;
+  g.dy = -t[5] * f;
+  g.x0 = info.georeference->origin_x() - 0.5 * g.dx;
+  g.y0 = info.georeference->origin_y() + 0.5 * g.dy;
   return g;
 }
 
@@ -141,7 +143,12 @@ int run(int argc, char** argv) {
     terrain::GeoTiffOptions o;
     o.type = int16 ? terrain::SampleType::Int16 : terrain::SampleType::Float32;
     o.geotransform = gt;
-    if (info.georeference && info.georeference->units == "degree") o.epsg = 4326;
+    if (info.georeference) {
+      const terrain::container::Georeference& geo = *info.georeference;
+      if (geo.crs_epsg) o.epsg = int(geo.crs_epsg);
+      o.geographic = geo.units == "degree";
+      o.crs_text = geo.crs_text;
+    }
     terrain::GeoTiffWriter writer(output, rect.width, rect.height, o);
     for (int64_t y = 0; y < rect.height; y += band_rows) {
       const int64_t rows = std::min(band_rows, rect.height - y);
@@ -160,6 +167,9 @@ int run(int argc, char** argv) {
     map.info.spacing_y = info.spacing_y * std::ldexp(1.0, file->level_count() - 1 - l);
     map.info.horizontal_units = info.horizontal_units;
     if (gt) map.info.origin_x = gt->x0 + 0.5 * gt->dx, map.info.origin_y = gt->y0 - 0.5 * gt->dy;
+    if (info.georeference && info.georeference->crs_epsg)
+      map.info.crs_epsg = int(info.georeference->crs_epsg);
+    if (info.georeference) map.info.crs_text = info.georeference->crs_text;
     const bool png = ends_with(output, ".png");
     map.info.sample_type = png || int16 ? terrain::SampleType::Int16 : terrain::SampleType::Float32;
     if (png) map.info.sample_type = terrain::SampleType::UInt16;

@@ -2,6 +2,7 @@
 // georeference), streaming it band by band so any size fits in memory; or a pyramid file (.pyr) from
 // its header and index alone.
 #include <algorithm>
+#include <array>
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
@@ -24,6 +25,24 @@ using terrain::container::Container;
 using terrain::container::ContainerInfo;
 using terrain::container::error_mode_name;
 using terrain::container::ErrorMode;
+
+// GDAL's six terms, 15 significant digits (--json has the exact values).
+void print_geotransform(const std::array<double, 6>& gt) {
+  std::printf("geotransform: %.15g, %.15g, %.15g, %.15g, %.15g, %.15g\n", gt[0], gt[1], gt[2], gt[3], gt[4],
+              gt[5]);
+}
+
+// The CRS line: "EPSG:n", the CRS text's first 60 bytes (--json has it whole), or "unknown".
+void print_crs(uint32_t epsg, const std::string& text) {
+  std::string line = epsg ? "EPSG:" + std::to_string(epsg) : std::string();
+  if (!text.empty()) {
+    std::string head = text.substr(0, 60);
+    for (char& c : head)
+      if (c == '\n' || c == '\r' || c == '\t') c = ' ';
+    line += (line.empty() ? "" : ", ") + head + (text.size() > 60 ? "..." : "");
+  }
+  std::printf("crs:          %s\n", line.empty() ? "unknown" : line.c_str());
+}
 
 // A .pyr: what its header and index say (nothing is decoded); with verify, every level's checksum,
 // band table and tile.
@@ -50,8 +69,17 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
     j.key("georeference");
     if (info.georeference) {
       j.begin_object();
-      j.field("origin_x", info.georeference->origin_x).field("origin_y", info.georeference->origin_y);
-      j.field("units", info.georeference->units).end_object();
+      const terrain::container::Georeference& geo = *info.georeference;
+      j.field("origin_x", geo.origin_x()).field("origin_y", geo.origin_y());
+      j.key("geotransform").begin_array();
+      for (const double v : geo.geotransform) j.value(v);
+      j.end_array();
+      j.field("units", geo.units);
+      j.key("crs_epsg");
+      geo.crs_epsg ? j.value(int64_t(geo.crs_epsg)) : j.null();
+      j.key("crs_text");
+      geo.crs_text.empty() ? j.null() : j.value(geo.crs_text);
+      j.end_object();
     } else {
       j.null();
     }
@@ -95,12 +123,16 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
                 shortest(q.target).c_str(), q.step_units, q.step_metres);
   std::printf("spacing:      %s x %s %s\n", shortest(info.spacing_x).c_str(),
               shortest(info.spacing_y).c_str(), info.horizontal_units.c_str());
-  if (info.georeference)
-    std::printf("origin:       north-west sample at x %s, y %s %s\n",
-                shortest(info.georeference->origin_x).c_str(), shortest(info.georeference->origin_y).c_str(),
-                info.georeference->units.c_str());
-  else
+  if (info.georeference) {
+    const terrain::container::Georeference& geo = *info.georeference;
+    const auto& gt = geo.geotransform;
+    std::printf("origin:       north-west sample at x %s, y %s %s\n", shortest(geo.origin_x()).c_str(),
+                shortest(geo.origin_y()).c_str(), geo.units.c_str());
+    print_geotransform(gt);
+    print_crs(geo.crs_epsg, geo.crs_text);
+  } else {
     std::printf("origin:       unknown\n");
+  }
   std::printf("voids:        %" PRIu64 " of %.0f samples\n", info.void_count, finest_samples);
   std::printf("size:         %" PRIu64 " bytes, %.4f bits per finest sample\n", file_bytes,
               double(file_bytes) * 8 / finest_samples);
@@ -211,6 +243,20 @@ int run(int argc, char** argv) {
         .field("horizontal_units", g.horizontal_units);
     field_or_null("origin_x", g.origin_x);
     field_or_null("origin_y", g.origin_y);
+    j.key("geotransform");
+    if (const auto gt = terrain::geotransform(g)) {
+      j.begin_array();
+      for (const double v : *gt) j.value(v);
+      j.end_array();
+    } else {
+      j.null();
+    }
+    field_or_null("crs_epsg", g.crs_epsg ? std::optional<double>(*g.crs_epsg) : std::nullopt);
+    j.key("crs_text");
+    if (g.crs_text.empty())
+      j.null();
+    else
+      j.value(g.crs_text);
     j.end_object();
     j.finish();
     return cli::kExitOk;
@@ -239,6 +285,8 @@ int run(int argc, char** argv) {
                 shortest(*g.origin_y).c_str());
   else
     std::printf("origin:       unknown\n");
+  if (const auto gt = terrain::geotransform(g)) print_geotransform(*gt);
+  print_crs(g.crs_epsg ? uint32_t(*g.crs_epsg) : 0, g.crs_text);
   return cli::kExitOk;
 }
 

@@ -32,15 +32,13 @@ void heat_colour(double e, uint8_t* rgb) {
   for (int c = 0; c < 3; ++c) rgb[c] = uint8_t(stops[i][c] + f * (stops[i + 1][c] - stops[i][c]) + 0.5);
 }
 
-// Writes under a temporary name, renamed when complete.
+// Writes a picture (write_image8 goes through a temporary, renamed when whole).
 void write_picture(const cli::Canvas& canvas, const std::string& path, const char* what) {
-  const std::string tmp = path + ".tmp.png";
   try {
-    canvas.write_png(tmp);
+    canvas.write_png(path);
   } catch (const Error& e) {
-    throw Error(ErrorCode::WriteFailed, path + ": cannot write the " + what + " (" + e.what() + ")");
+    throw Error(ErrorCode::WriteFailed, std::string("cannot write the ") + what + ": " + e.what());
   }
-  std::filesystem::rename(tmp, path);
 }
 
 // The heat map of |error| with a colour scale bar below it (0 .. scale_max metres, labelled).

@@ -54,20 +54,30 @@ PtcCoderOptions PtcResidualCoder::level_options(int levels_above_finest) const {
 std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
                                               int32_t* reconstructed, int levels_above_finest) {
   const codec::EncodeOptions copts = to_codec(level_options(levels_above_finest));
-  // The bound is ~16 bytes per sample and a band's stream ~0.3: a fresh zero-filled buffer per band
-  // cost 8-14% of the build's CPU in page faults, so each thread keeps one and copies out the bytes.
-  // It is not zero-filled either: pages the coder never writes stay unmapped, so a thread holds about
-  // what its streams use instead of 16 bytes per band sample (8192^2 at 16 threads: 267 MB).
+  // A fresh zero-filled buffer per band cost 8-14% of the build's CPU in page faults, so each thread
+  // keeps one and copies out the bytes. The bound is ~16 bytes per sample and a band's stream ~0.3:
+  // a buffer of the bound was most of a wide input's memory (a 4194304-column band of 64 rows, 4 GiB
+  // per thread). The buffer starts at kGuessBytesPerSample and is not zero-filled (pages the coder
+  // never writes stay unmapped); a stream that does not fit (noise coded losslessly) is coded again
+  // into the bound, with the same result.
+  constexpr size_t kGuessBytesPerSample = 2;
   thread_local std::unique_ptr<uint8_t[]> buffer;
   thread_local size_t capacity = 0;
+  const auto reserve = [](size_t bytes) {
+    if (capacity >= bytes) return;
+    buffer.reset(new uint8_t[bytes]);
+    capacity = bytes;
+  };
   const size_t bound = codec::encode_bound(w, h, copts);
-  if (capacity < bound) {
-    buffer.reset(new uint8_t[bound]);
-    capacity = bound;
-  }
+  reserve(std::min(bound, (size_t(1) << 16) + kGuessBytesPerSample * size_t(w) * size_t(h)));
   size_t written = 0;
-  const codec::Status s = codec::encode(residual, w, w, h, copts, buffer.get(), bound, &written,
-                                        thread_scratch(), reconstructed, w);
+  codec::Status s = codec::encode(residual, w, w, h, copts, buffer.get(), capacity, &written,
+                                  thread_scratch(), reconstructed, w);
+  if (s == codec::Status::BufferTooSmall && capacity < bound) {
+    reserve(bound);
+    s = codec::encode(residual, w, w, h, copts, buffer.get(), capacity, &written, thread_scratch(),
+                      reconstructed, w);
+  }
   if (s != codec::Status::Ok) {
     int64_t largest = 0;
     for (int64_t i = 0; i < w * h; ++i) largest = std::max<int64_t>(largest, std::abs(int64_t(residual[i])));

@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -130,19 +132,55 @@ struct Trial {
 };
 
 // Only the figures of a trial matter: it keeps no output and writes no file. Over several windows:
-// the rms of all their samples, the largest error, the bytes of all.
-Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const PtcCoderOptions& co) {
-  PtcResidualCoder coder(co);
+// the rms of all their samples, the largest error, the bytes of all. Each window's D is fitted by its
+// first trial and then given to the later ones as a fixed filter (the same taps, so the same trial
+// results): the fit does not depend on the step, and refitting it was a third of the calibration's
+// CPU time. filters: one per window, empty until fitted.
+Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const PtcCoderOptions& co,
+                  std::vector<std::optional<DownsampleFilter>>& filters) {
+  PtcResidualCoder coder(co);  // thread-safe: each thread has its own libcodec scratch
+  const size_t n = windows.size();
+  filters.resize(n);
+  // The windows are small pyramids that use few threads well: build them side by side, the threads
+  // shared out, and add their figures in window order (the same sums for any thread count).
+  std::vector<BuildResult> results(n);
+  std::vector<uint64_t> bytes(n, 0);
+  std::vector<std::exception_ptr> errors(n);
+  const int parallel = int(std::clamp<size_t>(size_t(bo.threads), 1, std::max<size_t>(n, 1)));
+  const auto build_window = [&](size_t k) {
+    try {
+      CountingSink sink;
+      BuildOptions wo = bo;
+      wo.threads = std::max(1, bo.threads / parallel);
+      if (filters[k]) {
+        wo.use_fixed_filter = true;
+        wo.fixed_filter = *filters[k];
+      }
+      results[k] = build_pyramid(windows[k], wo, coder, sink);
+      bytes[k] = sink.band_bytes;
+    } catch (...) {
+      errors[k] = std::current_exception();
+    }
+  };
+  for (size_t first = 0; first < n; first += size_t(parallel)) {
+    const size_t last = std::min(n, first + size_t(parallel));
+    std::vector<std::thread> pool;
+    for (size_t k = first + 1; k < last; ++k) pool.emplace_back(build_window, k);
+    build_window(first);
+    for (std::thread& th : pool) th.join();
+  }
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
   Trial t{co.step, 0, 0, 0};
   double squares = 0, samples = 0;
-  for (const Heightmap& window : windows) {
-    CountingSink sink;
-    const BuildResult r = build_pyramid(window, bo, coder, sink);
-    const double n = double(window.width() * window.height());
-    squares += r.levels.back().error_rms * r.levels.back().error_rms * n;
-    samples += n;
+  for (size_t k = 0; k < n; ++k) {
+    const BuildResult& r = results[k];
+    if (!filters[k]) filters[k] = r.header.filter;
+    const double count = double(windows[k].width() * windows[k].height());
+    squares += r.levels.back().error_rms * r.levels.back().error_rms * count;
+    samples += count;
     t.max_abs = std::max(t.max_abs, r.levels.back().error_max_abs);
-    t.bytes += sink.band_bytes;
+    t.bytes += bytes[k];
   }
   t.rms = samples > 0 ? std::sqrt(squares / samples) : 0;
   return t;
@@ -173,6 +211,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   // the calibration sample's mid-range. Ordinary DEMs keep their native units (offset 0).
   const std::vector<Heightmap> window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
+  std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
       LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
 
@@ -211,7 +250,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       double step = std::clamp(codec::step_for_target_rms(target), 1.0, kLargestStep);
       for (int i = 0; i < 10; ++i) {
         co.step = step;
-        const Trial t = trial_build(window, bo, co);
+        const Trial t = trial_build(window, bo, co, window_filters);
         out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " +
                                       std::to_string(t.rms * mpu) + " m, " + std::to_string(t.bytes) +
                                       " bytes");
@@ -254,7 +293,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
         Trial best{};
         for (double f : {1.0, 1.5, 2.0, 3.0, 4.0}) {
           co.step = std::clamp(f * out.max_error_units, 1.0, kLargestStep);
-          const Trial t = trial_build(window, bo, co);
+          const Trial t = trial_build(window, bo, co, window_filters);
           out.calibration_log.push_back("step " + std::to_string(t.step) + " units: max " +
                                         std::to_string(t.max_abs) + " units, " + std::to_string(t.bytes) +
                                         " bytes");
@@ -285,9 +324,14 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   info.vertical_units = "m";
   info.vertical_scale = mpu;
   info.vertical_offset = stored.offset_metres;
-  if (g.origin_x && g.origin_y)
-    info.georeference = Georeference{*g.origin_x, *g.origin_y,
-                                     g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units};
+  if (const auto gt = geotransform(g)) {
+    Georeference geo;
+    geo.geotransform = *gt;
+    geo.units = g.horizontal_units == "arc-second" ? "degree" : g.horizontal_units;
+    geo.crs_epsg = g.crs_epsg ? uint32_t(*g.crs_epsg) : 0;
+    geo.crs_text = g.crs_text;
+    info.georeference = std::move(geo);
+  }
   info.quantisation.step_units = co.step;
   info.quantisation.step_metres = co.step * mpu;
   info.quantisation.mode = o.mode;

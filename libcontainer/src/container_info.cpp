@@ -4,6 +4,7 @@
 #include <string>
 
 #include "container/container.h"
+#include "core/text.h"
 
 namespace terrain::container {
 
@@ -90,7 +91,15 @@ void validate_info(const ContainerInfo& info) {
           "units strings must be printable UTF-8");
   if (info.georeference) {
     const Georeference& g = *info.georeference;
-    require(std::isfinite(g.origin_x) && std::isfinite(g.origin_y), "georeference origin must be finite");
+    const auto& gt = g.geotransform;
+    for (size_t i = 0; i < 6; ++i)
+      require(std::isfinite(gt[i]), "georeference geotransform[" + std::to_string(i) + "] must be finite");
+    require(gt[1] != 0 && gt[5] != 0, "georeference pixel size (geotransform[1], [5]) must be non-zero");
+    require(gt[2] == 0 && gt[4] == 0, "georeference rotation terms (geotransform[2], [4]) must be 0");
+    require(std::isfinite(g.origin_x()) && std::isfinite(g.origin_y()), "georeference origin must be finite");
+    require(is_crs_text(g.crs_text), "georeference crs_text must be at most " +
+                                         std::to_string(kMaxCrsTextBytes) +
+                                         " bytes without control characters");
     require(g.units.size() <= kMaxUnitsLength && printable_utf8(g.units),
             "georeference units must be at most " + std::to_string(kMaxUnitsLength) +
                 " bytes of printable UTF-8");

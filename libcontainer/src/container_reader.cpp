@@ -15,6 +15,7 @@
 #include "container/internal/container_mask.h"
 #include "container/internal/mmap_file.h"
 #include "core/file.h"
+#include "core/text.h"
 
 namespace terrain::container {
 
@@ -148,7 +149,10 @@ Container Container::open(const std::string& path) {
   const uint32_t level_count = get_u32(idx + info::kLevelCount);
   const uint32_t record_size = get_u32(idx + info::kLevelRecordSize);
   const uint32_t filter_size = get_u32(idx + info::kFilterSize);
-  parse.require(newer ? (info_size >= info::kSizeV1 && info_size % 8 == 0) : info_size == info::kSizeV1,
+  // 2.0 info blocks end at kSizeV1; 2.1 appends the geotransform and the CRS (kSizeV2_1).
+  const bool has_crs_fields = minor >= 1;
+  const uint32_t known_info_size = has_crs_fields ? info::kSizeV2_1 : info::kSizeV1;
+  parse.require(newer ? (info_size >= known_info_size && info_size % 8 == 0) : info_size == known_info_size,
                 "index info size " + std::to_string(info_size) + " is invalid");
   // Version 2.0 records are those of 1.1: the residual statistics, then the reconstruction error.
   const uint32_t known_record_size = level::kSizeV1_1;
@@ -162,11 +166,20 @@ Container Container::open(const std::string& path) {
   parse.require(filter_size <= kMaxFilterSize,
                 "filter size " + std::to_string(filter_size) + " is too large");
   // Each term is below 2^38, so the sum cannot wrap.
-  const uint64_t needed =
+  const uint64_t filter_end =
       uint64_t(info_size) + uint64_t(level_count) * record_size + uint64_t(filter_size) * filter_size * 8;
+  // 2.1: the CRS text follows the filter, zero-padded to 8 bytes.
+  const uint32_t crs_text_size = has_crs_fields ? get_u32(idx + info::kCrsTextSize) : 0;
+  parse.require(crs_text_size <= kMaxCrsTextBytes, "georeference crs_text_size " +
+                                                       std::to_string(crs_text_size) + " exceeds " +
+                                                       std::to_string(kMaxCrsTextBytes) + " bytes");
+  const uint64_t needed = align_up(filter_end + crs_text_size);
   parse.require(
       newer ? index_size >= needed : index_size == needed,
       "index is " + std::to_string(index_size) + " bytes, its contents need " + std::to_string(needed));
+  parse.require(
+      Parser::all_zero(idx + filter_end + crs_text_size, size_t(needed - filter_end - crs_text_size)),
+      "padding after the CRS text is not zero");
 
   ContainerInfo& info = c.info_;
   info.width = get_u64(idx + info::kWidth);
@@ -179,16 +192,31 @@ Container Container::open(const std::string& path) {
   info.vertical_scale = get_f64(idx + info::kVerticalScale);
   info.vertical_offset = get_f64(idx + info::kVerticalOffset);
   const uint32_t has_georeference = get_u32(idx + info::kHasGeoreference);
+  std::optional<std::pair<double, double>> stored_origin;  // 2.1: the 2.0 origin fields
   parse.require(has_georeference <= 1, "georeference flag is " + std::to_string(has_georeference));
   if (has_georeference) {
     Georeference g;
-    g.origin_x = get_f64(idx + info::kOriginX);
-    g.origin_y = get_f64(idx + info::kOriginY);
+    const double origin_x = get_f64(idx + info::kOriginX), origin_y = get_f64(idx + info::kOriginY);
     g.units = parse.string_field(idx + info::kGeoreferenceUnits, info::kUnitsField, "georeference units");
+    if (has_crs_fields) {
+      for (size_t i = 0; i < 6; ++i) g.geotransform[i] = get_f64(idx + info::kGeotransform + 8 * i);
+      g.crs_epsg = get_u32(idx + info::kCrsEpsg);
+      g.crs_text.assign(reinterpret_cast<const char*>(idx + filter_end), crs_text_size);
+      stored_origin = {origin_x, origin_y};  // checked against the geotransform after validate_info
+    } else {
+      // 2.0: north-up, the pixel size from the spacing (arc-seconds -> degrees).
+      const double per_unit =
+          info.horizontal_units == "arc-second" && g.units == "degree" ? 1.0 / 3600.0 : 1.0;
+      const double dx = info.spacing_x * per_unit, dy = info.spacing_y * per_unit;
+      g.geotransform = {origin_x - 0.5 * dx, dx, 0.0, origin_y + 0.5 * dy, 0.0, -dy};
+    }
     info.georeference = std::move(g);
   } else {
     parse.require(Parser::all_zero(idx + info::kOriginX, info::kStepUnits - info::kOriginX),
                   "georeference fields are set but its flag is not");
+    if (has_crs_fields)
+      parse.require(Parser::all_zero(idx + info::kGeotransform, info::kSizeV2_1 - info::kGeotransform),
+                    "georeference geotransform or CRS fields are set but its flag is not");
   }
   const uint32_t provenance = get_u32(idx + info::kFilterProvenance);
   parse.require(provenance <= uint32_t(FilterProvenance::Fallback),
@@ -241,6 +269,11 @@ Container Container::open(const std::string& path) {
   } catch (const std::invalid_argument& e) {
     parse.fail(Code::CorruptData, e.what());
   }
+  // 2.1 keeps 2.0's origin fields for 2.0 readers: they must say what the geotransform says.
+  if (stored_origin)
+    parse.require(stored_origin->first == info.georeference->origin_x() &&
+                      stored_origin->second == info.georeference->origin_y(),
+                  "georeference origin_x/origin_y disagree with its geotransform");
 
   // --- metadata and mask, each with its own checksum
   const uint64_t metadata_offset = get_u64(idx + info::kMetadataOffset);

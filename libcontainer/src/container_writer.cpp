@@ -39,15 +39,8 @@ ContainerWriter::LevelRecord& ContainerWriter::LevelRecord::operator=(LevelRecor
 
 ContainerWriter::ContainerWriter(std::string path) : path_(std::move(path)), directory_(directory_of(path_)) {
   check_output_path(path_);
-  const std::string base = path_ + ".tmp." + std::to_string(::getpid());
-  // O_EXCL so two writers in one process aimed at the same target cannot share a temp file.
-  for (int attempt = 0; attempt < 100 && fd_ < 0; ++attempt) {
-    temp_path_ = attempt == 0 ? base : base + "." + std::to_string(attempt);
-    fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (fd_ < 0 && errno != EEXIST) break;
-  }
-  if (fd_ < 0) fail("cannot create");
-  const uint8_t zeros[sb::kSizeV1] = {};  // superblock placeholder, overwritten by finish()
+  fd_ = create_temp_beside(path_, "", &temp_path_);  // exclusive, random name: no two writers share it
+  const uint8_t zeros[sb::kSizeV1] = {};             // superblock placeholder, overwritten by finish()
   try {
     write_bytes(zeros, sizeof zeros);
   } catch (...) {
@@ -213,10 +206,12 @@ void ContainerWriter::finish() {
   pad_to_alignment();
 
   const size_t filter_count = info.filter.size();
-  const size_t index_size = info::kSizeV1 + level_count * level::kSizeV1_1 + filter_count * 8;
+  const size_t filter_end = info::kSizeV2_1 + level_count * level::kSizeV1_1 + filter_count * 8;
+  const std::string crs_text = info.georeference ? info.georeference->crs_text : std::string();
+  const size_t index_size = size_t(align_up(filter_end + crs_text.size()));
   std::vector<uint8_t> index(index_size, 0);
   uint8_t* p = index.data();
-  put_u32(p + info::kInfoSize, info::kSizeV1);
+  put_u32(p + info::kInfoSize, info::kSizeV2_1);
   put_u32(p + info::kLevelCount, uint32_t(level_count));
   put_u32(p + info::kLevelRecordSize, level::kSizeV1_1);
   put_u32(p + info::kFilterSize, info.filter_size);
@@ -231,9 +226,14 @@ void ContainerWriter::finish() {
   put_u32(p + info::kHasGeoreference, info.georeference ? 1 : 0);
   put_u32(p + info::kFilterProvenance, uint32_t(info.filter_provenance));
   if (info.georeference) {
-    put_f64(p + info::kOriginX, info.georeference->origin_x);
-    put_f64(p + info::kOriginY, info.georeference->origin_y);
-    put_string(p + info::kGeoreferenceUnits, info.georeference->units, info::kUnitsField);
+    const Georeference& g = *info.georeference;
+    put_f64(p + info::kOriginX, g.origin_x());
+    put_f64(p + info::kOriginY, g.origin_y());
+    put_string(p + info::kGeoreferenceUnits, g.units, info::kUnitsField);
+    for (size_t i = 0; i < 6; ++i) put_f64(p + info::kGeotransform + 8 * i, g.geotransform[i]);
+    put_u32(p + info::kCrsEpsg, g.crs_epsg);
+    put_u32(p + info::kCrsTextSize, uint32_t(crs_text.size()));
+    std::memcpy(p + filter_end, crs_text.data(), crs_text.size());
   }
   put_f64(p + info::kStepUnits, info.quantisation.step_units);
   put_f64(p + info::kStepMetres, info.quantisation.step_metres);
@@ -248,7 +248,7 @@ void ContainerWriter::finish() {
   put_u64(p + info::kMetadataOffset, metadata_offset);
   put_u64(p + info::kMetadataSize, metadata_json_.size());
   for (size_t l = 0; l < level_count; ++l) {
-    uint8_t* r = p + info::kSizeV1 + l * level::kSizeV1_1;
+    uint8_t* r = p + info::kSizeV2_1 + l * level::kSizeV1_1;
     const LevelInfo& li = info.levels[l];
     put_u64(r + level::kWidth, li.width);
     put_u64(r + level::kHeight, li.height);
@@ -267,7 +267,7 @@ void ContainerWriter::finish() {
       put_f64(r + level::kErrorMax, li.error->max_abs);
     }
   }
-  uint8_t* f = p + info::kSizeV1 + level_count * level::kSizeV1_1;
+  uint8_t* f = p + info::kSizeV2_1 + level_count * level::kSizeV1_1;
   for (size_t i = 0; i < filter_count; ++i) put_f64(f + 8 * i, info.filter[i]);
   const uint64_t index_offset = position_;
   write_bytes(index.data(), index.size());

@@ -5,7 +5,9 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
+#include <mutex>
 
 #include "core/error.h"
 
@@ -40,6 +42,25 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
     if (::stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino)
       throw Error(ErrorCode::WriteFailed, path + ": is the input " + in + "; refusing to overwrite it");
   }
+}
+
+int create_temp_beside(const std::string& path, const std::string& suffix, std::string* temp) {
+  std::string name = path + ".tmp.XXXXXX" + suffix;
+  const int fd = ::mkostemps(name.data(), int(suffix.size()), O_CLOEXEC);
+  if (fd < 0)
+    throw Error(ErrorCode::WriteFailed,
+                path + ": cannot create a temporary file beside it: " + std::strerror(errno));
+  // mkostemps creates 0600; an output gets what open(O_CREAT, 0666) would have given it. The umask
+  // can only be read by setting it, so it is read once.
+  static std::once_flag once;
+  static mode_t mask = 022;
+  std::call_once(once, [] {
+    mask = ::umask(022);
+    ::umask(mask);
+  });
+  ::fchmod(fd, 0666 & ~mask);
+  *temp = std::move(name);
+  return fd;
 }
 
 }  // namespace terrain

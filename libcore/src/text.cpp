@@ -47,3 +47,16 @@ std::string shortest(double v) {
 }
 
 }  // namespace terrain
+
+namespace terrain {
+
+bool is_crs_text(std::string_view s) {
+  if (s.size() > kMaxCrsTextBytes) return false;
+  for (const char ch : s) {
+    const auto c = static_cast<unsigned char>(ch);
+    if ((c < 0x20 && c != '\t' && c != '\n' && c != '\r') || c == 0x7F) return false;
+  }
+  return true;
+}
+
+}  // namespace terrain

@@ -77,9 +77,15 @@ GeoTiffWriter::GeoTiffWriter(const std::string& path, int64_t width, int64_t hei
   GTIF* gtif = GTIFNew(m.tif);
   if (!gtif) m.fail("cannot start the GeoTIFF keys");
   GTIFKeySet(gtif, GTRasterTypeGeoKey, TYPE_SHORT, 1, RasterPixelIsArea);
-  if (o.epsg) {
-    GTIFKeySet(gtif, GTModelTypeGeoKey, TYPE_SHORT, 1, ModelTypeGeographic);
-    GTIFKeySet(gtif, GeographicTypeGeoKey, TYPE_SHORT, 1, *o.epsg);
+  if (o.epsg || !o.crs_text.empty()) {
+    const int code = o.epsg ? *o.epsg : KvUserDefined;
+    GTIFKeySet(gtif, GTModelTypeGeoKey, TYPE_SHORT, 1,
+               o.geographic ? ModelTypeGeographic : ModelTypeProjected);
+    GTIFKeySet(gtif, o.geographic ? GeographicTypeGeoKey : ProjectedCSTypeGeoKey, TYPE_SHORT, 1, code);
+    if (!o.epsg) {
+      const std::string citation = "ESRI PE String = " + o.crs_text;
+      GTIFKeySet(gtif, GTCitationGeoKey, TYPE_ASCII, 0, citation.c_str());
+    }
   }
   const bool keys_written = GTIFWriteKeys(gtif) != 0;
   GTIFFree(gtif);

@@ -72,8 +72,17 @@ class InputConverter {
         exact_(info.integer_valued() && opt.value_scale == 1.0),
         width_(info.width) {}
 
+  // Converts rows y.. of a band and fills its voids: convert_rows on the whole band, then fill.
   // Returns the number of voids in the band.
   int64_t convert(const double* values, const uint8_t* valid, int64_t y, int64_t rows, int32_t* ints) {
+    const int64_t voids = convert_rows(values, valid, y, rows, ints);
+    if (voids) fill(valid, rows, ints);
+    return voids;
+  }
+
+  // Converts `rows` rows starting at input row y, voids as 0; returns the number of voids. A band
+  // may be converted in pieces, in order, before it is filled.
+  int64_t convert_rows(const double* values, const uint8_t* valid, int64_t y, int64_t rows, int32_t* ints) {
     const int64_t W = width_;
     int64_t voids = 0;
     for (int64_t k = 0; k < rows * W; ++k) {
@@ -93,8 +102,12 @@ class InputConverter {
                                     std::to_string(y + k / W) + ", column " + std::to_string(k % W));
       ints[k] = int32_t(r);
     }
-    if (voids) detail::fill_voids(ints, valid, W, rows, kFillTile, &carry_, scratch_);
     return voids;
+  }
+
+  // Fills the voids of a whole converted band (push-pull; carries state from band to band).
+  void fill(const uint8_t* valid, int64_t rows, int32_t* ints) {
+    detail::fill_voids(ints, valid, width_, rows, kFillTile, &carry_, scratch_);
   }
 
  private:
@@ -294,23 +307,31 @@ class StreamingBuilder {
       std::vector<int32_t> ints;
       int64_t y = 0, rows = 0, voids = 0;
     };
+    // A band keeps its level integers and validity (5 bytes a sample); the samples as read (8 bytes
+    // each) are converted kReadRows rows at a time, so that they are not held for the whole band:
+    // the two bands were most of a wide input's memory. The fill still sees the whole band.
+    constexpr int64_t kReadRows = 8;
     InputBand bands[2];
     for (InputBand& b : bands) {
-      b.values.resize(size_t(B * W));
+      b.values.resize(size_t(std::min(B, kReadRows) * W));
       b.valid.resize(size_t(B * W));
       b.ints.resize(size_t(B * W));
     }
     auto produce = [&](InputBand& b, int64_t y) {
       b.y = y;
       b.rows = std::min(B, H - y);
+      b.voids = 0;
       for (int64_t got = 0; got < b.rows;) {
-        const int64_t n = input.read_rows(b.rows - got, b.values.data() + got * W, b.valid.data() + got * W);
-        if (n <= 0 || n > b.rows - got)
+        const int64_t want = std::min(kReadRows, b.rows - got);
+        const int64_t n = input.read_rows(want, b.values.data(), b.valid.data() + got * W);
+        if (n <= 0 || n > want)
           throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) + " of " +
                                                 std::to_string(H) + " rows");
+        b.voids += converter.convert_rows(b.values.data(), b.valid.data() + got * W, y + got, n,
+                                          b.ints.data() + got * W);
         got += n;
       }
-      b.voids = converter.convert(b.values.data(), b.valid.data(), y, b.rows, b.ints.data());
+      if (b.voids) converter.fill(b.valid.data(), b.rows, b.ints.data());
     };
     produce(bands[0], 0);
     for (int64_t k = 0; bands[k & 1].y < H && bands[k & 1].rows > 0; ++k) {

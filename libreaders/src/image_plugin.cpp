@@ -87,6 +87,7 @@ LoadedPlugin load_plugin() {
   find("terrain_image_open", f.open);
   find("terrain_image_read_rows", f.read_rows);
   find("terrain_image_close", f.close);
+  find("terrain_image_read_georef", f.read_georef);
   find("terrain_image_create", f.create);
   find("terrain_image_write_rows", f.write_rows);
   find("terrain_image_finish", f.finish);

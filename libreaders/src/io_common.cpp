@@ -3,8 +3,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <system_error>
@@ -30,12 +32,52 @@ std::optional<SampleType> sample_type_from_name(const std::string& name) {
 }
 
 const char* file_format_name(FileFormat f) {
-  static constexpr const char* kNames[] = {"srtm-hgt", "raw",   "esri-bil",
-                                           "esri-flt", "image", "terrain-rgb-image"};
+  static constexpr const char* kNames[] = {"srtm-hgt",          "raw",       "esri-bil", "esri-flt", "image",
+                                           "terrain-rgb-image", "esri-ascii"};
   return enum_name(f, kNames);
 }
 
+std::optional<std::array<double, 6>> geotransform(const GridInfo& info) {
+  if (!info.origin_x || !info.origin_y) return std::nullopt;
+  const double per_unit = info.horizontal_units == "arc-second" ? 1.0 / 3600.0 : 1.0;
+  const double dx = info.spacing_x * per_unit, dy = info.spacing_y * per_unit;
+  return std::array<double, 6>{*info.origin_x - 0.5 * dx, dx, 0.0, *info.origin_y + 0.5 * dy, 0.0, -dy};
+}
+
 namespace io {
+
+std::optional<int> epsg_from_wkt(const std::string& wkt) {
+  // The outermost object's identifier is the last one, followed only by closing brackets.
+  for (const char* tag : {"AUTHORITY[\"EPSG\",", "ID[\"EPSG\","}) {
+    const size_t at = wkt.rfind(tag);
+    if (at == std::string::npos) continue;
+    size_t i = at + std::strlen(tag);
+    if (i < wkt.size() && wkt[i] == '"') ++i;
+    int code = 0;
+    const auto res = std::from_chars(wkt.data() + i, wkt.data() + wkt.size(), code);
+    if (res.ec != std::errc() || code <= 0) continue;
+    size_t j = size_t(res.ptr - wkt.data());
+    if (j < wkt.size() && wkt[j] == '"') ++j;
+    if (j >= wkt.size() || wkt[j] != ']') continue;
+    bool outermost = true;
+    for (size_t k = j + 1; k < wkt.size(); ++k)
+      if (wkt[k] != ']' && !std::isspace(static_cast<unsigned char>(wkt[k]))) outermost = false;
+    if (outermost) return code;
+  }
+  // ESRI WKT (what GDAL writes to .prj files) names instead of identifying: the common names.
+  const bool projected = wkt.find("PROJCS[") != std::string::npos;
+  if (!projected && wkt.rfind("GEOGCS[\"GCS_WGS_1984\"", 0) == 0) return 4326;
+  const std::string utm = "PROJCS[\"WGS_1984_UTM_Zone_";
+  if (wkt.rfind(utm, 0) == 0) {
+    int zone = 0;
+    const char* p = wkt.data() + utm.size();
+    const auto res = std::from_chars(p, wkt.data() + wkt.size(), zone);
+    if (res.ec == std::errc() && zone >= 1 && zone <= 60 && res.ptr + 1 < wkt.data() + wkt.size() &&
+        res.ptr[1] == '"' && (res.ptr[0] == 'N' || res.ptr[0] == 'S'))
+      return (res.ptr[0] == 'N' ? 32600 : 32700) + zone;
+  }
+  return std::nullopt;
+}
 
 void fail(ErrorCode code, const std::string& path, const std::string& problem) {
   throw Error(code, path + ": " + problem);
@@ -102,6 +144,7 @@ uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
   if (g.width <= 0 || g.height <= 0 || g.width > kMaxSide || g.height > kMaxSide)
     fail(ErrorCode::DimensionMismatch, path,
          "invalid dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height));
+  check_row_width(path, g.width);
   const unsigned __int128 bytes = (unsigned __int128)g.width * (unsigned __int128)g.height *
                                   (unsigned __int128)stored_bytes(layout.stored);
   if (bytes > (unsigned __int128)(uint64_t(1) << 56))  // 64 PiB: beyond any grid, and no 64-bit wrap
@@ -109,6 +152,13 @@ uint64_t layout_bytes(const std::string& path, const RawLayout& layout) {
          "dimensions " + std::to_string(g.width) + "x" + std::to_string(g.height) +
              " need more than 2^56 bytes");
   return uint64_t(bytes);
+}
+
+void check_row_width(const std::string& path, int64_t width) {
+  if (width > kMaxRowSamples)
+    fail(ErrorCode::DimensionMismatch, path,
+         "rows of " + std::to_string(width) + " samples are wider than the limit of " +
+             std::to_string(kMaxRowSamples) + " (2^20; docs/io.md, \"Limits\")");
 }
 
 void apply_common_overrides(GridInfo& info, const ReadOptions& o) {
@@ -143,14 +193,9 @@ std::string read_small_text_file(const std::string& path, size_t limit) {
 
 AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
   check_output_path(target_);
-  static std::atomic<unsigned> counter{0};
-  std::filesystem::path p(target_);
-  // Keep the extension so OpenImageIO chooses the writer from the temporary name too.
-  std::string ext = p.extension().string();
-  std::string stem = p.stem().string();
-  std::string temp_name = "." + stem + ".partial-" + std::to_string(::getpid()) + "-" +
-                          std::to_string(counter.fetch_add(1)) + ext;
-  temp_ = (p.parent_path() / temp_name).string();
+  // Keep the extension last so that OpenImageIO chooses the writer from the temporary name too.
+  const std::string ext = std::filesystem::path(target_).extension().string();
+  ::close(create_temp_beside(target_, ext, &temp_));  // created exclusively; writers reopen it by name
 }
 
 AtomicOutput::~AtomicOutput() {

@@ -3,17 +3,19 @@
 #include <cstdio>
 #include <cstring>
 
+#include "core/text.h"
 #include "readers/internal/io_internal.h"
 
 namespace terrain {
 namespace {
 
-enum class Kind { Hgt, Esri, Image, Raw };
+enum class Kind { Hgt, Esri, Ascii, Image, Raw };
 
 Kind detect_kind(const std::string& path, const ReadOptions& options) {
   using io::ends_with_ci;
   if (ends_with_ci(path, ".hgt") || ends_with_ci(path, ".hgt.gz")) return Kind::Hgt;
   if (ends_with_ci(path, ".bil") || ends_with_ci(path, ".flt")) return Kind::Esri;
+  if (ends_with_ci(path, ".asc")) return Kind::Ascii;
   for (const char* ext : {".png", ".tif", ".tiff", ".exr"})
     if (ends_with_ci(path, ext)) return Kind::Image;
   for (const char* ext : {".raw", ".bin", ".r16", ".r32", ".dat"})
@@ -37,7 +39,7 @@ Kind detect_kind(const std::string& path, const ReadOptions& options) {
   if (options.width || options.height || options.sample_type || io::file_exists(path + ".json"))
     return Kind::Raw;
   io::fail(ErrorCode::UnknownType, path,
-           "unknown format: expected .hgt[.gz], .bil/.flt, .png/.tif/.exr, or a raw grid with a .json "
+           "unknown format: expected .hgt[.gz], .bil/.flt, .asc, .png/.tif/.exr, or a raw grid with a .json "
            "sidecar or --type/--width/--height");
 }
 
@@ -58,6 +60,11 @@ const GridInfo& checked(const GridInfo& g, const std::string& path) {
     if (static_cast<unsigned char>(c) < 0x20) bad("horizontal_units", "must be printable text");
   if (g.origin_x && !std::isfinite(*g.origin_x)) bad("origin_x", "must be finite");
   if (g.origin_y && !std::isfinite(*g.origin_y)) bad("origin_y", "must be finite");
+  if (!is_crs_text(g.crs_text))
+    bad("crs_text", "must be at most " + std::to_string(kMaxCrsTextBytes) +
+                        " bytes of text without control characters (it has " +
+                        std::to_string(g.crs_text.size()) + " bytes)");
+  if (g.crs_epsg && !(*g.crs_epsg >= 1 && *g.crs_epsg <= 999999)) bad("crs_epsg", "must be 1..999999");
   return g;
 }
 
@@ -69,6 +76,8 @@ GridInfo probe(const std::string& path, const ReadOptions& options) {
       return checked(io::probe_hgt_layout(path, options).info, path);
     case Kind::Esri:
       return checked(io::probe_esri_layout(path, options).info, path);
+    case Kind::Ascii:
+      return checked(io::probe_ascii_grid(path, options), path);
     case Kind::Image:
       return checked(io::probe_image(path, options), path);
     case Kind::Raw:
@@ -85,6 +94,9 @@ std::unique_ptr<BandReader> open_band_reader(const std::string& path, const Read
       break;
     case Kind::Esri:
       reader = io::open_raw_stream(path, io::probe_esri_layout(path, options));
+      break;
+    case Kind::Ascii:
+      reader = io::open_ascii_grid(path, options);
       break;
     case Kind::Image:
       reader = io::open_image_reader(path, options);

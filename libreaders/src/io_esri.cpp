@@ -1,4 +1,5 @@
 // ESRI BIL / FLT grids: a whitespace-separated "KEY value" .hdr beside a fixed-layout sample file.
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -67,6 +68,21 @@ int64_t header_dimension(const Header& h, const std::string& key, const std::str
 }
 
 }  // namespace
+
+void apply_prj(const std::string& prj, GridInfo& g) {
+  // A .prj with a geographic and no projected system means degrees; spacing is kept in arc-seconds.
+  // Its text is the CRS (kept as is, trailing white space trimmed; checked by is_crs_text).
+  if (!file_exists(prj)) return;
+  std::string text = read_small_text_file(prj, kSideFileLimit);
+  while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+  g.crs_text = text;
+  g.crs_epsg = epsg_from_wkt(text);
+  if (text.find("GEOGCS") != std::string::npos && text.find("PROJCS") == std::string::npos) {
+    g.horizontal_units = "arc-second";
+    g.spacing_x *= 3600.0;
+    g.spacing_y *= 3600.0;
+  }
+}
 
 RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options) {
   uint64_t size = existing_file_size(path);
@@ -150,16 +166,7 @@ RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options)
   if (auto xc = header_number(h, "XLLCENTER", where)) g.origin_x = *xc;
   if (auto yc = header_number(h, "YLLCENTER", where)) g.origin_y = *yc + double(g.height - 1) * g.spacing_y;
 
-  // A .prj with a geographic and no projected system means degrees; spacing is kept in arc-seconds.
-  std::string prj = hdr.substr(0, hdr.size() - 4) + ".prj";
-  if (file_exists(prj)) {
-    const std::string text = read_small_text_file(prj, kSideFileLimit);
-    if (text.find("GEOGCS") != std::string::npos && text.find("PROJCS") == std::string::npos) {
-      g.horizontal_units = "arc-second";
-      g.spacing_x *= 3600.0;
-      g.spacing_y *= 3600.0;
-    }
-  }
+  apply_prj(hdr.substr(0, hdr.size() - 4) + ".prj", g);
 
   apply_common_overrides(g, options);
   uint64_t need = layout_bytes(path, layout) + layout.data_offset;

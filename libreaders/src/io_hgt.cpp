@@ -93,6 +93,7 @@ RawLayout probe_hgt_layout(const std::string& path, const ReadOptions& options) 
   if (parse_tile_name(std::filesystem::path(path).filename().string(), lat, lon)) {
     g.origin_x = double(lon);
     g.origin_y = double(lat + 1);  // row 0 is the northern edge, one degree above the SW corner
+    g.crs_epsg = 4326;             // SRTM heights are on WGS 84 (EGM96 geoid)
   }
   apply_common_overrides(g, options);
   return layout;

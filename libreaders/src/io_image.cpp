@@ -2,10 +2,12 @@
 // TIFF/EXR, Mapbox Terrain-RGB PNG; read scanline band by scanline band, and the 16-bit / float32
 // image writers, and the 8-bit writer for pictures.
 #include <array>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <vector>
 
+#include "core/text.h"
 #include "readers/image8.h"
 #include "readers/internal/image_plugin.h"
 #include "readers/internal/io_internal.h"
@@ -44,8 +46,95 @@ OpenedImage open_image(const std::string& path) {
   return image;
 }
 
-ImagePlan plan_image(const std::string& path, const terrain_image_header& header,
-                     const ReadOptions& options) {
+// GeoTIFF georeference (tags read by the plugin) into g: origin, spacing and units, CRS, nodata.
+// Throws MissingField naming the file and the tag for values no stage could use.
+void apply_geotiff(const std::string& path, const terrain_image_georef& t, GridInfo& g) {
+  const auto bad = [&](const std::string& field, const std::string& rule) {
+    fail(ErrorCode::MissingField, path, "GeoTIFF " + field + " " + rule);
+  };
+  if (t.has_nodata) {
+    const std::string text = t.nodata;
+    double v = 0;
+    size_t begin = text.find_first_not_of(" \t");
+    if (begin == std::string::npos) bad("GDAL_NODATA", "is empty");
+    const std::string value = text.substr(begin, text.find_last_not_of(" \t") + 1 - begin);
+    const auto res = std::from_chars(value.data(), value.data() + value.size(), v);
+    if (to_lower(value) == "nan")
+      g.nodata = std::nan("");
+    else if (res.ec != std::errc() || res.ptr != value.data() + value.size() || !std::isfinite(v))
+      bad("GDAL_NODATA", "is not a number: \"" + text + "\"");
+    else
+      g.nodata = v;
+  }
+  std::array<double, 6> gt{};  // GDAL order, pixel corners once PixelIsPoint is accounted for
+  std::string field;           // the tag gt came from, for messages
+  const auto all_finite = [](const double* v, int n) {
+    for (int i = 0; i < n; ++i)
+      if (!std::isfinite(v[i])) return false;
+    return true;
+  };
+  if (t.transformation_count > 0) {
+    field = "ModelTransformation";
+    if (t.transformation_count != 16)
+      bad(field, "has " + std::to_string(t.transformation_count) + " values, not 16");
+    const double* m = t.transformation;
+    if (!all_finite(m, 16)) bad(field, "must be finite");
+    gt = {m[3], m[0], m[1], m[7], m[4], m[5]};
+  } else if (t.tiepoint_count > 0 || t.pixel_scale_count > 0) {
+    field = "ModelTiepoint";
+    if (t.tiepoint_count > 6)
+      bad(field,
+          "has " + std::to_string(t.tiepoint_count / 6) +
+              " tiepoints: ground control points are not supported (one tiepoint and ModelPixelScale)");
+    if (t.tiepoint_count != 6) bad(field, "has " + std::to_string(t.tiepoint_count) + " values, not 6");
+    if (!all_finite(t.tiepoint, 6)) bad(field, "must be finite");
+    if (t.pixel_scale_count < 2) bad("ModelPixelScale", "is missing or has fewer than 2 values");
+    if (!all_finite(t.pixel_scale, 2) || t.pixel_scale[0] == 0 || t.pixel_scale[1] == 0)
+      bad("ModelPixelScale", "must be finite and non-zero (" + format_double(t.pixel_scale[0]) + ", " +
+                                 format_double(t.pixel_scale[1]) + ")");
+    const double* tp = t.tiepoint;
+    const double sx = t.pixel_scale[0], sy = t.pixel_scale[1];
+    gt = {tp[3] - tp[0] * sx, sx, 0.0, tp[4] + tp[1] * sy, 0.0, -sy};
+  } else {
+    return;  // no georeference
+  }
+  if (gt[2] != 0 || gt[4] != 0)
+    bad(field, "has rotation terms (" + format_double(gt[2]) + ", " + format_double(gt[4]) +
+                   "): rotated grids are not supported");
+  if (!(gt[1] > 0 && gt[5] < 0))
+    bad(field, "pixel size " + format_double(gt[1]) + " x " + format_double(gt[5]) +
+                   " is not north-up with columns east (x > 0, y < 0): flipped grids are not supported");
+  // PixelIsPoint: the tags place pixel centres, so the corners lie half a pixel up and left.
+  if (t.raster_type == 2) {
+    gt[0] -= 0.5 * gt[1];
+    gt[3] -= 0.5 * gt[5];
+  }
+  const bool geographic = t.model_type == 2;
+  const int code = geographic ? t.geographic_type : t.model_type == 1 ? t.projected_type : 0;
+  if (code >= 1 && code < 32767) g.crs_epsg = code;
+  if (t.citation_truncated) bad("citation", "is longer than " + std::to_string(kMaxCrsTextBytes) + " bytes");
+  const std::string citation = t.citation;
+  const std::string esri = "ESRI PE String = ";
+  if (!g.crs_epsg) {
+    if (citation.rfind(esri, 0) == 0)
+      g.crs_text = citation.substr(esri.size());
+    else if (citation.rfind("PROJCS[", 0) == 0 || citation.rfind("GEOGCS[", 0) == 0)
+      g.crs_text = citation;
+    if (!g.crs_text.empty()) g.crs_epsg = epsg_from_wkt(g.crs_text);
+  }
+  const double per_unit = geographic ? 3600.0 : 1.0;  // spacing in arc-seconds for degrees
+  g.horizontal_units = geographic ? "arc-second" : "m";
+  g.spacing_x = gt[1] * per_unit;
+  g.spacing_y = -gt[5] * per_unit;
+  g.origin_x = gt[0] + 0.5 * gt[1];
+  g.origin_y = gt[3] + 0.5 * gt[5];
+  if (!std::isfinite(*g.origin_x) || !std::isfinite(*g.origin_y) || !std::isfinite(g.spacing_x) ||
+      !std::isfinite(g.spacing_y))
+    bad(field, "gives a non-finite origin or pixel size");
+}
+
+ImagePlan plan_image(const std::string& path, const OpenedImage& image, const ReadOptions& options) {
+  const terrain_image_header& header = image.header;
   ImagePlan plan;
   GridInfo& g = plan.info;
   g.width = header.width;
@@ -53,6 +142,14 @@ ImagePlan plan_image(const std::string& path, const terrain_image_header& header
   g.format = FileFormat::Image;
   if (header.width <= 0 || header.height <= 0 || header.depth > 1)
     fail(ErrorCode::DimensionMismatch, path, "image has no usable 2-D size");
+  check_row_width(path, header.width);
+  if (header.decode_unit_bytes > kMaxImageDecodeBytes)
+    fail(ErrorCode::DimensionMismatch, path,
+         "decoding it needs " + std::to_string(header.decode_unit_bytes) +
+             " bytes at once (one strip or row of tiles, or the whole of an interlaced PNG); the limit "
+             "is " +
+             std::to_string(kMaxImageDecodeBytes) +
+             " (docs/io.md, \"Limits\"): store it in smaller strips or tiles, or not interlaced");
   const int32_t fmt = header.pixel;
   const std::string fmt_name = header.pixel_name;
   const bool rgb8 = fmt == TERRAIN_PIXEL_UINT8 && (header.channels == 3 || header.channels == 4);
@@ -96,6 +193,12 @@ ImagePlan plan_image(const std::string& path, const terrain_image_header& header
     }
     plan.channels = 1;
   }
+  terrain_image_georef georef{};
+  Message message{};
+  if (image.plugin->read_georef(image.reader.get(), &georef, message.data(), message.size()) !=
+      TERRAIN_IMAGE_OK)
+    fail(ErrorCode::CorruptData, path, "cannot read the GeoTIFF tags: " + std::string(message.data()));
+  apply_geotiff(path, georef, g);
   apply_common_overrides(g, options);
   return plan;
 }
@@ -116,10 +219,14 @@ class ImageBandReader final : public BandReader {
     int64_t n = std::min(rows, g.height - rows_read_);
     if (n <= 0) return 0;
     const size_t row_bytes = plan_.read_bytes * size_t(plan_.channels) * size_t(g.width);
-    if (rows_read_ < buffer_y0_ || rows_read_ + n > buffer_y1_) {
+    if (rows_read_ < buffer_y0_ || rows_read_ >= buffer_y1_) {
       // Read ahead: a plugin call per row costs the image library a buffer allocation (and under
       // ASan a page-faulted mmap) each time; callers that read one row at a time were 35 s per DEM.
-      const int64_t ahead = std::max<int64_t>(n, int64_t(std::max<size_t>(1, kReadAheadBytes / row_bytes)));
+      // At most kReadAheadRows rows, whatever the caller asks for (fewer rows come back then): the
+      // buffer stays small, and so does OpenImageIO's log of an error per row it fails to decode,
+      // which aborts the process past 16 MB within one call.
+      const int64_t ahead =
+          std::min(kReadAheadRows, int64_t(std::max<size_t>(1, kReadAheadBytes / row_bytes)));
       const int64_t m = std::min(ahead, g.height - rows_read_);
       if (buffer_.size() < size_t(m) * row_bytes) buffer_.resize(size_t(m) * row_bytes);
       if (image_.plugin->read_rows(image_.reader.get(), int32_t(rows_read_), int32_t(rows_read_ + m),
@@ -131,6 +238,7 @@ class ImageBandReader final : public BandReader {
       buffer_y0_ = rows_read_;
       buffer_y1_ = rows_read_ + m;
     }
+    n = std::min(n, buffer_y1_ - rows_read_);
     const int64_t count = n * g.width;
     const bool has_nodata = g.nodata.has_value();
     const double nodata = has_nodata ? *g.nodata : 0.0;
@@ -188,6 +296,7 @@ class ImageBandReader final : public BandReader {
   OpenedImage image_;
   ImagePlan plan_;
   static constexpr size_t kReadAheadBytes = size_t(1) << 20;
+  static constexpr int64_t kReadAheadRows = 1024;
   std::vector<uint8_t> buffer_;  // rows [buffer_y0_, buffer_y1_) as the plugin delivered them
   int64_t buffer_y0_ = 0, buffer_y1_ = 0;
   Message message_{};
@@ -261,12 +370,12 @@ void write_image_bands(const std::string& path, const Heightmap& map, int32_t pi
 
 GridInfo probe_image(const std::string& path, const ReadOptions& options) {
   OpenedImage image = open_image(path);
-  return plan_image(path, image.header, options).info;
+  return plan_image(path, image, options).info;
 }
 
 std::unique_ptr<BandReader> open_image_reader(const std::string& path, const ReadOptions& options) {
   OpenedImage image = open_image(path);
-  ImagePlan plan = plan_image(path, image.header, options);
+  ImagePlan plan = plan_image(path, image, options);
   return std::make_unique<ImageBandReader>(path, std::move(image), plan);
 }
 
@@ -321,10 +430,15 @@ void write_exr(const std::string& path, const Heightmap& map) {
 void write_image8(const std::string& path, int width, int height, int channels, const uint8_t* pixels) {
   if (width < 1 || height < 1 || channels < 1 || channels > 4 || !pixels)
     io::fail(ErrorCode::WriteFailed, path, "no pixels, or not 1 to 4 channels");
-  io::PluginImageWriter out(io::image_plugin(ErrorCode::WriteFailed, path));
-  if (out.create(path, width, height, channels, TERRAIN_PIXEL_UINT8, nullptr, 0) != TERRAIN_IMAGE_OK ||
-      out.write_rows(0, height, pixels) != TERRAIN_IMAGE_OK || out.finish() != TERRAIN_IMAGE_OK)
-    io::fail(ErrorCode::WriteFailed, path, out.message());
+  io::AtomicOutput target(path);  // a failed write leaves no partial picture under the final name
+  {
+    io::PluginImageWriter out(io::image_plugin(ErrorCode::WriteFailed, path));
+    if (out.create(target.temp_path(), width, height, channels, TERRAIN_PIXEL_UINT8, nullptr, 0) !=
+            TERRAIN_IMAGE_OK ||
+        out.write_rows(0, height, pixels) != TERRAIN_IMAGE_OK || out.finish() != TERRAIN_IMAGE_OK)
+      io::fail(ErrorCode::WriteFailed, path, out.message());
+  }
+  target.commit();
 }
 
 }  // namespace terrain

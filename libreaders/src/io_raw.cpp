@@ -1,14 +1,17 @@
 // Fixed-layout sample streams (raw grids, and the .hgt / .bil / .flt payloads), the raw JSON sidecar,
 // and the raw writer.
+#include <unistd.h>
 #include <zlib.h>
 
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <vector>
 
+#include "core/file.h"
 #include "readers/internal/io_internal.h"
 #include "readers/internal/io_json.h"
 
@@ -19,7 +22,7 @@ std::string row_col(int64_t row, int64_t col) {
   return "row " + std::to_string(row) + ", column " + std::to_string(col);
 }
 
-// Streams rows of a fixed-layout file with fread (or gzread), keeping one band of bytes.
+// Streams rows of a fixed-layout file with fread (or zlib's inflate), keeping one band of bytes.
 class RawStreamReader final : public BandReader {
  public:
   RawStreamReader(std::string path, const RawLayout& layout) : path_(std::move(path)), layout_(layout) {
@@ -28,22 +31,28 @@ class RawStreamReader final : public BandReader {
       nodata_as_float_ = float(*layout_.info.nodata);
       std::memcpy(&nodata_float_bits_, &nodata_as_float_, sizeof nodata_float_bits_);
     }
+    // A regular file only (core/file.h): a FIFO swapped in after the probe must not block the read.
+    fd_.fd = open_regular_file(path_);
     if (layout_.gzip) {
-      gz_ = gzopen(path_.c_str(), "rb");
-      if (!gz_) fail(ErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
-      gzbuffer(gz_, 1 << 17);
-      if (layout_.data_offset > 0 && gzseek(gz_, z_off_t(layout_.data_offset), SEEK_SET) < 0)
-        fail(ErrorCode::Truncated, path_, "gzip stream ends before the data offset");
+      // 16 + MAX_WBITS: one gzip member (header, deflate data, CRC-32 and length trailer).
+      if (inflateInit2(&gz_.z, 16 + MAX_WBITS) != Z_OK)
+        fail(ErrorCode::CorruptData, path_, "cannot start zlib");
+      gz_.started = true;
+      gz_in_.resize(size_t(1) << 17);
+      std::vector<uint8_t> skip(size_t(std::min<uint64_t>(layout_.data_offset, uint64_t(1) << 20)));
+      for (uint64_t left = layout_.data_offset; left > 0;) {
+        const size_t n = size_t(std::min<uint64_t>(left, skip.size()));
+        if (inflate_into(skip.data(), n) != n)
+          fail(ErrorCode::Truncated, path_, "gzip stream ends before the data offset");
+        left -= n;
+      }
     } else {
-      file_ = std::fopen(path_.c_str(), "rb");
+      file_.reset(::fdopen(fd_.fd, "rb"));
       if (!file_) fail(ErrorCode::NotFound, path_, std::string("cannot open: ") + std::strerror(errno));
-      if (layout_.data_offset > 0 && fseeko(file_, off_t(layout_.data_offset), SEEK_SET) != 0)
+      fd_.fd = -1;  // file_ owns it now
+      if (layout_.data_offset > 0 && fseeko(file_.get(), off_t(layout_.data_offset), SEEK_SET) != 0)
         fail(ErrorCode::Truncated, path_, "cannot seek to the data offset");
     }
-  }
-  ~RawStreamReader() override {
-    if (file_) std::fclose(file_);
-    if (gz_) gzclose(gz_);
   }
   RawStreamReader(const RawStreamReader&) = delete;
   RawStreamReader& operator=(const RawStreamReader&) = delete;
@@ -55,9 +64,9 @@ class RawStreamReader final : public BandReader {
     if (n <= 0) return 0;
     size_t want = size_t(uint64_t(n) * row_bytes_);
     if (buffer_.size() < want) buffer_.resize(want);
-    size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_);
+    size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_.get());
     if (got < want) {
-      if (file_ && std::ferror(file_)) fail(ErrorCode::NotFound, path_, "read error");
+      if (file_ && std::ferror(file_.get())) fail(ErrorCode::NotFound, path_, "read error");
       fail(ErrorCode::Truncated, path_,
            "data ends in row " + std::to_string(rows_read_ + int64_t(got / row_bytes_)) + " of " +
                std::to_string(layout_.info.height) + " (" + std::to_string(layout_.info.width) + "x" +
@@ -74,41 +83,77 @@ class RawStreamReader final : public BandReader {
  private:
   std::string path_;
   RawLayout layout_;
-  FILE* file_ = nullptr;
-  gzFile gz_ = nullptr;
+  // Owners (so that a constructor that throws releases what it took): the descriptor until stdio
+  // owns it, the stdio stream, zlib's state.
+  struct Descriptor {
+    int fd = -1;
+    ~Descriptor() {
+      if (fd >= 0) ::close(fd);
+    }
+  } fd_;
+  struct FileCloser {
+    void operator()(FILE* f) const { std::fclose(f); }
+  };
+  std::unique_ptr<FILE, FileCloser> file_;
+  struct Inflater {
+    z_stream z{};
+    bool started = false;
+    ~Inflater() {
+      if (started) inflateEnd(&z);
+    }
+  } gz_;
+  bool gz_ended_ = false;
+  std::vector<uint8_t> gz_in_;  // compressed bytes read from fd_ and not yet inflated
   uint64_t row_bytes_ = 0;
   std::vector<uint8_t> buffer_;
   float nodata_as_float_ = 0;
   uint32_t nodata_float_bits_ = 0;
 
-  size_t read_gz(size_t want) {
-    size_t got = 0;
-    while (got < want) {
-      unsigned chunk = unsigned(std::min<size_t>(want - got, size_t(1) << 30));
-      int r = gzread(gz_, buffer_.data() + got, chunk);
-      if (r < 0) {
-        int errnum = 0;
-        const char* msg = gzerror(gz_, &errnum);
-        fail(ErrorCode::CorruptData, path_,
-             std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
+  size_t read_gz(size_t want) { return inflate_into(buffer_.data(), want); }
+
+  // Inflates up to `size` bytes into `out`; fewer only where the member (or the file) ends. The end
+  // of the member must be the end of the file: anything after it (garbage, or a second member,
+  // which gzread would have read on or skipped in silence) is refused, so the grid is never a part
+  // of what the file holds (docs/io.md, "Limits").
+  size_t inflate_into(uint8_t* out, size_t size) {
+    size_t done = 0;
+    while (done < size && !gz_ended_) {
+      if (gz_.z.avail_in == 0) {
+        const ssize_t n = ::read(fd_.fd, gz_in_.data(), gz_in_.size());
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) fail(ErrorCode::NotFound, path_, std::string("read error: ") + std::strerror(errno));
+        if (n == 0) break;  // the compressed data ends early: the caller reports what is missing
+        gz_.z.next_in = gz_in_.data();
+        gz_.z.avail_in = uInt(n);
       }
-      if (r == 0) break;
-      got += size_t(r);
+      const size_t chunk = std::min<size_t>(size - done, size_t(1) << 30);
+      gz_.z.next_out = out + done;
+      gz_.z.avail_out = uInt(chunk);
+      const int r = inflate(&gz_.z, Z_NO_FLUSH);
+      done += chunk - gz_.z.avail_out;
+      if (r == Z_STREAM_END) {
+        gz_ended_ = true;
+        uint8_t extra = 0;
+        ssize_t more;
+        while ((more = ::read(fd_.fd, &extra, 1)) < 0 && errno == EINTR) {
+        }
+        if (gz_.z.avail_in > 0 || more > 0)
+          fail(ErrorCode::CorruptData, path_,
+               "data after the end of the gzip stream (only one member is read; docs/io.md)");
+      } else if (r != Z_OK && r != Z_BUF_ERROR) {
+        fail(ErrorCode::CorruptData, path_,
+             std::string("corrupt gzip stream: ") + (gz_.z.msg ? gz_.z.msg : "unknown error"));
+      }
     }
-    return got;
+    return done;
   }
 
-  // Reading one byte past the samples makes zlib verify the trailer CRC, and finds extra data.
+  // Inflating one byte past the samples verifies the trailer CRC and finds extra data.
   void check_gz_end() {
     uint8_t extra = 0;
-    int r = gzread(gz_, &extra, 1);
-    if (r < 0) {
-      int errnum = 0;
-      const char* msg = gzerror(gz_, &errnum);
-      fail(ErrorCode::CorruptData, path_,
-           std::string("corrupt gzip stream: ") + (msg ? msg : "unknown error"));
-    }
-    if (r > 0) fail(ErrorCode::Oversized, path_, "gzip stream holds more bytes than the dimensions need");
+    if (inflate_into(&extra, 1) > 0)
+      fail(ErrorCode::Oversized, path_, "gzip stream holds more bytes than the dimensions need");
+    if (!gz_ended_) fail(ErrorCode::Truncated, path_, "gzip stream ends before its trailer");
   }
 
   template <typename Fn> void decode_with(const uint8_t* src, double* values, uint8_t* valid, Fn fetch) {
@@ -260,6 +305,13 @@ RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options) 
     auto units = obj->find("horizontal_units");
     if (units != obj->end() && units->second.kind == JsonScalar::Kind::String)
       g.horizontal_units = units->second.text;
+    if (auto v = number_member(*obj, "crs_epsg", *sidecar)) {
+      if (!(*v >= 1 && *v <= 999999) || *v != std::floor(*v))
+        fail(ErrorCode::MissingField, *sidecar, "field \"crs_epsg\" must be an integer 1..999999");
+      g.crs_epsg = int(*v);
+    }
+    auto crs = obj->find("crs_text");
+    if (crs != obj->end() && crs->second.kind == JsonScalar::Kind::String) g.crs_text = crs->second.text;
   }
   if (!type) {
     if (ends_with_ci(path, ".r16"))
@@ -380,6 +432,8 @@ void write_raw_with_sidecar(const std::string& path, const Heightmap& map, bool 
     js << format_double(*g.nodata);
   if (g.origin_x) js << ",\n  \"origin_x\": " << format_double(*g.origin_x);
   if (g.origin_y) js << ",\n  \"origin_y\": " << format_double(*g.origin_y);
+  if (g.crs_epsg) js << ",\n  \"crs_epsg\": " << *g.crs_epsg;
+  if (!g.crs_text.empty()) js << ",\n  \"crs_text\": " << json_quote(g.crs_text);
   js << "\n}\n";
   std::string text = js.str();
   AtomicOutput side(path + ".json");

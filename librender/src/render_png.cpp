@@ -16,7 +16,8 @@ void write_png_rgba(const std::string& path, int width, int height, const std::v
   try {
     write_image8(path, width, height, 4, rgba.data());
   } catch (const Error& e) {
-    throw std::runtime_error(std::string("cannot write ") + e.what());  // "cannot write <path>: <reason>"
+    // Exit status 9 in the tools, as every other write failure: "cannot write <path>: <reason>".
+    throw Error(ErrorCode::WriteFailed, std::string("cannot write ") + e.what());
   }
 }
 

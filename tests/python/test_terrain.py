@@ -78,6 +78,22 @@ def test_srtm_tile_geotransform_and_exact_lossless_values(tmp_path):
     np.testing.assert_array_equal(p.read(p.level_count - 1, 100, 250, 300, 200), raw[250:450, 100:400])
 
 
+def test_projected_ascii_grid_keeps_its_geotransform_and_crs(tmp_path):
+    """A UTM ASCII grid (+ .prj): the geotransform is the stored one, the CRS its EPSG code and WKT."""
+    grid = np.round(synthetic(30, 40)).astype(np.int32)
+    asc = tmp_path / "utm.asc"
+    header = "ncols 40\nnrows 30\nxllcorner 500000\nyllcorner 5199100\ncellsize 30\n"
+    asc.write_text(header + "\n".join(" ".join(str(v) for v in row) for row in grid) + "\n")
+    wkt = 'PROJCS["WGS_1984_UTM_Zone_10N",GEOGCS["GCS_WGS_1984"],UNIT["Meter",1.0]]'
+    (tmp_path / "utm.prj").write_text(wkt)
+    terrain.build(str(asc), str(tmp_path / "u.pyr"), lossless=True)
+    p = terrain.open(str(tmp_path / "u.pyr"))
+    assert p.geotransform == (500000.0, 30.0, 0.0, 5200000.0, 0.0, -30.0)
+    assert p.info["crs_epsg"] == 32610
+    assert p.info["crs_text"] == wkt
+    np.testing.assert_array_equal(p.read(p.level_count - 1, 0, 0, 40, 30), grid.astype(np.float32))
+
+
 def test_errors_carry_the_library_code(tmp_path):
     with pytest.raises(terrain.Error) as missing:
         terrain.open(str(tmp_path / "missing.pyr"))

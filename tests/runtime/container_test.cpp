@@ -97,7 +97,14 @@ Sample random_sample(std::mt19937_64& rng, uint64_t width, uint64_t height, size
   info.vertical_units = "m";
   info.vertical_scale = 0.1 + std::abs(unit(rng));
   info.vertical_offset = unit(rng) * 1000;
-  if (rng() % 2) info.georeference = Georeference{unit(rng) * 180, unit(rng) * 90, "degree"};
+  if (rng() % 2) {
+    Georeference g;
+    g.geotransform = {unit(rng) * 180, 0.001 + std::abs(unit(rng)), 0, unit(rng) * 90, 0, -0.002};
+    g.units = "degree";
+    g.crs_epsg = (rng() % 2) ? 4326 : 0;
+    if (rng() % 2) g.crs_text = std::string(size_t(rng() % 300), 'w');  // any length, not 8-aligned
+    info.georeference = std::move(g);
+  }
   info.filter_size = (rng() % 4 == 0) ? 0 : 11;
   info.filter.resize(size_t(info.filter_size) * info.filter_size);
   for (double& c : info.filter) c = unit(rng);
@@ -200,8 +207,9 @@ void check_matches(const Container& c, const Sample& s, bool checksums) {
   CHECK(a.vertical_offset == e.vertical_offset);
   REQUIRE(a.georeference.has_value() == e.georeference.has_value());
   if (e.georeference) {
-    CHECK(a.georeference->origin_x == e.georeference->origin_x);
-    CHECK(a.georeference->origin_y == e.georeference->origin_y);
+    CHECK(a.georeference->geotransform == e.georeference->geotransform);
+    CHECK(a.georeference->crs_epsg == e.georeference->crs_epsg);
+    CHECK(a.georeference->crs_text == e.georeference->crs_text);
     CHECK(a.georeference->units == e.georeference->units);
   }
   CHECK(a.filter_size == e.filter_size);
@@ -248,7 +256,7 @@ void check_matches(const Container& c, const Sample& s, bool checksums) {
 Sample small_sample() {
   std::mt19937_64 rng(99);
   Sample s = random_sample(rng, 13, 6, 3);
-  s.info.georeference = Georeference{7.5, 46.25, "degree"};
+  s.info.georeference = Georeference{{7.5, 0.25, 0, 46.25, 0, -0.25}, "degree", 4326, ""};
   s.info.filter_size = 3;
   s.info.filter.assign(9, 0.125);
   s.blobs = {std::vector<uint8_t>(5, 0xA1), std::vector<uint8_t>(0), std::vector<uint8_t>(37, 0xB2)};
@@ -367,7 +375,7 @@ TEST_CASE("container file appears only on finish and temp files never linger", "
   const Sample s = small_sample();
   SECTION("finish renames the complete file into place") {
     ContainerWriter w(path);
-    CHECK(w.temp_path() == path + ".tmp." + std::to_string(::getpid()));
+    CHECK(w.temp_path().rfind(path + ".tmp.", 0) == 0);
     w.set_info(s.info);
     for (uint32_t l = 0; l < 3; ++l) w.add_level(l, s.blobs[l].data(), s.blobs[l].size());
     w.append_mask(s.mask.data(), s.mask.size());
@@ -514,6 +522,60 @@ TEST_CASE("container version rules", "[runtime][container]") {
       }
     }
   }
+  SECTION("a 2.0 file (no geotransform or CRS fields) still opens, its geotransform derived") {
+    std::vector<uint8_t> b = good;
+    const size_t index = size_t(get_le(b, kSbIndexOffset, 8));
+    const size_t tail = 3 * 96 + 8 * 9;  // level records and filter of small_sample
+    std::vector<uint8_t> v20(b.begin(), b.begin() + std::ptrdiff_t(index + 264));
+    v20.insert(v20.end(), b.begin() + std::ptrdiff_t(index + kInfoBlock),
+               b.begin() + std::ptrdiff_t(index + kInfoBlock + tail));
+    put_le(v20, index + kInfoSize, 264, 4);
+    put_le(v20, kSbMinor, 0, 2);
+    put_le(v20, kSbIndexSize, 264 + tail, 8);
+    put_le(v20, kSbFileSize, v20.size(), 8);
+    reseal(v20);
+    write_bytes(path, v20);
+    const Container c = Container::open(path);
+    CHECK(c.minor_version() == 0);
+    REQUIRE(c.info().georeference.has_value());
+    const Georeference& g = *c.info().georeference;
+    const double per_unit = c.info().horizontal_units == "arc-second" ? 1.0 / 3600.0 : 1.0;
+    CHECK(g.geotransform[1] == c.info().spacing_x * per_unit);
+    CHECK(g.geotransform[5] == -c.info().spacing_y * per_unit);
+    CHECK(g.origin_x() == Approx(7.625).epsilon(1e-12));
+    CHECK(g.origin_y() == Approx(46.125).epsilon(1e-12));
+    CHECK(g.crs_epsg == 0);
+    CHECK(g.crs_text.empty());
+  }
+  SECTION("bad 2.1 georeference fields are refused, naming the field") {
+    const size_t index = size_t(get_le(good, kSbIndexOffset, 8));
+    const auto refused = [&](std::vector<uint8_t> b, const std::string& field) {
+      reseal(b);
+      write_bytes(path, b);
+      try {
+        Container::open(path);
+        FAIL(field << " accepted");
+      } catch (const Error& e) {
+        CHECK(e.code() == ErrorCode::CorruptData);
+        CHECK_THAT(e.what(), Catch::Contains(path) && Catch::Contains(field));
+      }
+    };
+    std::vector<uint8_t> b = good;
+    put_f64(b, index + 264, std::nan(""));
+    refused(b, "geotransform[0]");
+    b = good;
+    put_f64(b, index + 264 + 8, 0.0);
+    refused(b, "pixel size");
+    b = good;
+    put_f64(b, index + 264 + 16, 0.5);
+    refused(b, "rotation");
+    b = good;
+    put_le(b, index + 316, 9000, 4);
+    refused(b, "crs_text_size");
+    b = good;
+    put_f64(b, index + 264, 7.0);  // the 2.0 origin field no longer matches
+    refused(b, "disagree");
+  }
   SECTION("a newer minor version of the same major is read") {
     std::vector<uint8_t> b = good;
     put_le(b, kSbMinor, kFormatMinor + 1, 2);
@@ -560,7 +622,7 @@ TEST_CASE("container level error figures are validated", "[runtime][container]")
   s.info.levels[0].error = LevelError{0.5, 2.0};
   s.info.levels[1].error.reset();
   const std::vector<uint8_t> good = write_sample_bytes(path, s, rng);
-  const size_t records = size_t(get_le(good, kSbIndexOffset, 8)) + 264;
+  const size_t records = size_t(get_le(good, kSbIndexOffset, 8)) + kInfoBlock;
   constexpr size_t kRecord = 96, kFlags = 36, kErrorRms = 80, kErrorMax = 88;
   const auto damaged = [&](size_t at, uint64_t value, int bytes) {
     std::vector<uint8_t> b = good;
@@ -750,8 +812,8 @@ TEST_CASE("container: crafted huge offsets are rejected without overflow", "[run
   std::mt19937_64 rng(9);
   const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
   const uint64_t index = get_le(good, kSbIndexOffset, 8);
-  // Level records start 264 bytes into the index (96 bytes each, blob offset at +16, size at +24).
-  const size_t record2 = size_t(index) + 264 + 2 * 96;
+  // Level records start 320 bytes into the index (96 bytes each, blob offset at +16, size at +24).
+  const size_t record2 = size_t(index) + kInfoBlock + 2 * 96;
   const uint64_t cases[][2] = {{~uint64_t(0) - 7, 16},
                                {8, ~uint64_t(0) - 7},
                                {uint64_t(1) << 32, 37},
@@ -815,7 +877,7 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(get_le(b, kSbFileSize, 8) == b.size());
   const uint64_t index = get_le(b, kSbIndexOffset, 8), index_size = get_le(b, kSbIndexSize, 8);
   CHECK(index % 8 == 0);
-  CHECK(index_size == 264 + 3 * 96 + 8 * 9);
+  CHECK(index_size == kInfoBlock + 3 * 96 + 8 * 9);
   CHECK(index + index_size == b.size());
   CHECK(get_le(b, kSbIndexCrc, 4) == crc32c(b.data() + index, size_t(index_size)));
   CHECK(get_le(b, kSbCrc, 4) == crc32c(b.data(), 60));
@@ -830,9 +892,10 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
   CHECK(get_le(b, kSbMajor, 2) == 2);
-  CHECK(get_le(b, kSbMinor, 2) == 0);
-  CHECK(get_le(b, index + 8, 4) == 96);  // level record size
-  const uint64_t level2 = index + 264 + 2 * 96;
+  CHECK(get_le(b, kSbMinor, 2) == 1);
+  CHECK(get_le(b, index + 0, 4) == 320);  // info size (2.1)
+  CHECK(get_le(b, index + 8, 4) == 96);   // level record size
+  const uint64_t level2 = index + kInfoBlock + 2 * 96;
   CHECK(get_le(b, level2, 8) == 13);
   CHECK(get_le(b, level2 + 24, 8) == 37);
   const uint64_t blob = get_le(b, level2 + 16, 8);
@@ -841,6 +904,6 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(get_le(b, level2 + 36, 4) == 3);                            // flags: checksum, error figures
   CHECK(std::bit_cast<double>(get_le(b, level2 + 80, 8)) == 0.75);  // error rms
   CHECK(std::bit_cast<double>(get_le(b, level2 + 88, 8)) == 3.0);   // error max
-  const uint64_t filter = index + 264 + 3 * 96;
+  const uint64_t filter = index + kInfoBlock + 3 * 96;
   CHECK(std::bit_cast<double>(get_le(b, filter + 8 * 8, 8)) == 0.125);
 }

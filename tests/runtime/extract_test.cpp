@@ -10,29 +10,16 @@
 #include "build/pyramid_build.h"
 #include "container/pyramid_file.h"
 #include "io/io_test_util.h"
+#include "runtime/gdal_test_util.h"
 #include "runtime/region_decoder.h"
 #include "shared_data.h"
 
 namespace {
 
+using gdaltest::gdal;
+using gdaltest::have_gdal;
 using iotest::run_tool;
 using iotest::shell_quote;
-
-// gdal-bin is installed by scripts/setup; without it the test fails in CI and is skipped elsewhere.
-bool have_gdal() {
-  if (std::system("command -v gdalinfo >/dev/null 2>&1 && command -v gdal_translate >/dev/null 2>&1") == 0)
-    return true;
-  if (testdata::in_ci()) FAIL("gdalinfo / gdal_translate missing in CI (scripts/setup installs gdal-bin)");
-  WARN("gdal-bin not installed: GDAL interoperability test skipped");
-  return false;
-}
-
-std::string gdal(const iotest::TempDir& dir, const std::string& command) {
-  const std::string out = dir.file("gdal.out");
-  REQUIRE(std::system((command + " >" + shell_quote(out) + " 2>&1").c_str()) == 0);
-  const auto bytes = iotest::read_file(out);
-  return std::string(bytes.begin(), bytes.end());
-}
 
 // The samples of a GDAL-readable raster as raw little-endian values (ENVI), via gdal_translate.
 template <class T>

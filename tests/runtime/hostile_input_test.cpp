@@ -323,10 +323,10 @@ TEST_CASE("mirror-tile refuses an output larger than the free disk before writin
   REQUIRE(iotest::run_tool(dir, {"terrain-synth", {"-o", tile, "--width", "16", "--height", "16", "-q"}})
               .status == 0);
   std::string err;
-  CHECK(run_bounded(
-            dir, "mirror-tile",
-            {tile, "-o", dir.file("huge.raw"), "--out-width", "2147483648", "--out-height", "2147483648"},
-            &err) == 9);
+  CHECK(
+      run_bounded(dir, "mirror-tile",
+                  {tile, "-o", dir.file("huge.raw"), "--out-width", "1048576", "--out-height", "2147483648"},
+                  &err) == 9);
   CHECK_THAT(err, Catch::Contains("free"));
   CHECK_FALSE(std::filesystem::exists(dir.file("huge.raw")));
   CHECK(run_bounded(dir, "mirror-tile", {tile, "-o", tile}) == 1);  // usage: --out-width missing

@@ -45,7 +45,7 @@ inline void reseal(std::vector<uint8_t>& b) {
 // Index fields (offsets within the info block and a level record) from docs/format.md.
 constexpr size_t kInfoSize = 0, kInfoLevelCount = 4, kInfoRecordSize = 8, kInfoMaskOffset = 216,
                  kInfoMaskSize = 224, kInfoMaskCrc = 240, kInfoMetadataCrc = 244, kInfoMetadataOffset = 248,
-                 kInfoMetadataSize = 256, kInfoBlock = 264;
+                 kInfoMetadataSize = 256, kInfoBlock = 320;  // 2.1 (264 in 2.0)
 constexpr size_t kRecBlobOffset = 16, kRecBlobSize = 24, kRecBlobCrc = 32, kRecFlags = 36, kRecMin = 40;
 constexpr size_t kBandFooter = 12;  // u32 table size, "BND2", u32 CRC-32C of the table
 

@@ -19,6 +19,7 @@
 #include "json_writer.h"
 #include "readers/heightmap.h"
 #include "render/renderer.h"
+#include "report_file.h"
 
 namespace clipmap_view {
 
@@ -198,8 +199,8 @@ void write_stats_json(const std::string& json_path, const Flight& flight, const 
                       const std::vector<DamagedTile>& damaged) {
   const ViewOptions& o = flight.options;
   const double med = percentile(log.frame_ms, 0.5), p99 = percentile(log.frame_ms, 0.99);
-  std::ofstream js(json_path + ".tmp");
-  cli::JsonWriter j(js);
+  cli::ReportFile file(json_path);
+  cli::JsonWriter j(file.stream());
   j.begin_object();
   j.field("pyramid", o.pyramid)
       .field("renderer", renderer_name)
@@ -261,9 +262,7 @@ void write_stats_json(const std::string& json_path, const Flight& flight, const 
   j.end_array();
   j.end_object();
   j.finish();
-  js.close();
-  if (!js) throw Error(ErrorCode::WriteFailed, "cannot write " + json_path);
-  std::filesystem::rename(json_path + ".tmp", json_path);
+  file.finish();
 }
 
 void print_summary(const Flight& flight, const FlightLog& log) {
@@ -309,8 +308,9 @@ int run_flight(const Flight& flight) {
   std::error_code ec;
   std::filesystem::create_directories(o.out_dir, ec);
   const std::string csv_path = o.out_dir + "/stats.csv", json_path = o.out_dir + "/stats.json";
-  std::ofstream csv(csv_path + ".tmp");
-  if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
+  // Through a temporary renamed when complete; a flight that fails leaves neither it nor stats.csv.
+  cli::ReportFile csv_file(csv_path);
+  std::ostream& csv = csv_file.stream();
   csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,residual_ms,zc_ms,normals_ms,bounds_ms,upload_ms,"
          "render_ms,frame_ms,"
          "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
@@ -411,9 +411,7 @@ int run_flight(const Flight& flight) {
   }
   // CPU per frame covers everything in the loop (reference renders and PNG writing included).
   log.cpu_ms_per_frame = (cpu_seconds() - cpu0) * 1e3 / o.frames;
-  csv.close();
-  if (!csv) throw Error(ErrorCode::WriteFailed, "cannot write " + csv_path);
-  std::filesystem::rename(csv_path + ".tmp", csv_path);
+  csv_file.finish();
 
   damage.poll(*flight.decoder);
   write_stats_json(json_path, flight, clipmap, gl.renderer_name(), log, sse, s_px, damage.parts());

@@ -18,6 +18,7 @@
 #include "clipmap_view.h"
 #include "raster.h"
 #include "render/renderer.h"
+#include "report_file.h"
 
 #if defined(TERRAIN_HAVE_GLFW)
 #define GLFW_INCLUDE_NONE
@@ -279,12 +280,13 @@ int run_window(const Flight& flight) {
   if (&flight.heights == &source)
     sse = screen_error_bound(o, flight.file->info(), source, first_level, s_px, finest_error);
 
-  std::ofstream record;
+  // Through a temporary renamed when complete (cli::ReportFile), like the flight's stats.
+  std::optional<cli::ReportFile> record_file;
+  std::ostream* record = nullptr;
   if (!o.record_path.empty()) {
-    record.open(o.record_path + ".tmp");
-    if (!record) throw Error(ErrorCode::WriteFailed, "cannot write " + o.record_path);
-    record << "# clipmap-view --window camera: frame x_m y_m above_ground_m yaw_deg pitch_deg\n";
-    record.precision(17);
+    record = &record_file.emplace(o.record_path).stream();
+    *record << "# clipmap-view --window camera: frame x_m y_m above_ground_m yaw_deg pitch_deg\n";
+    record->precision(17);
   }
 
   // GLFW, X11 and the GL driver keep process-lifetime allocations: the whole GL session is paused.
@@ -376,8 +378,8 @@ int run_window(const Flight& flight) {
       const RenderStats rs = renderer.render(clipmap, cam, viewer.render);
       damage.poll(*flight.decoder);
       if (record)
-        record << f << ' ' << cam.position[0] << ' ' << cam.position[1] << ' ' << cam.position[2] - ground
-               << ' ' << cam.yaw * 180 / M_PI << ' ' << cam.pitch * 180 / M_PI << '\n';
+        *record << f << ' ' << cam.position[0] << ' ' << cam.position[1] << ' ' << cam.position[2] - ground
+                << ' ' << cam.yaw * 180 / M_PI << ' ' << cam.pitch * 180 / M_PI << '\n';
       int fb_w = 0, fb_h = 0;
       glfwGetFramebufferSize(window, &fb_w, &fb_h);
       if (fb_w > 0 && fb_h > 0) {
@@ -432,11 +434,7 @@ int run_window(const Flight& flight) {
     }
   }
   glfwDestroyWindow(window);
-  if (record) {
-    record.close();
-    if (!record) throw Error(ErrorCode::WriteFailed, "cannot write " + o.record_path);
-    std::filesystem::rename(o.record_path + ".tmp", o.record_path);
-  }
+  if (record_file) record_file->finish();
   damage.poll(*flight.decoder);
   if (!damage.parts().empty()) status = cli::kExitDamaged;
   return status;

@@ -22,7 +22,7 @@ ReportFile::ReportFile(std::string path) : path_(std::move(path)) {
     return;
   }
   terrain::check_output_path(path_);
-  temp_ = path_ + ".tmp." + std::to_string(::getpid());
+  ::close(terrain::create_temp_beside(path_, "", &temp_));  // exclusive: a planted link is not followed
   file_.open(temp_, std::ios::binary | std::ios::trunc);
   if (!file_) throw terrain::Error(terrain::ErrorCode::WriteFailed, path_ + ": cannot create the report");
 }

@@ -11,6 +11,7 @@
 // dimension chain are validated on open, so bad input gives Error, never a crash.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -39,9 +40,10 @@ using codec::crc32c_portable;
 // Format version written by this library. A reader accepts any minor version of its major
 // version (minor versions only append fields) and rejects other majors. 2.0: level blobs with
 // compact band tables and all-zero bands without a stream, libcodec format 4 streams; its level
-// records are those of 1.1 (with the error figures). 1.x files must be rebuilt.
+// records are those of 1.1 (with the error figures). 1.x files must be rebuilt. 2.1 adds the
+// georeference's full geotransform and its CRS (EPSG code, CRS text); 2.0 files still open.
 inline constexpr uint16_t kFormatMajor = 2;
-inline constexpr uint16_t kFormatMinor = 0;
+inline constexpr uint16_t kFormatMinor = 1;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
@@ -78,9 +80,17 @@ struct LevelInfo {
 };
 
 struct Georeference {
-  double origin_x = 0;  // longitude or easting of the north-west sample centre
-  double origin_y = 0;  // latitude or northing of the north-west sample centre
-  std::string units;    // e.g. "degree", "m"
+  // GDAL's affine geotransform of pixel corners in `units`: x = gt[0] + col * gt[1] + row * gt[2],
+  // y = gt[3] + col * gt[4] + row * gt[5] (finest level). gt[1], gt[5] finite and non-zero; the
+  // rotation terms gt[2], gt[4] are 0 (rotated grids are not stored). A 2.0 file's is derived from
+  // its origin and spacing (north-up).
+  std::array<double, 6> geotransform{0, 1, 0, 0, 0, -1};
+  std::string units;      // e.g. "degree", "m"
+  uint32_t crs_epsg = 0;  // EPSG code of the CRS; 0 unknown (always 0 in 2.0 files)
+  std::string crs_text;   // WKT / PROJ text of the CRS, empty when unknown; is_crs_text (core/text.h)
+  // Longitude/easting and latitude/northing of the north-west sample centre (2.0's origin fields).
+  double origin_x() const { return geotransform[0] + 0.5 * geotransform[1]; }
+  double origin_y() const { return geotransform[3] + 0.5 * geotransform[5]; }
 };
 
 struct Quantisation {

@@ -15,6 +15,12 @@ std::string json_quote(std::string_view s);
 // "-0"); "nan", "inf" and "-inf" for the non-finite values (callers writing JSON map those to null).
 std::string shortest(double v);
 
+// A coordinate reference system's text (WKT or PROJ) as readers take it from a file and the .pyr
+// stores it: at most kMaxCrsTextBytes bytes, none a control character other than tab, LF and CR
+// (UTF-8 and other bytes >= 0x80 pass). Pure.
+inline constexpr size_t kMaxCrsTextBytes = 8192;
+bool is_crs_text(std::string_view s);
+
 // names[e] for an enum whose values are 0, 1, ... in the order of `names`; "unknown" for any other
 // value (a value read from a file may be anything). The one way enum names are written.
 template <class Enum, size_t N> const char* enum_name(Enum e, const char* const (&names)[N]) {

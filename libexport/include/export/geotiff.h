@@ -21,7 +21,11 @@ struct GeoTransform {
 struct GeoTiffOptions {
   SampleType type = SampleType::Float32;  // Float32 (voids NaN) or Int16 (voids = nodata)
   std::optional<GeoTransform> geotransform;
-  std::optional<int> epsg;  // geographic EPSG code (4326 = WGS 84) when the CRS is known
+  // The CRS: an EPSG code (geographic when `geographic`, else projected), or else CRS text (WKT),
+  // written as a user-defined CRS with the citation "ESRI PE String = <text>" that GDAL reads back.
+  std::optional<int> epsg;
+  bool geographic = true;
+  std::string crs_text;
   int16_t int16_nodata = -32768;
   int rows_per_strip = 16;
 };

@@ -15,6 +15,7 @@
 // header claiming a huge size can make read_heightmap allocate up to its 2^34-sample limit.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -33,7 +34,7 @@ const char* sample_type_name(SampleType t);
 // case); nullopt if unknown.
 std::optional<SampleType> sample_type_from_name(const std::string& name);
 
-enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage };
+enum class FileFormat { Hgt, Raw, EsriBil, EsriFlt, Image, TerrainRgbImage, EsriAscii };
 const char* file_format_name(FileFormat f);  // e.g. "srtm-hgt", "raw"; static storage
 
 // Everything known about a grid except its samples.
@@ -48,11 +49,24 @@ struct GridInfo {
   double vertical_scale = 1.0;         // metres = value * vertical_scale + vertical_offset
   double vertical_offset = 0.0;
   std::optional<double> nodata;  // native value marking a void, if any
-  // Georeference of the north-west sample centre, when the input has one (e.g. .hgt file name).
+  // Georeference of the north-west sample centre, when the input has one (.hgt file name, ESRI
+  // header, GeoTIFF tags), in the CRS's units (degrees when horizontal_units is "arc-second"). Grids
+  // are north-up: columns run east by spacing_x, rows south by spacing_y; readers refuse rotated or
+  // flipped georeferences. geotransform() below gives the full affine form.
   std::optional<double> origin_x;  // longitude or easting of column 0
   std::optional<double> origin_y;  // latitude or northing of row 0
+  // The coordinate reference system, when known: its EPSG code (4326 for SRTM names, a GeoTIFF's
+  // GeographicType/ProjectedCSType key, a .prj's AUTHORITY) and/or the CRS text the input carries
+  // (a .prj's WKT, a GeoTIFF's "ESRI PE String" citation), kept as is (is_crs_text, core/text.h).
+  std::optional<int> crs_epsg;
+  std::string crs_text;
   bool integer_valued() const { return sample_type != SampleType::Float32; }
 };
+
+// GDAL's affine geotransform of pixel corners: x = gt[0] + col * gt[1] + row * gt[2], y = gt[3] +
+// col * gt[4] + row * gt[5], in the CRS's units (spacing in arc-seconds becomes degrees); gt[2] and
+// gt[4] are 0 and gt[5] = -spacing (north-up). nullopt without an origin.
+std::optional<std::array<double, 6>> geotransform(const GridInfo& info);
 
 // A whole grid in memory. Row-major, row 0 is the northern edge. at/is_valid/metres do not check
 // their coordinates (0 <= x < width, 0 <= y < height).

@@ -142,7 +142,7 @@ class ClipmapRenderer {
 };
 
 // Writes RGBA8 (top row first) as a PNG (any thread: no GL). Throws std::invalid_argument naming the
-// path when rgba is not width * height * 4 bytes, std::runtime_error naming it when writing fails.
+// path when rgba is not width * height * 4 bytes, Error(WriteFailed) naming it when writing fails.
 void write_png_rgba(const std::string& path, int width, int height, const std::vector<uint8_t>& rgba);
 
 }  // namespace terrain::render

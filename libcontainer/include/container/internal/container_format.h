@@ -33,7 +33,11 @@ inline constexpr size_t kInfoSize = 0, kLevelCount = 4, kLevelRecordSize = 8, kF
                         kMaskEncoding = 204, kTarget = 208, kMaskOffset = 216, kMaskSize = 224,
                         kVoidCount = 232, kMaskCrc = 240, kMetadataCrc = 244, kMetadataOffset = 248,
                         kMetadataSize = 256;
-inline constexpr uint32_t kSizeV1 = 264;
+inline constexpr uint32_t kSizeV1 = 264;  // versions 1.x and 2.0
+// Version 2.1: the georeference's geotransform (6 f64, GDAL order), its CRS's EPSG code and the size
+// of its CRS text, which follows the filter coefficients at the end of the index (zero-padded to 8).
+inline constexpr size_t kGeotransform = 264, kCrsEpsg = 312, kCrsTextSize = 316;
+inline constexpr uint32_t kSizeV2_1 = 320;
 inline constexpr size_t kUnitsField = 32;
 }  // namespace info
 

@@ -15,6 +15,7 @@ struct ImagePlugin {
   decltype(&terrain_image_open) open = nullptr;
   decltype(&terrain_image_read_rows) read_rows = nullptr;
   decltype(&terrain_image_close) close = nullptr;
+  decltype(&terrain_image_read_georef) read_georef = nullptr;
   decltype(&terrain_image_create) create = nullptr;
   decltype(&terrain_image_write_rows) write_rows = nullptr;
   decltype(&terrain_image_finish) finish = nullptr;

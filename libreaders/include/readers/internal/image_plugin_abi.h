@@ -11,7 +11,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define TERRAIN_IMAGE_PLUGIN_ABI_VERSION 1
+#define TERRAIN_IMAGE_PLUGIN_ABI_VERSION 3
 
 #ifdef __cplusplus
 extern "C" {
@@ -45,6 +45,9 @@ struct terrain_image_header {
   int32_t width, height, depth, channels;
   int32_t pixel;        // enum terrain_image_pixel of the stored samples
   char pixel_name[32];  // OpenImageIO's name of the stored type ("uint8", "half", ...), for messages
+  // Bytes OpenImageIO must hold at once to decode any one row: a strip or a row of tiles as the file
+  // groups them, the whole image for an interlaced PNG. From the header, before any allocation.
+  int64_t decode_unit_bytes;
 };
 
 typedef struct terrain_image_reader terrain_image_reader;
@@ -52,7 +55,8 @@ typedef struct terrain_image_writer terrain_image_writer;
 
 int32_t terrain_image_abi_version(void);
 
-// Opens `path` (RGB kept as stored: alpha is not premultiplied) and fills `header`.
+// Opens `path` (RGB kept as stored: alpha is not premultiplied) and fills `header`. An error that
+// OpenImageIO records while opening is a failure even when it returns an input.
 int32_t terrain_image_open(const char* path, terrain_image_reader** reader,
                            struct terrain_image_header* header, char* message, size_t message_size);
 // Decodes rows [row_begin, row_end) (0 = first row), `channels` channels from the first, converted
@@ -61,6 +65,31 @@ int32_t terrain_image_read_rows(terrain_image_reader* reader, int32_t row_begin,
                                 int32_t channels, int32_t pixel, void* pixels, char* message,
                                 size_t message_size);
 void terrain_image_close(terrain_image_reader* reader);
+
+// The GeoTIFF tags of an opened TIFF as stored (version 2), read with libtiff/libgeotiff; the reader
+// (libreaders' io_image.cpp) interprets and validates them. Counts are those of the file, the arrays
+// hold their first values. For a file that is not a TIFF every count and flag is 0.
+#define TERRAIN_IMAGE_CITATION_SIZE 8192
+struct terrain_image_georef {
+  int32_t pixel_scale_count;  // ModelPixelScaleTag (33550) values; pixel_scale holds up to 3
+  double pixel_scale[3];
+  int32_t tiepoint_count;  // ModelTiepointTag (33922) values (6 per tiepoint); tiepoint: the first
+  double tiepoint[6];
+  int32_t transformation_count;  // ModelTransformationTag (34264) values; 16 when present
+  double transformation[16];
+  int32_t has_geokeys;         // GeoKeyDirectoryTag (34735) present
+  int32_t model_type;          // GTModelTypeGeoKey (1 projected, 2 geographic, 3 geocentric); 0 absent
+  int32_t raster_type;         // GTRasterTypeGeoKey (1 PixelIsArea, 2 PixelIsPoint); 0 absent
+  int32_t geographic_type;     // GeographicTypeGeoKey (EPSG code, 32767 user-defined); 0 absent
+  int32_t projected_type;      // ProjectedCSTypeGeoKey (EPSG code, 32767 user-defined); 0 absent
+  int32_t citation_truncated;  // 1 when the citation below did not fit
+  char citation[TERRAIN_IMAGE_CITATION_SIZE];  // PCSCitation, else GeogCitation, else GTCitation;
+                                               // NUL-terminated
+  int32_t has_nodata;                          // GDAL_NODATA (42113) present
+  char nodata[64];                             // its text, NUL-terminated (truncated)
+};
+int32_t terrain_image_read_georef(terrain_image_reader* reader, struct terrain_image_georef* georef,
+                                  char* message, size_t message_size);
 
 // Bit of terrain_image_create's flags: write an empty DateTime (otherwise some writers stamp the
 // current time), so that the output is byte-reproducible.

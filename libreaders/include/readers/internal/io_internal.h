@@ -33,7 +33,8 @@ struct RawLayout {
   bool gzip = false;         // stream through zlib's gzread
 };
 
-// Bytes the samples of `layout` need; DimensionMismatch if the dimensions are not positive or overflow.
+// Bytes the samples of `layout` need; DimensionMismatch if the dimensions are not positive, overflow,
+// or the rows are wider than kMaxRowSamples.
 uint64_t layout_bytes(const std::string& path, const RawLayout& layout);
 // Band reader over a fixed-layout file (fread at the data offset, or gzread for gzip streams).
 std::unique_ptr<BandReader> open_raw_stream(const std::string& path, const RawLayout& layout);
@@ -41,6 +42,18 @@ std::unique_ptr<BandReader> open_raw_stream(const std::string& path, const RawLa
 // than `limit` bytes (memory stays bounded whatever the file), NotFound when it is not a regular file.
 std::string read_small_text_file(const std::string& path, size_t limit);
 inline constexpr size_t kSideFileLimit = size_t(1) << 16;
+
+// The ESRI .prj beside a grid (ignored when missing): its WKT becomes crs_text (and crs_epsg where
+// it names one, epsg_from_wkt); a geographic CRS turns spacing (degrees) into arc-seconds.
+void apply_prj(const std::string& prj, GridInfo& g);
+// Rows of at most kMaxRowSamples samples (docs/io.md, "Limits"): readers and the builder hold a band
+// of rows, so memory is O(width x band) and a wider row is refused from the header alone.
+inline constexpr int64_t kMaxRowSamples = int64_t(1) << 20;
+// DimensionMismatch naming `path` and the limit when `width` is above kMaxRowSamples.
+void check_row_width(const std::string& path, int64_t width);
+// The most bytes the image library may hold to decode one row (a strip, a row of tiles, the whole
+// of an interlaced PNG: terrain_image_header::decode_unit_bytes).
+inline constexpr int64_t kMaxImageDecodeBytes = int64_t(256) << 20;
 
 // Overrides every format honours: spacing, vertical scale/offset, nodata.
 void apply_common_overrides(GridInfo& info, const ReadOptions& options);
@@ -50,13 +63,21 @@ RawLayout probe_hgt_layout(const std::string& path, const ReadOptions& options);
 RawLayout probe_raw_layout(const std::string& path, const ReadOptions& options);
 RawLayout probe_esri_layout(const std::string& path, const ReadOptions& options);
 GridInfo probe_image(const std::string& path, const ReadOptions& options);
+// ESRI ASCII grids (.asc): header keywords, then whitespace-separated values, streamed.
+GridInfo probe_ascii_grid(const std::string& path, const ReadOptions& options);
+std::unique_ptr<BandReader> open_ascii_grid(const std::string& path, const ReadOptions& options);
 std::unique_ptr<BandReader> open_image_reader(const std::string& path, const ReadOptions& options);
+
+// The EPSG code a WKT text names for its outermost CRS: its AUTHORITY["EPSG","n"] / ID["EPSG",n],
+// else the ESRI names GCS_WGS_1984 (4326) and WGS_1984_UTM_Zone_nN/S (326nn/327nn); nullopt otherwise.
+std::optional<int> epsg_from_wkt(const std::string& wkt);
 
 // Shortest decimal text that reads back as exactly the same double (locale independent).
 std::string format_double(double v);
 
-// Writes go to a temporary name beside the target (same extension, so OpenImageIO picks the same
-// writer); commit() renames it over the target. Destroying an uncommitted one removes the temporary.
+// Writes go to a temporary file beside the target, created exclusively under a random name with the
+// same extension (so OpenImageIO picks the same writer; core/file.h create_temp_beside); commit()
+// renames it over the target. Destroying an uncommitted one removes the temporary.
 class AtomicOutput {
  public:
   explicit AtomicOutput(std::string target);
