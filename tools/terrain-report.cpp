@@ -12,7 +12,7 @@
 #include "json_writer.h"
 #include "pyramid/error_stats.h"
 #include "pyramid/reference.h"
-#include "readers/image8.h"
+#include "raster.h"
 #include "report_file.h"
 #include "runtime/region_decoder.h"
 
@@ -32,12 +32,25 @@ void heat_colour(double e, uint8_t* rgb) {
   for (int c = 0; c < 3; ++c) rgb[c] = uint8_t(stops[i][c] + f * (stops[i + 1][c] - stops[i][c]) + 0.5);
 }
 
+// Writes a picture (write_image8 goes through a temporary, renamed when whole).
+void write_picture(const cli::Canvas& canvas, const std::string& path, const char* what) {
+  try {
+    canvas.write_png(path);
+  } catch (const Error& e) {
+    throw Error(ErrorCode::WriteFailed, std::string("cannot write the ") + what + ": " + e.what());
+  }
+}
+
+// The heat map of |error| with a colour scale bar below it (0 .. scale_max metres, labelled).
 void write_heatmap(const std::string& path, const std::vector<float>& abs_err, int64_t w, int64_t h,
                    double scale_max) {
   // Max-pool to at most 2048 pixels on the longer side so isolated large errors stay visible.
   const int64_t f = std::max<int64_t>(1, (std::max(w, h) + 2047) / 2048);
   const int64_t ow = (w + f - 1) / f, oh = (h + f - 1) / f;
-  std::vector<uint8_t> rgb(size_t(ow * oh * 3));
+  // The scale panel: at least 320 pixels wide, 3x text on maps wider than 1200 pixels.
+  const int scale = ow > 1200 ? 3 : ow > 600 ? 2 : 1, panel_h = 26 * scale + 12;
+  cli::Canvas canvas(int(std::max<int64_t>(ow, 320)), int(oh) + panel_h, {255, 255, 255, 255});
+  uint8_t rgb[3];
   for (int64_t oy = 0; oy < oh; ++oy)
     for (int64_t ox = 0; ox < ow; ++ox) {
       float m = 0;
@@ -47,25 +60,98 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
           const float e = abs_err[size_t(y * w + x)];
           if (!std::isnan(e)) m = std::max(m, e), any = true;
         }
-      uint8_t* p = &rgb[size_t((oy * ow + ox) * 3)];
       if (!any)
-        p[0] = p[1] = p[2] = 128;  // void
+        rgb[0] = rgb[1] = rgb[2] = 128;  // void
       else
-        heat_colour(scale_max > 0 ? m / scale_max : 0, p);
+        heat_colour(scale_max > 0 ? m / scale_max : 0, rgb);
+      canvas.set(int(ox), int(oy), {rgb[0], rgb[1], rgb[2], 255});
     }
-  try {
-    write_image8(path, int(ow), int(oh), 3, rgb.data());  // through a temporary, renamed when whole
-  } catch (const Error& e) {
-    throw Error(ErrorCode::WriteFailed, std::string("cannot write the heat-map: ") + e.what());
+  // Scale bar: the ramp from 0 to the finest level's max |error|, five labelled ticks, units.
+  const cli::Rgba ink{0, 0, 0, 255};
+  const std::string units = "|error|, metres (grey: void)";
+  const int bar_x = 8 * scale, bar_w = canvas.width() - 16 * scale, bar_y = int(oh) + 4 * scale,
+            bar_h = 8 * scale;
+  for (int x = 0; x < bar_w; ++x) {
+    heat_colour(double(x) / std::max(1, bar_w - 1), rgb);
+    canvas.fill_rect(bar_x + x, bar_y, 1, bar_h, {rgb[0], rgb[1], rgb[2], 255});
   }
+  for (int t = 0; t <= 4; ++t) {
+    const int x = bar_x + int(std::lround(double(t) * (bar_w - 1) / 4));
+    canvas.fill_rect(x, bar_y + bar_h, std::max(1, scale / 2), 2 * scale, ink);
+    const std::string label = cli::tick_label(scale_max * t / 4);
+    const int tw = cli::Canvas::text_width(label, scale);
+    canvas.text(std::clamp(x - tw / 2, 0, canvas.width() - tw), bar_y + bar_h + 3 * scale, label, ink, scale);
+  }
+  canvas.text(canvas.width() - cli::Canvas::text_width(units, scale) - 8 * scale, bar_y + bar_h + 12 * scale,
+              units, ink, scale);
+  write_picture(canvas, path, "heat-map");
+}
+
+// Per-level error plot: rms, 99.9th percentile and max |error| (metres, log axis) against the level.
+void write_plot(const std::string& path, const std::vector<ErrorStats>& per_level, const std::string& title) {
+  const int W = 760, H = 480, left = 78, right = 110, top = 36, bottom = 58;
+  cli::Canvas c(W, H);
+  const cli::Rgba ink{0, 0, 0, 255}, grid{215, 215, 215, 255};
+  const int levels = int(per_level.size());
+  double lo = INFINITY, hi = 0;
+  for (const ErrorStats& e : per_level)
+    for (double v : {e.rms, e.p999_abs, e.max_abs})
+      if (v > 0) lo = std::min(lo, v), hi = std::max(hi, v);
+  if (!(hi > 0)) lo = 0.01, hi = 1;  // lossless: every figure 0, drawn on the floor of the axis
+  const double d0 = std::floor(std::log10(lo)), d1 = std::max(std::ceil(std::log10(hi)), d0 + 1);
+  const double pw = W - left - right, ph = H - top - bottom;
+  auto px = [&](double level) { return left + (levels > 1 ? level / (levels - 1) : 0.5) * pw; };
+  auto py = [&](double v) {
+    const double lv = v > 0 ? std::log10(v) : d0;
+    return top + ph * (1 - (std::clamp(lv, d0, d1) - d0) / (d1 - d0));
+  };
+  for (double d = d0; d <= d1; ++d) {  // decades: grid line and label; 2 and 5 as lighter lines
+    c.line(left, py(std::pow(10, d)), W - right, py(std::pow(10, d)), grid);
+    const std::string label = cli::tick_label(std::pow(10, d));
+    c.text(left - 6 - cli::Canvas::text_width(label, 2), int(py(std::pow(10, d))) - 7, label, ink, 2);
+    if (d < d1)
+      for (double m : {2.0, 5.0})
+        c.line(left, py(m * std::pow(10, d)), W - right, py(m * std::pow(10, d)), {235, 235, 235, 255});
+  }
+  for (int l = 0; l < levels; ++l) {
+    c.line(px(l), top + ph, px(l), top + ph + 5, ink);
+    const std::string label = std::to_string(l);
+    c.text(int(px(l)) - cli::Canvas::text_width(label, 2) / 2, top + int(ph) + 9, label, ink, 2);
+  }
+  c.line(left, top, left, top + ph, ink);
+  c.line(left, top + ph, W - right, top + ph, ink);
+  const std::string xlabel = "pyramid level (0 = coarsest)", ylabel = "|error|, metres";
+  c.text(left + int(pw) / 2 - cli::Canvas::text_width(xlabel, 2) / 2, H - 22, xlabel, ink, 2);
+  c.text(10, top + int(ph) / 2 + cli::Canvas::text_width(ylabel, 2) / 2, ylabel, ink, 2, true);
+  c.text(left, 10, title, ink, 2);
+  const struct {
+    const char* name;
+    cli::Rgba colour;
+    double ErrorStats::*field;
+  } series[3] = {{"max", {200, 40, 40, 255}, &ErrorStats::max_abs},
+                 {"p99.9", {230, 140, 20, 255}, &ErrorStats::p999_abs},
+                 {"rms", {30, 80, 200, 255}, &ErrorStats::rms}};
+  int legend_y = top + 8;
+  for (const auto& s : series) {
+    for (int l = 0; l < levels; ++l) {
+      const double v = per_level[size_t(l)].*s.field;
+      if (l > 0) c.line(px(l - 1), py(per_level[size_t(l - 1)].*s.field), px(l), py(v), s.colour, 2);
+      c.fill_rect(int(px(l)) - 3, int(py(v)) - 3, 7, 7, s.colour);
+    }
+    c.fill_rect(W - right + 12, legend_y + 5, 20, 3, s.colour);  // the legend, right of the plot
+    c.text(W - right + 38, legend_y, s.name, ink, 2);
+    legend_y += 20;
+  }
+  write_picture(c, path, "plot");
 }
 
 int run(int argc, char** argv) {
-  std::string input, pyr_path, json_path, heatmap;
+  std::string input, pyr_path, json_path, heatmap, plot;
   cli::CommonFlags common;
   ReadOptions read_options;
   cli::ArgParser parser(
-      "terrain-report", "INPUT PYRAMID.pyr [--json FILE] [--heatmap FILE.png] [read options]",
+      "terrain-report",
+      "INPUT PYRAMID.pyr [--json FILE] [--heatmap FILE.png] [--plot FILE.png] [read options]",
       "Compares a pyramid file with the input it was built from. Per level and overall: rms,\n"
       "max |error|, 99.9th percentile of |error| (metres) and PSNR = 20 log10((zmax-zmin)/rms) dB,\n"
       "where level l of the source is the builder's own filtered level (same D filter, same void\n"
@@ -75,7 +161,12 @@ int run(int argc, char** argv) {
   parser.positional("INPUT", "the heightmap the pyramid was built from", &input);
   parser.positional("PYRAMID", "the .pyr file", &pyr_path);
   parser.option("--json", "FILE", "write the report as JSON to FILE ('-' for stdout)", &json_path);
-  parser.option("--heatmap", "FILE", "write a PNG of |error| at the finest level (grey = void)", &heatmap);
+  parser.option("--heatmap", "FILE",
+                "write a PNG of |error| at the finest level (grey = void) with a colour scale in metres",
+                &heatmap);
+  parser.option("--plot", "FILE",
+                "write a PNG plot of rms, 99.9th percentile and max |error| per level (metres, log axis)",
+                &plot);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
   if (auto status = parser.parse(argc, argv)) return *status;
@@ -157,6 +248,8 @@ int run(int argc, char** argv) {
                                                                                               : 32;
 
   if (!heatmap.empty()) write_heatmap(heatmap, finest_err, map.width(), map.height(), finest.max_abs);
+  if (!plot.empty())
+    write_plot(plot, per_level, "error per level: " + std::filesystem::path(pyr_path).filename().string());
 
   if (!common.quiet) {
     std::printf("%s vs %s: %dx%d, %d levels, %s\n", pyr_path.c_str(), input.c_str(), int(map.width()),

@@ -1,6 +1,7 @@
 // Drawing a geometry clipmap with OpenGL 4.5 core: toroidal height textures read in the vertex
 // shader, footprints from constant vertex/index buffers, transition morph, T-junction stitching, per-block
-// view-frustum culling, z-coloured diffuse shading from the slope (normal) maps.
+// view-frustum culling; shading from the slope (normal) maps: hypsometric tints with hillshade, a sky
+// gradient and distance haze, or the plain relative-z ramp.
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 
@@ -42,6 +43,7 @@ uniform sampler2DArray u_zc;
 out vec2 v_grid;
 out float v_alpha;
 out float v_height;
+out vec3 v_world;            // metres, for the distance haze
 invariant gl_Position;
 
 void main() {
@@ -70,6 +72,7 @@ void main() {
   v_grid = vec2(g);
   v_alpha = alpha;
   v_height = z;
+  v_world = vec3(vec2(g) * u_g, z);
   gl_Position = u_mvp * vec4(vec2(g) * u_g, z, 1.0);
 }
 )";
@@ -78,6 +81,7 @@ const char* kFragmentShader = R"(#version 450 core
 in vec2 v_grid;
 in float v_alpha;
 in float v_height;
+in vec3 v_world;
 uniform sampler2DArray u_normal;  // 2n x 2n: dz/dx, dz/dy; linear filtering, repeat = toroidal wrap
 uniform int u_level;
 uniform int u_coarse_layer;
@@ -87,6 +91,17 @@ uniform vec3 u_light;
 uniform int u_flat;
 uniform vec3 u_flat_rgb;
 uniform vec2 u_zrange;
+uniform int u_shading;           // 0: relative z ramp (the look before issue 19), 1: hypsometric
+uniform vec3 u_eye;              // camera, metres
+uniform vec3 u_haze_rgb;         // the sky at the horizon
+uniform float u_haze_distance;   // metres at which 1 - 1/e of the haze is reached; 0: none
+uniform float u_haze_max;
+uniform int u_level_colours;     // tint each level (viewer toggle)
+uniform vec3 u_hillshade_light;  // hypsometric: towards the sun
+uniform float u_relief;          // hypsometric: slope exaggeration of the hillshade
+uniform int u_drape;             // hypsometric: colours from the draped image where it covers
+uniform vec4 u_drape_rect;       // its world x0, y0 (metres) and 1 / its width, 1 / its height
+uniform sampler2D u_drape_image;
 out vec4 o_colour;
 
 vec3 ramp(float t) {
@@ -95,6 +110,25 @@ vec3 ramp(float t) {
   if (t < 0.33) return mix(c0, c1, t / 0.33);
   if (t < 0.75) return mix(c1, c2, (t - 0.33) / 0.42);
   return mix(c2, c3, (t - 0.75) / 0.25);
+}
+
+// Hypsometric tints by absolute height in metres (a map's layer colours): water at or below 0 m
+// from light to deep blue, then lowland greens, tan uplands, brown mountains, grey rock, snow.
+vec3 hypsometric(float h) {
+  if (h <= 0.0) return mix(vec3(0.36, 0.58, 0.82), vec3(0.08, 0.20, 0.48), clamp(-h / 1000.0, 0.0, 1.0));
+  const float z[8] = float[8](0.0, 300.0, 800.0, 1300.0, 1900.0, 2600.0, 3200.0, 4000.0);
+  const vec3 c[8] = vec3[8](vec3(0.30, 0.52, 0.28), vec3(0.40, 0.60, 0.32), vec3(0.58, 0.66, 0.38),
+                            vec3(0.76, 0.72, 0.48), vec3(0.68, 0.55, 0.40), vec3(0.60, 0.55, 0.52),
+                            vec3(0.86, 0.86, 0.87), vec3(0.98, 0.98, 1.00));
+  for (int i = 1; i < 8; ++i)
+    if (h < z[i]) return mix(c[i - 1], c[i], (h - z[i - 1]) / (z[i] - z[i - 1]));
+  return c[7];
+}
+
+vec3 level_tint(int l) {
+  const vec3 t[6] = vec3[6](vec3(1.0, 0.45, 0.45), vec3(0.45, 1.0, 0.45), vec3(0.45, 0.55, 1.0),
+                            vec3(1.0, 1.0, 0.4), vec3(1.0, 0.45, 1.0), vec3(0.4, 1.0, 1.0));
+  return t[l % 6];
 }
 
 void main() {
@@ -112,23 +146,89 @@ void main() {
   }
   vec3 normal = normalize(vec3(-s, 1.0));
   float diffuse = max(dot(normal, normalize(u_light)), 0.0);
-  float t = clamp((v_height - u_zrange.x) / max(u_zrange.y - u_zrange.x, 1e-3), 0.0, 1.0);
-  o_colour = vec4(ramp(t) * (0.25 + 0.75 * diffuse), 1.0);
+  vec3 colour;
+  if (u_shading == 0) {
+    float t = clamp((v_height - u_zrange.x) / max(u_zrange.y - u_zrange.x, 1e-3), 0.0, 1.0);
+    colour = ramp(t) * (0.25 + 0.75 * diffuse);
+  } else {
+    // Hillshade: the normal map's slope lit from the north-west (u_light), as on a relief map;
+    // water stays flat-lit.
+    vec3 tint = hypsometric(v_height);
+    vec3 relief = normalize(vec3(-u_relief * s, 1.0));
+    float hill = max(dot(relief, normalize(u_hillshade_light)), 0.0);
+    float shade = v_height <= 0.0 ? 0.85 : 0.22 + 0.95 * hill;
+    if (u_drape != 0) {
+      vec2 uv = (v_world.xy - u_drape_rect.xy) * u_drape_rect.zw;
+      if (all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)))) {
+        vec4 d = texture(u_drape_image, uv);
+        tint = mix(tint, d.rgb, d.a);  // transparent pixels keep the height tint
+        shade = mix(shade, 0.45 + 0.6 * hill, d.a);  // an image has its own shadows: a milder hillshade
+      }
+    }
+    colour = tint * shade;
+  }
+  if (u_level_colours != 0) colour *= level_tint(u_level);
+  if (u_haze_distance > 0.0) {
+    float haze = u_haze_max * (1.0 - exp(-length(v_world - u_eye) / u_haze_distance));
+    colour = mix(colour, u_haze_rgb, haze);
+  }
+  o_colour = vec4(colour, 1.0);
 }
 )";
+
+// The sky behind the terrain: one full-screen triangle, coloured by the elevation of each pixel's
+// view ray (horizon colour below the horizon, where only the distant haze is).
+const char* kSkyVertexShader = R"(#version 450 core
+out vec2 v_ndc;
+void main() {
+  vec2 p = vec2(float((gl_VertexID & 1) * 4 - 1), float((gl_VertexID & 2) * 2 - 1));
+  v_ndc = p;
+  gl_Position = vec4(p, 1.0, 1.0);
+}
+)";
+
+const char* kSkyFragmentShader = R"(#version 450 core
+in vec2 v_ndc;
+uniform vec3 u_forward, u_right, u_up;  // camera basis, world frame
+uniform vec2 u_tan_half;                // tan of half the horizontal and vertical field of view
+uniform vec3 u_zenith_rgb, u_horizon_rgb;
+out vec4 o_colour;
+void main() {
+  vec3 d = normalize(u_forward + v_ndc.x * u_tan_half.x * u_right + v_ndc.y * u_tan_half.y * u_up);
+  float e = clamp(d.z, 0.0, 1.0);
+  o_colour = vec4(mix(u_horizon_rgb, u_zenith_rgb, pow(e, 0.6)), 1.0);
+}
+)";
+
+// Throws with the info log when a shader's compile or a program's link status is false.
+template <typename GetIv, typename GetLog>
+void check_status(GLuint object, GLenum status, GetIv get_iv, GetLog get_log, const char* what) {
+  GLint ok = 0;
+  get_iv(object, status, &ok);
+  if (ok) return;
+  char log[4096];
+  get_log(object, GLsizei(sizeof log), nullptr, log);
+  throw std::runtime_error(std::string("clipmap renderer: ") + what + " failed: " + log);
+}
 
 GLuint compile(GLenum kind, const char* src) {
   GLuint s = glCreateShader(kind);
   glShaderSource(s, 1, &src, nullptr);
   glCompileShader(s);
-  GLint ok = 0;
-  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    char log[4096];
-    glGetShaderInfoLog(s, sizeof log, nullptr, log);
-    throw std::runtime_error(std::string("clipmap renderer: shader compile failed: ") + log);
-  }
+  check_status(s, GL_COMPILE_STATUS, glGetShaderiv, glGetShaderInfoLog, "shader compile");
   return s;
+}
+
+GLuint link(const char* vertex, const char* fragment) {
+  const GLuint vs = compile(GL_VERTEX_SHADER, vertex), fs = compile(GL_FRAGMENT_SHADER, fragment);
+  const GLuint program = glCreateProgram();
+  glAttachShader(program, vs);
+  glAttachShader(program, fs);
+  glLinkProgram(program);
+  glDeleteShader(vs);
+  glDeleteShader(fs);
+  check_status(program, GL_LINK_STATUS, glGetProgramiv, glGetProgramInfoLog, "program link");
+  return program;
 }
 
 void check_gl(const char* step) {
@@ -153,18 +253,24 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
   return r;
 }
 
-Mat4 view_projection(const Camera& cam, double aspect, double near_m, double far_m) {
+// The camera's forward, right and up vectors in the world frame.
+void camera_basis(const Camera& cam, double f[3], double r[3], double u[3]) {
   const double cp = std::cos(cam.pitch), sp = std::sin(cam.pitch), cy = std::cos(cam.yaw),
                sy = std::sin(cam.yaw);
-  const double f[3] = {cp * cy, cp * sy, sp};
+  f[0] = cp * cy, f[1] = cp * sy, f[2] = sp;
   // right = f x up(0,0,1), normalised; up' = right x f
-  double r[3] = {f[1], -f[0], 0};
+  r[0] = f[1], r[1] = -f[0], r[2] = 0;
   const double rl = std::hypot(r[0], r[1]);
   if (rl < 1e-9)
     r[0] = 1, r[1] = 0;  // looking straight up or down: any right vector will do
   else
     r[0] /= rl, r[1] /= rl;
-  const double u[3] = {r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]};
+  u[0] = r[1] * f[2] - r[2] * f[1], u[1] = r[2] * f[0] - r[0] * f[2], u[2] = r[0] * f[1] - r[1] * f[0];
+}
+
+Mat4 view_projection(const Camera& cam, double aspect, double near_m, double far_m) {
+  double f[3], r[3], u[3];
+  camera_basis(cam, f, r, u);
   const double* e = cam.position;
   Mat4 view{r[0],
             u[0],
@@ -267,7 +373,15 @@ struct ClipmapRenderer::Gl {
   std::vector<bool> uploaded;
   GLint u_origin = -1, u_extent = -1, u_transpose = -1, u_level = -1, u_n = -1, u_wrap_base = -1, u_g = -1,
         u_viewer = -1, u_active = -1, u_w = -1, u_transitions = -1, u_mvp = -1, u_coarse_layer = -1,
-        u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1;
+        u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1, u_shading = -1,
+        u_eye = -1, u_haze_rgb = -1, u_haze_distance = -1, u_haze_max = -1, u_level_colours = -1,
+        u_hillshade_light = -1, u_relief = -1, u_drape = -1, u_drape_rect = -1;
+  // The draped image (set_drape): an RGBA8 texture with mipmaps and the world rectangle it covers.
+  GLuint drape = 0;
+  double drape_rect[4] = {0, 0, 0, 0};
+  // The sky gradient (hypsometric shading): a full-screen triangle drawn before the terrain.
+  GLuint sky_program = 0, sky_vao = 0;
+  GLint s_forward = -1, s_right = -1, s_up = -1, s_tan_half = -1, s_zenith = -1, s_horizon = -1;
 };
 
 ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
@@ -277,21 +391,12 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   Gl& g = *gl_;
   g.uploaded_clip.assign(size_t(levels), Rect{});
   g.uploaded.assign(size_t(levels), false);
-  const GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader),
-               fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
-  g.program = glCreateProgram();
-  glAttachShader(g.program, vs);
-  glAttachShader(g.program, fs);
-  glLinkProgram(g.program);
-  glDeleteShader(vs);
-  glDeleteShader(fs);
-  GLint ok = 0;
-  glGetProgramiv(g.program, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    char log[4096];
-    glGetProgramInfoLog(g.program, sizeof log, nullptr, log);
-    throw std::runtime_error(std::string("clipmap renderer: program link failed: ") + log);
-  }
+  g.program = link(kVertexShader, kFragmentShader);
+  g.sky_program = link(kSkyVertexShader, kSkyFragmentShader);
+  glCreateVertexArrays(1, &g.sky_vao);
+  auto sloc = [&](const char* name) { return glGetUniformLocation(g.sky_program, name); };
+  g.s_forward = sloc("u_forward"), g.s_right = sloc("u_right"), g.s_up = sloc("u_up");
+  g.s_tan_half = sloc("u_tan_half"), g.s_zenith = sloc("u_zenith_rgb"), g.s_horizon = sloc("u_horizon_rgb");
   auto loc = [&](const char* name) { return glGetUniformLocation(g.program, name); };
   g.u_origin = loc("u_origin"), g.u_extent = loc("u_extent"), g.u_transpose = loc("u_transpose");
   g.u_level = loc("u_level"), g.u_n = loc("u_n"), g.u_wrap_base = loc("u_wrap_base"), g.u_g = loc("u_g");
@@ -300,7 +405,13 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   g.u_mvp = loc("u_mvp"), g.u_coarse_layer = loc("u_coarse_layer"), g.u_coarse_scale = loc("u_coarse_scale");
   g.u_light = loc("u_light"), g.u_flat = loc("u_flat"), g.u_flat_rgb = loc("u_flat_rgb"),
   g.u_zrange = loc("u_zrange");
+  g.u_shading = loc("u_shading"), g.u_eye = loc("u_eye"), g.u_haze_rgb = loc("u_haze_rgb");
+  g.u_haze_distance = loc("u_haze_distance"), g.u_haze_max = loc("u_haze_max");
+  g.u_level_colours = loc("u_level_colours");
+  g.u_hillshade_light = loc("u_hillshade_light"), g.u_relief = loc("u_relief");
+  g.u_drape = loc("u_drape"), g.u_drape_rect = loc("u_drape_rect");
   glUseProgram(g.program);
+  glUniform1i(loc("u_drape_image"), 3);
   glUniform1i(loc("u_z"), 0);
   glUniform1i(loc("u_zc"), 1);
   glUniform1i(loc("u_normal"), 2);
@@ -383,7 +494,10 @@ ClipmapRenderer::~ClipmapRenderer() {
   glDeleteRenderbuffers(1, &g.colour);
   glDeleteRenderbuffers(1, &g.depth);
   glDeleteVertexArrays(1, &g.vao);
+  glDeleteVertexArrays(1, &g.sky_vao);
   glDeleteProgram(g.program);
+  glDeleteProgram(g.sky_program);
+  if (g.drape) glDeleteTextures(1, &g.drape);
 }
 
 void ClipmapRenderer::upload(const Clipmap& cm, bool everything) {
@@ -463,6 +577,26 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
   glViewport(0, 0, width_, height_);
   glClearColor(opt.background_rgb[0], opt.background_rgb[1], opt.background_rgb[2], 1.0f);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+  const bool hypsometric = opt.shading == Shading::Hypsometric && !opt.flat_colour;
+  if (hypsometric) {  // the sky gradient, behind everything (no depth written)
+    double f[3], r[3], u[3];
+    camera_basis(cam, f, r, u);
+    const double ty = std::tan(cam.fov_y_deg * M_PI / 360.0), tx = ty * double(width_) / double(height_);
+    glDisable(GL_DEPTH_TEST);
+    glDepthMask(GL_FALSE);
+    glUseProgram(g.sky_program);
+    glUniform3f(g.s_forward, float(f[0]), float(f[1]), float(f[2]));
+    glUniform3f(g.s_right, float(r[0]), float(r[1]), float(r[2]));
+    glUniform3f(g.s_up, float(u[0]), float(u[1]), float(u[2]));
+    glUniform2f(g.s_tan_half, float(tx), float(ty));
+    glUniform3f(g.s_zenith, opt.sky_zenith_rgb[0], opt.sky_zenith_rgb[1], opt.sky_zenith_rgb[2]);
+    glUniform3f(g.s_horizon, opt.sky_horizon_rgb[0], opt.sky_horizon_rgb[1], opt.sky_horizon_rgb[2]);
+    glBindVertexArray(g.sky_vao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glDepthMask(GL_TRUE);
+  }
+  if (opt.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_LINE);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LEQUAL);
   glDisable(GL_CULL_FACE);  // stitching triangles have no meaningful orientation
@@ -477,6 +611,23 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
   glUniform3f(g.u_light, opt.light_dir[0], opt.light_dir[1], opt.light_dir[2]);
   glUniform1i(g.u_flat, opt.flat_colour ? 1 : 0);
   glUniform3f(g.u_flat_rgb, opt.terrain_rgb[0], opt.terrain_rgb[1], opt.terrain_rgb[2]);
+  glUniform1i(g.u_shading, hypsometric ? 1 : 0);
+  glUniform1i(g.u_level_colours, opt.level_colours ? 1 : 0);
+  glUniform3f(g.u_eye, float(cam.position[0]), float(cam.position[1]), float(cam.position[2]));
+  glUniform3f(g.u_haze_rgb, opt.sky_horizon_rgb[0], opt.sky_horizon_rgb[1], opt.sky_horizon_rgb[2]);
+  // Haze: 1 - 1/e of haze_max at half the coarsest level's extent unless given (scales with the scene).
+  const double haze_m = opt.haze_distance_m > 0 ? opt.haze_distance_m : 0.5 * n_ * cm.spacing(0);
+  glUniform1f(g.u_haze_distance, hypsometric && opt.haze_max > 0 ? float(haze_m) : 0.0f);
+  glUniform1f(g.u_haze_max, opt.haze_max);
+  glUniform3f(g.u_hillshade_light, opt.hillshade_dir[0], opt.hillshade_dir[1], opt.hillshade_dir[2]);
+  glUniform1f(g.u_relief, opt.relief);
+  const bool drape = opt.drape && g.drape != 0;
+  glUniform1i(g.u_drape, drape ? 1 : 0);
+  if (drape) {
+    glBindTextureUnit(3, g.drape);
+    glUniform4f(g.u_drape_rect, float(g.drape_rect[0]), float(g.drape_rect[1]), float(1 / g.drape_rect[2]),
+                float(1 / g.drape_rect[3]));
+  }
   if (opt.z_hi > opt.z_lo) {
     glUniform2f(g.u_zrange, opt.z_lo, opt.z_hi);
   } else {
@@ -596,10 +747,41 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
       }
     }
   }
+  glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
   glFinish();
   check_gl("render");
   stats.seconds_render = since(t0);
   return stats;
+}
+
+void ClipmapRenderer::set_drape(const std::vector<uint8_t>& rgba, int width, int height, double x0_m,
+                                double y0_m, double width_m, double height_m) {
+  if (width < 1 || height < 1 || width > 16384 || height > 16384 ||
+      rgba.size() != size_t(width) * size_t(height) * 4 || !(width_m > 0) || !(height_m > 0))
+    throw std::invalid_argument(
+        "clipmap renderer: drape image must be 1..16384 pixels a side, RGBA8, over a "
+        "positive area");
+  Gl& g = *gl_;
+  if (g.drape) glDeleteTextures(1, &g.drape);
+  int mip_levels = 1;
+  while ((std::max(width, height) >> mip_levels) > 0) ++mip_levels;
+  glCreateTextures(GL_TEXTURE_2D, 1, &g.drape);
+  glTextureStorage2D(g.drape, mip_levels, GL_RGBA8, width, height);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  glTextureSubImage2D(g.drape, 0, 0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+  glGenerateTextureMipmap(g.drape);
+  glTextureParameteri(g.drape, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+  glTextureParameteri(g.drape, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTextureParameteri(g.drape, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(g.drape, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  g.drape_rect[0] = x0_m, g.drape_rect[1] = y0_m, g.drape_rect[2] = width_m, g.drape_rect[3] = height_m;
+  check_gl("drape upload");
+}
+
+void ClipmapRenderer::blit_to_default_framebuffer(int width, int height) const {
+  glBlitNamedFramebuffer(gl_->fbo, 0, 0, 0, width_, height_, 0, 0, width, height, GL_COLOR_BUFFER_BIT,
+                         width == width_ && height == height_ ? GL_NEAREST : GL_LINEAR);
+  check_gl("blit");
 }
 
 void ClipmapRenderer::read_rgba(std::vector<uint8_t>& out) const {

@@ -13,7 +13,9 @@
 #include <tuple>
 #include <vector>
 
+#include "container/container.h"
 #include "render/leak_check.h"
+#include "render/renderer.h"
 #include "runtime/clipmap.h"
 #include "runtime/region_decoder.h"
 #include "runtime/screen_error.h"
@@ -49,7 +51,37 @@ struct ViewOptions {
   std::optional<double> max_screen_error;
   bool no_transitions = false, no_culling = false;
   bool quiet = false;
+  terrain::render::Shading shading = terrain::render::Shading::Hypsometric;
+  bool frames_given = false;
+  // --window: a desktop window (GLFW) instead of the headless flight; --script drives it with timed
+  // events, --screenshot writes its last frame, --record-path its camera per frame as keyframes.
+  bool window = false;
+  std::string script, screenshot, screenshot_window, record_path;
+  std::string drape;  // --drape: an 8-bit RGB(A) image over the terrain's extent
 };
+
+// The renderer's options from the command line.
+terrain::render::RenderOptions render_options(const ViewOptions& o);
+
+// One keyframe: position in metres (x east along columns, y along rows), height above the ground,
+// heading and pitch in degrees.
+struct Key {
+  double frame, x, y, above, yaw_deg, pitch_deg;
+};
+// The lines of a small text file (at most 16 MiB, a regular file) with their 1-based numbers, '#'
+// comments cut off; `what` names it in errors. Throws Error.
+std::vector<std::pair<int, std::string>> read_small_text(const std::string& path, const std::string& what);
+// A --path file's keyframes (frame numbers increasing); throws Error.
+std::vector<Key> read_path(const std::string& path);
+// The built-in flight over `source`'s terrain for `frames` frames.
+std::vector<Key> default_path(terrain::runtime::HeightSource& source, double spacing, int frames);
+// The keyframes interpolated linearly at `frame` (clamped to the first and last).
+Key interpolate(const std::vector<Key>& keys, double frame);
+// The finest level's height (metres) at the sample nearest (x, y), clamped into the terrain.
+float ground_height(terrain::runtime::RegionDecoderSource& source, double x, double y);
+// The flight's camera at a keyframe: `above` metres over ground_height.
+terrain::render::Camera camera_at(terrain::runtime::RegionDecoderSource& source, const Key& k,
+                                  double fov_deg);
 
 // What a flight flies over.
 struct Flight {
@@ -61,6 +93,25 @@ struct Flight {
   terrain::runtime::ClipmapOptions clipmap;
   double spacing;  // metres between finest samples
 };
+
+// The screen-space error of levels first_level.. for triangles of s_px pixels, estimated from the
+// pyramid's own finest level, plus that level's recorded compression error (finest_error, when the
+// file has it) as a bound; warns on stderr when it has not.
+std::vector<terrain::runtime::LevelScreenError> screen_error_bound(
+    const ViewOptions& o, const terrain::container::ContainerInfo& info,
+    terrain::runtime::RegionDecoderSource& source, int first_level, double s_px,
+    std::optional<terrain::container::LevelError>& finest_error);
+
+// --drape: reads the image (any 8-bit RGB or RGBA file the readers take, through their Terrain-RGB
+// path, which keeps R, G, B exactly) and hands it to the renderer over the finest level's area
+// (samples -0.5 .. size - 0.5, pixel-is-area). Nothing without --drape. Throws Error (UnknownType for
+// an image that is not 8-bit RGB).
+void apply_drape(terrain::render::ClipmapRenderer& renderer, const Flight& flight);
+
+// --window: the interactive (or --script driven) viewer; the same clipmap, renderer and shaders as
+// run_flight, in a GLFW window. Returns the exit status; cli::kExitUnavailable when this build has no
+// GLFW or no window can be opened.
+int run_window(const Flight& flight);
 
 // Plays the flight: PNG frames, stats.csv and stats.json in options.out_dir, a summary on stdout.
 // Returns the exit status (cli::kExitDamaged when the pyramid's decoder met damaged tiles, which are

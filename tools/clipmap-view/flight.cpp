@@ -17,6 +17,7 @@
 #include "clipmap_view.h"
 #include "core/file.h"
 #include "json_writer.h"
+#include "readers/heightmap.h"
 #include "render/renderer.h"
 #include "report_file.h"
 
@@ -37,6 +38,38 @@ void DamageLog::poll(const RegionDecoder& decoder) {
   }
 }
 
+RenderOptions render_options(const ViewOptions& o) {
+  RenderOptions r;
+  r.transitions = !o.no_transitions;
+  r.culling = !o.no_culling;
+  r.shading = o.shading;
+  r.drape = !o.drape.empty();
+  return r;
+}
+
+void apply_drape(ClipmapRenderer& renderer, const Flight& flight) {
+  const ViewOptions& o = flight.options;
+  if (o.drape.empty()) return;
+  ReadOptions ro;
+  ro.terrain_rgb = true;  // value = R * 65536 + G * 256 + B, exactly
+  const Heightmap image = read_heightmap(o.drape, ro);
+  if (image.info.sample_type != SampleType::TerrainRGB)
+    throw Error(ErrorCode::UnknownType, o.drape + ": --drape needs an 8-bit RGB or RGBA image");
+  if (image.width() > 16384 || image.height() > 16384)
+    throw Error(ErrorCode::Oversized, o.drape + ": --drape image larger than 16384 pixels a side");
+  std::vector<uint8_t> rgba(size_t(image.width()) * size_t(image.height()) * 4);
+  for (size_t i = 0; i < image.values.size(); ++i) {
+    const auto v = uint32_t(image.values[i]);
+    rgba[4 * i] = uint8_t(v >> 16), rgba[4 * i + 1] = uint8_t(v >> 8), rgba[4 * i + 2] = uint8_t(v);
+    rgba[4 * i + 3] = image.valid.empty() || image.valid[i] ? 255 : 0;
+  }
+  const GridSize fs = flight.source.level_size(flight.source.level_count() - 1);
+  const double g = flight.spacing;
+  const GlLeakCheckPause gl_pause;
+  renderer.set_drape(rgba, int(image.width()), int(image.height()), -0.5 * g, -0.5 * g, double(fs.width) * g,
+                     double(fs.height) * g);
+}
+
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -44,29 +77,27 @@ double percentile(std::vector<double> v, double p) {
   return v[size_t(k)];
 }
 
-namespace {
-
-// One keyframe: position in metres (x east along columns, y along rows), height above the ground,
-// heading and pitch in degrees.
-struct Key {
-  double frame, x, y, above, yaw_deg, pitch_deg;
-};
-
-std::vector<Key> read_path(const std::string& path) {
-  // A camera path is a small text file: anything else (a FIFO, /dev/zero) is refused before reading.
-  constexpr uint64_t kMaxPathBytes = uint64_t(16) << 20;
+std::vector<std::pair<int, std::string>> read_small_text(const std::string& path, const std::string& what) {
+  // A small text file: anything else (a FIFO, /dev/zero) is refused before reading.
+  constexpr uint64_t kMaxBytes = uint64_t(16) << 20;
   uint64_t bytes = 0;
   ::close(terrain::open_regular_file(path, &bytes));
-  if (bytes > kMaxPathBytes) throw Error(ErrorCode::Oversized, path + ": camera path larger than 16 MiB");
+  if (bytes > kMaxBytes) throw Error(ErrorCode::Oversized, path + ": " + what + " larger than 16 MiB");
   std::ifstream in(path);
-  if (!in) throw Error(ErrorCode::NotFound, "cannot open camera path " + path);
-  std::vector<Key> keys;
+  if (!in) throw Error(ErrorCode::NotFound, "cannot open " + what + " " + path);
+  std::vector<std::pair<int, std::string>> lines;
   std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
+  for (int number = 1; std::getline(in, line); ++number) {
     const auto hash = line.find('#');
     if (hash != std::string::npos) line.resize(hash);
+    lines.emplace_back(number, line);
+  }
+  return lines;
+}
+
+std::vector<Key> read_path(const std::string& path) {
+  std::vector<Key> keys;
+  for (const auto& [number, line] : read_small_text(path, "camera path")) {
     std::istringstream s(line);
     Key k{};
     if (!(s >> k.frame)) continue;  // blank or comment line
@@ -107,6 +138,7 @@ Key interpolate(const std::vector<Key>& keys, double frame) {
   if (frame >= keys.back().frame) return keys.back();
   size_t i = 1;
   while (keys[i].frame < frame) ++i;
+  if (keys[i].frame == frame) return keys[i];  // exactly the keyframe (a recorded path replays exactly)
   const Key &a = keys[i - 1], &b = keys[i];
   const double t = (frame - a.frame) / (b.frame - a.frame);
   auto mix = [t](double u, double v) { return u + (v - u) * t; };
@@ -117,6 +149,30 @@ Key interpolate(const std::vector<Key>& keys, double frame) {
              mix(a.yaw_deg, b.yaw_deg),
              mix(a.pitch_deg, b.pitch_deg)};
 }
+
+float ground_height(RegionDecoderSource& source, double x, double y) {
+  const int finest_level = source.level_count() - 1;
+  const double spacing = source.spacing_m();
+  const GridSize fs = source.level_size(finest_level);
+  const int64_t gx = std::clamp<int64_t>(int64_t(std::llround(x / spacing)), 0, fs.width - 1);
+  const int64_t gy = std::clamp<int64_t>(int64_t(std::llround(y / spacing)), 0, fs.height - 1);
+  float ground = 0;
+  source.fill(finest_level, Rect{gx, gy, 1, 1}, &ground, 1);
+  return ground;
+}
+
+Camera camera_at(RegionDecoderSource& source, const Key& k, double fov_deg) {
+  Camera cam;
+  cam.position[0] = k.x;
+  cam.position[1] = k.y;
+  cam.position[2] = double(ground_height(source, k.x, k.y)) + k.above;
+  cam.yaw = k.yaw_deg * M_PI / 180.0;
+  cam.pitch = k.pitch_deg * M_PI / 180.0;
+  cam.fov_y_deg = fov_deg;
+  return cam;
+}
+
+namespace {
 
 // CPU seconds of the whole process (all threads, llvmpipe's included): on a shared machine a steadier
 // measure of the work per frame than wall time.
@@ -238,7 +294,6 @@ int run_flight(const Flight& flight) {
   const double spacing = flight.spacing;
   RegionDecoderSource& source = flight.source;
   Clipmap clipmap(flight.heights, copt);
-  const int finest_level = source.level_count() - 1;
   DamageLog damage;
 
   // The reference flight: same clipmap options over another pyramid or the original input.
@@ -276,33 +331,22 @@ int run_flight(const Flight& flight) {
   if (ref_clipmap)
     ref_renderer = std::make_unique<ClipmapRenderer>(copt.n, clipmap.level_count(), o.width, o.height);
   gl_setup_pause.reset();
+  apply_drape(renderer, flight);
+  if (ref_renderer) apply_drape(*ref_renderer, flight);
   std::vector<uint8_t> ref_pixels;
   if (!o.quiet)
     std::cerr << "clipmap-view: " << gl.renderer_name() << " (EGL " << gl.platform() << "), n=" << copt.n
               << ", " << clipmap.level_count() << " levels, " << o.width << "x" << o.height << ", spacing "
               << spacing << " m\n";
-  RenderOptions ropt;
-  ropt.transitions = !o.no_transitions;
-  ropt.culling = !o.no_culling;
+  const RenderOptions ropt = render_options(o);
   std::vector<uint8_t> pixels;
   FlightLog log;
-  float ground_scratch = 0;
   std::vector<std::string> written;
   const double cpu0 = cpu_seconds();
   for (int f = 0; f < o.frames; ++f) {
     const Key k = interpolate(keys, double(f));
     // Ground under the camera from the finest level (one sample, decoded through the tile cache).
-    const GridSize fs = source.level_size(finest_level);
-    const int64_t gx = std::clamp<int64_t>(int64_t(std::llround(k.x / spacing)), 0, fs.width - 1);
-    const int64_t gy = std::clamp<int64_t>(int64_t(std::llround(k.y / spacing)), 0, fs.height - 1);
-    source.fill(finest_level, Rect{gx, gy, 1, 1}, &ground_scratch, 1);
-    Camera cam;
-    cam.position[0] = k.x;
-    cam.position[1] = k.y;
-    cam.position[2] = double(ground_scratch) + k.above;
-    cam.yaw = k.yaw_deg * M_PI / 180.0;
-    cam.pitch = k.pitch_deg * M_PI / 180.0;
-    cam.fov_y_deg = o.fov;
+    const Camera cam = camera_at(source, k, o.fov);
     const RegionStats before = flight.decoder->stats();
     const auto t0 = Clock::now();
     const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);

@@ -15,6 +15,25 @@ using namespace terrain::runtime;
 using namespace terrain::container;
 using namespace clipmap_view;
 
+namespace clipmap_view {
+std::vector<LevelScreenError> screen_error_bound(const ViewOptions& o, const ContainerInfo& info,
+                                                 RegionDecoderSource& source, int first_level, double s_px,
+                                                 std::optional<LevelError>& finest_error) {
+  std::vector<LevelScreenError> errors = estimate_screen_space_error(source, first_level, s_px);
+  // The estimate takes the file's finest level for the truth; the finest level's own error against
+  // the input, which version 1.1 files record, turns it into a bound.
+  finest_error = level_error_metres(info, info.levels.size() - 1);
+  if (finest_error)
+    add_finest_error_bound(errors, finest_error->rms, finest_error->max_abs, s_px);
+  else if (!o.quiet)
+    std::fprintf(stderr,
+                 "clipmap-view: warning: %s (format 1.0) does not record its compression error; the "
+                 "estimate leaves it out\n",
+                 o.pyramid.c_str());
+  return errors;
+}
+}  // namespace clipmap_view
+
 namespace {
 
 // --max-screen-error: the smallest n whose estimated (or, with the file's recorded finest-level
@@ -24,11 +43,9 @@ int clipmap_size_for(const ViewOptions& o, const ContainerInfo& info, RegionDeco
   const int first_level = source.level_count() - clipmap_level_count(copt, source.level_count());
   const double s_ref = triangle_size_px(o.width, o.height, o.fov, 255);
   const auto t0 = Clock::now();
-  std::vector<LevelScreenError> errors = estimate_screen_space_error(source, first_level, s_ref);
-  // The estimate takes the file's finest level for the truth; the finest level's own error against
-  // the input, which version 1.1 files record, turns it into a bound.
-  const std::optional<LevelError> finest_error = level_error_metres(info, info.levels.size() - 1);
-  if (finest_error) add_finest_error_bound(errors, finest_error->rms, finest_error->max_abs, s_ref);
+  std::optional<LevelError> finest_error;
+  const std::vector<LevelScreenError> errors =
+      screen_error_bound(o, info, source, first_level, s_ref, finest_error);
   const ClipmapSizeChoice choice =
       clipmap_size_for_screen_error(errors, s_ref, o.width, o.height, o.fov, *o.max_screen_error);
   if (!o.quiet) {
@@ -41,11 +58,6 @@ int clipmap_size_for(const ViewOptions& o, const ContainerInfo& info, RegionDeco
       std::fprintf(stderr,
                    "clipmap-view: the bound includes the finest level's compression error (max %.3f m)\n",
                    finest_error->max_abs);
-    else
-      std::fprintf(stderr,
-                   "clipmap-view: warning: %s (format 1.0) does not record its compression error; the "
-                   "estimate leaves it out\n",
-                   o.pyramid.c_str());
   }
   return choice.n;
 }
@@ -97,8 +109,10 @@ int run(int argc, char** argv) {
     o.fov = cli::parse_double("--fov", v);
     if (!(o.fov > 1 && o.fov < 179)) throw cli::UsageError("--fov must be in (1, 179) degrees");
   });
-  p.option("--frames", "N", "frames to play (default 300)",
-           [&](const std::string& v) { o.frames = int(cli::parse_int("--frames", v, 1, 1000000)); });
+  p.option("--frames", "N", "frames to play (default 300)", [&](const std::string& v) {
+    o.frames = int(cli::parse_int("--frames", v, 1, 1000000));
+    o.frames_given = true;
+  });
   p.option("--png-every", "K", "write every K-th frame as PNG, 0 = none (default 1)",
            [&](const std::string& v) { o.png_every = int(cli::parse_int("--png-every", v, 0, 1000000)); });
   p.option("--reference", "PYR",
@@ -131,6 +145,38 @@ int run(int argc, char** argv) {
              if (!(synth_detail >= 0 && synth_detail <= 100))
                throw cli::UsageError("--synth-detail must be in [0, 100]");
            });
+  p.option("--shading", "MODE",
+           "hypsometric (default: height tints, water at or below 0 m blue, hillshade, sky and haze) or\n"
+           "flat (the earlier look: a ramp over the frame's height range on a plain background)",
+           [&](const std::string& v) {
+             if (v == "hypsometric")
+               o.shading = terrain::render::Shading::Hypsometric;
+             else if (v == "flat")
+               o.shading = terrain::render::Shading::Flat;
+             else
+               throw cli::UsageError("--shading must be flat or hypsometric, got " + v);
+           });
+  p.option("--drape", "IMAGE",
+           "an 8-bit RGB(A) image (e.g. an orthophoto) draped over the terrain with --shading hypsometric:\n"
+           "it covers the pyramid's whole extent (same georeferencing; transparent pixels keep the tints)",
+           &o.drape);
+  p.flag("--window",
+         "fly interactively in a desktop window (GLFW) instead of the headless flight:\n"
+         "WASD move, E/Q up/down, mouse look (left-button drag), +/- speed, T transitions,\n"
+         "C culling, L level colours, F wireframe, Esc quits. Exit 12 when this build has\n"
+         "no GLFW or no display can be opened",
+         &o.window);
+  p.option("--script", "FILE",
+           "--window driven by timed events instead of the user: lines 'SECONDS key NAME down|up',\n"
+           "'SECONDS mouse DX DY', 'SECONDS quit' (# comments); time advances 1/30 s per frame",
+           &o.script);
+  p.option("--screenshot", "FILE.png", "--window: write the last frame (without the overlay) on exit",
+           &o.screenshot);
+  p.option("--screenshot-window", "FILE.png", "--window: write the window as last shown, overlay included",
+           &o.screenshot_window);
+  p.option("--record-path", "FILE",
+           "--window: write the camera of every frame as --path keyframes (replay it headless)",
+           &o.record_path);
   p.flag("--no-transitions", "disable the transition morph (to see popping)", &o.no_transitions);
   p.flag("--no-culling", "disable view-frustum culling", &o.no_culling);
   p.add_common(common, false);
@@ -144,6 +190,11 @@ int run(int argc, char** argv) {
 
   if (!o.reference.empty() && !o.original.empty())
     throw cli::UsageError("give --reference or --original, not both");
+  if (!o.window &&
+      (!o.script.empty() || !o.screenshot.empty() || !o.screenshot_window.empty() || !o.record_path.empty()))
+    throw cli::UsageError("--script, --screenshot, --screenshot-window and --record-path need --window");
+  if (o.window && (!o.reference.empty() || !o.original.empty() || bench > 0))
+    throw cli::UsageError("--window cannot be combined with --reference, --original or --bench");
   std::shared_ptr<const PyramidFile> file, ref_file;
   try {
     file = PyramidFile::open(o.pyramid);
@@ -187,6 +238,7 @@ int run(int argc, char** argv) {
   }
   copt.n = n;
   if (bench > 0) return run_bench(file, spacing, copt, bench, o.quiet);
+  if (o.window) return run_window(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
   return run_flight(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
 }
 

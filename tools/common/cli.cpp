@@ -39,6 +39,9 @@ const std::vector<ExitStatus>& exit_table() {
       {kExitDamaged,
        "finished with damaged tiles (clipmap-view: each logged once, its region shown from a coarser level)",
        {}},
+      {kExitUnavailable,
+       "not available here (clipmap-view --window: built without GLFW, or no display to open a window on)",
+       {}},
       {kExitInternal, "internal error", {}},
   };
   return table;

@@ -22,6 +22,9 @@ constexpr int kExitUsage = 1;
 // A viewer (clipmap-view) that met damaged tiles, showed their regions from coarser levels and
 // finished: "finished with damaged tiles".
 constexpr int kExitDamaged = 11;
+// A feature this build or this machine does not offer: clipmap-view --window built without GLFW, or
+// no display to open a window on.
+constexpr int kExitUnavailable = 12;
 constexpr int kExitInternal = 70;
 int exit_status(terrain::ErrorCode code);
 // The exit-status table, for the end of every tool's --help.

@@ -39,6 +39,12 @@ struct Camera {
   double far_m = 0;                   // far plane, metres; 0: the coarsest level's extent
 };
 
+// How terrain pixels are coloured. Flat: a ramp over the frame's height range (green - tan - brown -
+// white) times diffuse light on a uniform background (the look before issue 19). Hypsometric: map
+// layer tints by absolute height (water blue at or below 0 m), hillshade from the normal maps lit from
+// the north-west, a sky gradient and distance haze.
+enum class Shading { Flat, Hypsometric };
+
 struct RenderOptions {
   bool transitions = true;           // geometry and normal morph near each ring's outer edge
   bool culling = true;               // per-block view-frustum culling against the z bounds
@@ -48,8 +54,20 @@ struct RenderOptions {
   bool flat_colour = false;          // every terrain pixel gets `terrain_rgb` (crack tests)
   float terrain_rgb[3] = {1, 1, 1};  // linear 0..1
   float background_rgb[3] = {0.55f, 0.70f, 0.90f};  // linear 0..1
-  float light_dir[3] = {-0.4f, -0.3f, 0.87f};       // towards the light, world frame
-  float z_lo = 0, z_hi = 0;  // height colour ramp range, metres; z_hi <= z_lo: level 0's range
+  float light_dir[3] = {-0.4f, -0.3f, 0.87f};       // towards the light, world frame (north is -y)
+  float z_lo = 0, z_hi = 0;  // height colour ramp range, metres; z_hi <= z_lo: level 0's range (Flat)
+  Shading shading = Shading::Hypsometric;
+  float sky_zenith_rgb[3] = {0.22f, 0.42f, 0.75f};   // Hypsometric: sky straight up
+  float sky_horizon_rgb[3] = {0.78f, 0.84f, 0.90f};  // ... at the horizon, and the haze colour
+  double haze_distance_m = 0;  // distance of 1 - 1/e haze; 0: half the coarsest level's extent
+  float haze_max = 0.85f;      // haze never hides more than this fraction; 0: no haze
+  // Hypsometric hillshade: towards the sun (azimuth 315 degrees, altitude 45: the cartographic
+  // north-west light; north is -y) and the slope exaggeration of the shading normal.
+  float hillshade_dir[3] = {-0.5f, -0.5f, 0.7071f};
+  float relief = 2.0f;
+  bool drape = false;          // Hypsometric: colour from the image set_drape() gave, where it covers
+  bool level_colours = false;  // tint each clipmap level (viewer toggle)
+  bool wireframe = false;      // triangle edges only (viewer toggle)
 };
 
 struct RenderStats {
@@ -98,6 +116,15 @@ class ClipmapRenderer {
   // Draws the clipmap's active regions into the framebuffer and waits for the GPU (the textures are
   // what the last upload() put there). Throws as upload().
   RenderStats render(const runtime::Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
+  // An image draped over the terrain (RenderOptions::drape, Hypsometric shading): RGBA8, top row first,
+  // covering world x0_m .. x0_m + width_m, y0_m .. y0_m + height_m (its first row at y0_m); its alpha
+  // blends it over the height tints. Replaces an earlier drape. Throws std::invalid_argument for an
+  // image outside 1..16384 pixels a side or not width * height * 4 bytes, std::runtime_error on GL errors.
+  void set_drape(const std::vector<uint8_t>& rgba, int width, int height, double x0_m, double y0_m,
+                 double width_m, double height_m);
+  // Copies the last frame to the default framebuffer of the current context (a window), scaled to
+  // width x height pixels. Throws std::runtime_error on GL errors.
+  void blit_to_default_framebuffer(int width, int height) const;
   // Frame as RGBA8, top row first (out resized to width*height*4). Throws std::runtime_error on GL
   // errors.
   void read_rgba(std::vector<uint8_t>& out) const;
