@@ -38,6 +38,9 @@ PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
                                 ", tile size " + std::to_string(options_.tile_size) + ")");
 }
 
+static_assert(kLargestStep == double(codec::kMaxAbsSample),
+              "ptc_coder.h's step cap is libcodec's largest sample");
+
 PtcCoderOptions PtcResidualCoder::level_options(int levels_above_finest) const {
   PtcCoderOptions o = options_;
   // Zero error (lossless, or a max error of 0) is zero in screen space too: every level stays exact.

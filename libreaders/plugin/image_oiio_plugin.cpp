@@ -158,17 +158,21 @@ bool png_is_interlaced(const char* path) {
 std::string exr_header_problem(const char* path) {
   std::FILE* f = std::fopen(path, "rb");
   if (!f) return {};
-  std::vector<uint8_t> data;
+  // Every image open comes through here: other formats cost one 8-byte read.
+  static const uint8_t kMagic[4] = {0x76, 0x2f, 0x31, 0x01};
+  std::vector<uint8_t> data(8);
+  if (std::fread(data.data(), 1, 8, f) != 8 || std::memcmp(data.data(), kMagic, 4) != 0) {
+    std::fclose(f);
+    return {};
+  }
   uint8_t buffer[65536];
   size_t got = 0;
   // Headers are small; 16 MiB of them is beyond any real file (the checks below use the file size).
-  while ((got = std::fread(buffer, 1, sizeof buffer, f)) > 0 && data.size() < (size_t(16) << 20))
+  while (data.size() < (size_t(16) << 20) && (got = std::fread(buffer, 1, sizeof buffer, f)) > 0)
     data.insert(data.end(), buffer, buffer + got);
   std::fseek(f, 0, SEEK_END);
   const long file_size = std::ftell(f);
   std::fclose(f);
-  static const uint8_t kMagic[4] = {0x76, 0x2f, 0x31, 0x01};
-  if (data.size() < 8 || std::memcmp(data.data(), kMagic, 4) != 0) return {};
   const bool multipart = (data[5] & 0x10) != 0;  // version field bit 12
   size_t p = 8;
   const auto c_string = [&](std::string& out) {

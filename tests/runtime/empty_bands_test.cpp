@@ -41,14 +41,22 @@ Heightmap island(int64_t w, int64_t h) {
   return map;
 }
 
+// A side x side raw grid (with sidecar) of `value` everywhere; returns its path.
+std::string write_constant_grid(const iotest::TempDir& dir, const std::string& name, int64_t side,
+                                double value) {
+  Heightmap map = synthesize_terrain(SynthOptions{.seed = 1, .width = 16, .height = 16});  // the grid info
+  map.info.width = map.info.height = side;
+  map.values.assign(size_t(side * side), value);
+  const std::string path = dir.file(name);
+  write_raw(path, map);
+  return path;
+}
+
 }  // namespace
 
 TEST_CASE("a constant grid: every residual level is a few bytes of band table", "[e2e]") {
   iotest::TempDir dir;
-  Heightmap map = synthesize_terrain(SynthOptions{.seed = 1, .width = 1024, .height = 1024});
-  std::fill(map.values.begin(), map.values.end(), 57.0);
-  const std::string src = dir.file("flat.raw");
-  write_raw(src, map);
+  const std::string src = write_constant_grid(dir, "flat.raw", 1024, 57.0);
   const std::pair<ErrorMode, double> targets[] = {
       {ErrorMode::Lossless, 0}, {ErrorMode::Step, 5}, {ErrorMode::MaxError, 2}, {ErrorMode::Rms, 1}};
   for (const auto& [mode, metres] : targets) {
@@ -72,11 +80,7 @@ TEST_CASE("a constant grid: every residual level is a few bytes of band table", 
 // coarse bands are at least 16 rows, and the default D the fit falls back to is not stored).
 TEST_CASE("a constant 4096^2 grid costs under 0.001 bits per sample at every target", "[e2e]") {
   iotest::TempDir dir;
-  Heightmap map = synthesize_terrain(SynthOptions{.seed = 1, .width = 16, .height = 16});
-  map.info.width = map.info.height = 4096;
-  map.values.assign(size_t(4096) * 4096, 123.0);
-  const std::string src = dir.file("flat4k.raw");
-  write_raw(src, map);
+  const std::string src = write_constant_grid(dir, "flat4k.raw", 4096, 123.0);
   const std::pair<ErrorMode, double> targets[] = {
       {ErrorMode::Lossless, 0}, {ErrorMode::Rms, 1}, {ErrorMode::Rms, 8}, {ErrorMode::MaxError, 0.5}};
   for (const auto& [mode, metres] : targets) {
