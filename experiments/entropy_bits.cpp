@@ -25,29 +25,15 @@
 #include "codec/codec.h"
 #include "codec/internal/lapped_transform.h"
 #include "codec/internal/quantizer.h"
+#include "token_model.h"
 
 using namespace codec::detail;
+using namespace experiments;
 
 namespace {
-struct Pos {
-  int u, v;
-};
-constexpr Pos kScan[15] = {{1, 0}, {0, 1}, {0, 2}, {1, 1}, {2, 0}, {3, 0}, {2, 1}, {1, 2},
-                           {0, 3}, {1, 3}, {2, 2}, {3, 1}, {3, 2}, {2, 3}, {3, 3}};
-constexpr int kTokens = 68;
-constexpr int kClasses = 10;
 int variant = 0;
 int kRamp = 4;
 
-int token_of(uint32_t m, int* raw_bits) {
-  if (m < 16) {
-    *raw_bits = 0;
-    return int(m);
-  }
-  const int n = 31 - __builtin_clz(m);
-  *raw_bits = n - 1;
-  return 16 + (n - 4) * 2 + int((m >> (n - 1)) & 1);
-}
 int ctx_class(uint32_t a) {
   static const uint32_t kEdges[kClasses - 1] = {1, 2, 3, 4, 6, 9, 14, 22, 36};
   int c = 0;
@@ -68,93 +54,17 @@ struct Stats {
   }
 };
 
-// Bits of coding counts h with h normalised to 2^12.
-double coded_bits(const std::vector<uint64_t>& h) {
-  uint64_t total = 0;
-  int used = 0;
-  for (auto c : h) {
-    total += c;
-    used += c > 0;
-  }
-  if (!total) return 0;
-  double bits = 0;
-  for (auto c : h)
-    if (c) {
-      const double f = std::max(1.0, std::round(4096.0 * double(c) / double(total)));
-      bits += double(c) * (12 - std::log2(f));
-    }
-  return bits;
-}
-double table_bits(const std::vector<uint64_t>& h) {
-  int last = 0, used = 0;
-  for (int t = 0; t < kTokens; ++t)
-    if (h[t]) {
-      last = t;
-      ++used;
-    }
-  return used ? 8 + used * 9.0 + (last + 1 - used) * 1.0 : 0;
-}
-
-// Greedy clustering: merge the pair that saves most (data + table bits) while any saves.
+// Bits of the clustered tables: data at 12-bit precision plus the tables.
 double clustered_bits(const std::vector<std::vector<uint64_t>>& hist, int* clusters_out) {
-  std::vector<std::vector<uint64_t>> c;
-  for (auto& h : hist) {
-    uint64_t s = 0;
-    for (auto v : h) s += v;
-    if (s) c.push_back(h);
-  }
-  const size_t n = c.size();
-  std::vector<double> cost(n);
-  for (size_t i = 0; i < n; ++i) cost[i] = coded_bits(c[i]) + table_bits(c[i]);
-  std::vector<bool> alive(n, true);
-  std::vector<std::vector<double>> gain(n, std::vector<double>(n, -1e300));
-  auto merged = [&](size_t i, size_t j) {
-    std::vector<uint64_t> m(kTokens);
-    for (int t = 0; t < kTokens; ++t) m[t] = c[i][t] + c[j][t];
-    return m;
-  };
-  for (size_t i = 0; i < n; ++i)
-    for (size_t j = i + 1; j < n; ++j) {
-      auto m = merged(i, j);
-      gain[i][j] = cost[i] + cost[j] - coded_bits(m) - table_bits(m);
-    }
-  for (;;) {
-    double best = 0;
-    size_t bi = 0, bj = 0;
-    for (size_t i = 0; i < n; ++i)
-      if (alive[i])
-        for (size_t j = i + 1; j < n; ++j)
-          if (alive[j] && gain[i][j] > best) {
-            best = gain[i][j];
-            bi = i;
-            bj = j;
-          }
-    if (best <= 0) break;
-    c[bi] = merged(bi, bj);
-    alive[bj] = false;
-    cost[bi] = coded_bits(c[bi]) + table_bits(c[bi]);
-    for (size_t k = 0; k < n; ++k)
-      if (alive[k] && k != bi) {
-        auto m = merged(std::min(k, bi), std::max(k, bi));
-        gain[std::min(k, bi)][std::max(k, bi)] = cost[k] + cost[bi] - coded_bits(m) - table_bits(m);
-      }
-  }
+  std::vector<std::vector<uint64_t>> tables;
   double total = 0;
-  int clusters = 0;
-  for (size_t i = 0; i < n; ++i)
-    if (alive[i]) {
-      total += cost[i];
-      ++clusters;
-    }
-  *clusters_out = clusters;
+  cluster(hist, 12, tables, &total);
+  for (const auto& t : tables) total += coded_bits(t, 12);
+  *clusters_out = int(tables.size());
   return total;
 }
 
 bool lossy_ref(double step) { return std::lround(step * 256) > 256; }
-int64_t med(int64_t l, int64_t t, int64_t tl) {
-  const int64_t lo = std::min(l, t), hi = std::max(l, t);
-  return tl >= hi ? lo : tl <= lo ? hi : l + t - tl;
-}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -164,26 +74,15 @@ int main(int argc, char** argv) {
   if (argc > 4) variant = atoi(argv[4]);
   if (argc > 7) kRamp = atoi(argv[7]);
   const double dz_lo = argc > 5 ? atof(argv[5]) : 0.375, dz_hi = argc > 6 ? atof(argv[6]) : 0.375;
-  FILE* f = fopen(argv[1], "rb");
   const int W = 1201, H = 1201;
-  std::vector<uint8_t> raw(size_t(W) * H * 2);
-  if (fread(raw.data(), 1, raw.size(), f) != raw.size()) return 1;
-  fclose(f);
-  std::vector<int32_t> src(size_t(W) * H);
-  for (size_t i = 0; i < src.size(); ++i) {
-    int16_t v = int16_t(raw[2 * i] << 8 | raw[2 * i + 1]);
-    src[i] = v == -32768 ? 0 : v;
-  }
+  std::vector<int32_t> src;
+  if (!read_srtm3(argv[1], src)) return 1;
 
   // Reference: the real codec (RLGR).
-  codec::EncodeOptions o;
-  o.step = step;
-  o.tile_size = uint32_t(T);
-  std::vector<uint8_t> stream(codec::encode_bound(W, H, o));
-  size_t written = 0;
   codec::Scratch scratch;
-  std::vector<int32_t> recon(src.size());
-  codec::encode(src.data(), W, W, H, o, stream.data(), stream.size(), &written, scratch, recon.data(), W);
+  std::vector<uint8_t> stream;
+  std::vector<int32_t> recon;
+  const size_t written = encode_rlgr(src, W, H, step, T, stream, recon, scratch);
   double se = 0;
   for (size_t i = 0; i < src.size(); ++i) se += double(src[i] - recon[i]) * (src[i] - recon[i]);
   const double rlgr_bits = 8.0 * double(written), rlgr_rms = std::sqrt(se / double(src.size()));
@@ -225,12 +124,8 @@ int main(int argc, char** argv) {
           }
         for (int my = 0; my < mby; ++my)
           for (int mx = 0; mx < mbx; ++mx) {
-            auto at = [&](int x, int y) { return int64_t(lev[size_t(y) * 16 * pw + x * 16]); };
-            const int64_t p = (mx | my) == 0 ? 0
-                              : my == 0      ? at(mx - 1, 0)
-                              : mx == 0      ? at(0, my - 1)
-                                             : med(at(mx - 1, my), at(mx, my - 1), at(mx - 1, my - 1));
-            const int64_t r = at(mx, my) - p;
+            const int64_t p = dc_prediction(lev.data(), pw, mx, my);
+            const int64_t r = int64_t(lev[size_t(my) * 16 * pw + size_t(mx) * 16]) - p;
             st.add(0, uint32_t(r >= 0 ? 2 * r : -2 * r - 1), false);
           }
         // LP then HP, position-major
@@ -280,8 +175,7 @@ int main(int argc, char** argv) {
         // Reconstruction
         for (int y = 0; y < ph; ++y)
           for (int x = 0; x < pw; ++x) {
-            const int p = (y & 3) * 4 + (x & 3), q = (y >> 2 & 3) * 4 + (x >> 2 & 3);
-            const int band = p != 0 ? hp_band(p) : q != 0 ? lp_band(q) : 0;
+            const int band = band_at(x, y);
             tile[size_t(y) * pw + x] = int32_t(dequantize(lev[size_t(y) * pw + x], steps.q8[band]));
           }
         inverse_lapped(tile.data(), pw, ph, lossy);
