@@ -84,7 +84,8 @@ int run(int argc, char** argv) {
                     throw cli::UsageError("--level-error must be absolute or screen");
                   o.screen_level_error = v == "screen";
                 });
-  parser.flag("--resume", "striped, journalled build: a killed build run again continues from its completed stripes",
+  parser.flag("--resume",
+              "striped, journalled build: a killed build run again continues from its completed stripes",
               &o.journal);
   parser.option("--stripes", "N", "stripes of a striped build (default: one per MPI rank, 4 for one process)",
                 [&](const std::string& v) { o.stripes = int(cli::parse_int("--stripes", v, 1, 100000)); });
@@ -102,7 +103,8 @@ int run(int argc, char** argv) {
     o.group = group.get();
     // The host's cores shared among its ranks (each rank's builder has its own threads).
     if (o.threads == 0)
-      o.threads = std::max(1, int(std::thread::hardware_concurrency()) / terrain::build::local_process_count());
+      o.threads =
+          std::max(1, int(std::thread::hardware_concurrency()) / terrain::build::local_process_count());
     if (rank != 0) common.quiet = true, json_path.clear();  // rank 0 reports
   }
 #endif

@@ -52,6 +52,8 @@ int local_process_count() {
   return n > 0 ? n : 1;
 }
 
-std::unique_ptr<ProcessGroup> mpi_world(int* argc, char*** argv) { return std::make_unique<MpiWorld>(argc, argv); }
+std::unique_ptr<ProcessGroup> mpi_world(int* argc, char*** argv) {
+  return std::make_unique<MpiWorld>(argc, argv);
+}
 
 }  // namespace terrain::build

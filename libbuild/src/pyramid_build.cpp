@@ -311,7 +311,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   PtcResidualCoder coder(co);
   const int rank = o.group ? o.group->rank() : 0;
   std::optional<PyramidFileWriter> writer;
-  if (rank == 0) writer.emplace(output);
+  const auto open_output = [&]() -> PyramidFileWriter& { return writer.emplace(output); };
   StripeBuildOptions so;
   so.directory = stripe_directory(output);
   // Everything the output depends on: parts of another input or other options are never reused.
@@ -329,16 +329,19 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   const int journal_stripes = read_journal_stripes(so.directory, fp.str());
   const int processes = o.group ? o.group->size() : 1;
   if (o.journal || o.stripes > 0 || processes > 1 || journal_stripes > 0) {
-    so.stripes = o.stripes > 0 ? o.stripes : journal_stripes > 0 ? journal_stripes : processes > 1 ? processes : 4;
+    so.stripes = o.stripes > 0         ? o.stripes
+                 : journal_stripes > 0 ? journal_stripes
+                 : processes > 1       ? processes
+                                       : 4;
     so.fingerprint = fp.str() + "stripes " + std::to_string(so.stripes) + "\n";
     so.group = o.group;
     if (progress && rank == 0) so.progress = [&](double f) { progress("coding stripes", f); };
     out.build = build_stripes([&] { return open_band_reader(input, read_options); }, bo, coder, so,
-                              writer ? &*writer : nullptr, &out.stripes_resumed);
+                              open_output, &out.stripes_resumed);
     out.stripes = so.stripes;
   } else {
     ProgressReader preader(*reader, progress);
-    ProgressSink psink(*writer, progress);
+    ProgressSink psink(open_output(), progress);
     out.build = build_pyramid(preader, bo, coder, psink);
   }
   out.seconds_build = seconds_since(t_build);

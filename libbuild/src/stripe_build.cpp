@@ -120,7 +120,8 @@ class PartWriter final : public PyramidSink {
     if (::fsync(fd_) != 0) write_failed(temp_, "cannot sync");
     ::close(fd_);
     fd_ = -1;
-    if (::rename(temp_.c_str(), path_.c_str()) != 0) write_failed(path_, "cannot rename " + temp_ + " onto it");
+    if (::rename(temp_.c_str(), path_.c_str()) != 0)
+      write_failed(path_, "cannot rename " + temp_ + " onto it");
   }
 
  private:
@@ -174,7 +175,8 @@ class PartReader {
     uint64_t size = 0;
     fd_ = open_regular_file(path, &size);
     const auto bad = [&](const std::string& why) {
-      if (strict) throw Error(ErrorCode::CorruptData, path + ": " + why + " (remove the directory to start over)");
+      if (strict)
+        throw Error(ErrorCode::CorruptData, path + ": " + why + " (remove the directory to start over)");
       return false;
     };
     uint8_t h[kHeaderBytes];
@@ -225,13 +227,15 @@ class PartReader {
     data.resize(r.size), mask.resize(r.mask_size);
     if (!read_at(h, kRecordHeader, r.offset) || !read_at(data.data(), r.size, r.offset + kRecordHeader) ||
         !read_at(mask.data(), r.mask_size, r.offset + kRecordHeader + r.size))
-      throw Error(ErrorCode::Truncated, path_ + ": cannot read the record at byte " + std::to_string(r.offset));
+      throw Error(ErrorCode::Truncated,
+                  path_ + ": cannot read the record at byte " + std::to_string(r.offset));
     uint32_t crc = codec::crc32c(h, 80);
     crc = codec::crc32c(data.data(), data.size(), crc);
     crc = codec::crc32c(mask.data(), mask.size(), crc);
     if (crc != bytes::get_u32(h + 80))
-      throw Error(ErrorCode::ChecksumMismatch, path_ + ": record at byte " + std::to_string(r.offset) +
-                                                   " fails its checksum (remove the directory to start over)");
+      throw Error(ErrorCode::ChecksumMismatch,
+                  path_ + ": record at byte " + std::to_string(r.offset) +
+                      " fails its checksum (remove the directory to start over)");
   }
 
  private:
@@ -263,7 +267,8 @@ void prepare_directory(const StripeBuildOptions& so) {
   const std::string journal = so.directory + "/journal";
   if (fs::exists(so.directory, ec) && (!so.resume || read_text(journal) != so.fingerprint)) {
     // Only what a stripe build writes is removed: another directory of that name is not ours.
-    if (!fs::is_directory(so.directory, ec) || (fs::exists(journal, ec) == false && !fs::is_empty(so.directory, ec)))
+    if (!fs::is_directory(so.directory, ec) ||
+        (fs::exists(journal, ec) == false && !fs::is_empty(so.directory, ec)))
       throw Error(ErrorCode::WriteFailed, so.directory + ": exists and is not a build journal directory");
     for (const auto& e : fs::directory_iterator(so.directory, ec)) {
       const std::string name = e.path().filename().string();
@@ -271,13 +276,17 @@ void prepare_directory(const StripeBuildOptions& so) {
         fs::remove(e.path(), ec);
     }
   }
+  // The temporaries of parts a killed build was writing.
+  for (const auto& e : fs::directory_iterator(so.directory, ec))
+    if (e.path().filename().string().find(".part.tmp.") != std::string::npos) fs::remove(e.path(), ec);
   fs::create_directories(so.directory, ec);
   if (ec) throw Error(ErrorCode::WriteFailed, so.directory + ": cannot create: " + ec.message());
   if (read_text(journal) == so.fingerprint) return;
   std::string temp;
   const int fd = create_temp_beside(journal, "", &temp);
-  const bool ok = ::write(fd, so.fingerprint.data(), so.fingerprint.size()) == ssize_t(so.fingerprint.size()) &&
-                  ::fsync(fd) == 0;
+  const bool ok =
+      ::write(fd, so.fingerprint.data(), so.fingerprint.size()) == ssize_t(so.fingerprint.size()) &&
+      ::fsync(fd) == 0;
   ::close(fd);
   if (!ok || ::rename(temp.c_str(), journal.c_str()) != 0) {
     ::unlink(temp.c_str());
@@ -305,7 +314,8 @@ void remove_stripe_directory(const std::string& directory) {
 
 BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& open_input,
                           const BuildOptions& options, ResidualCoder& coder, const StripeBuildOptions& so,
-                          container::PyramidFileWriter* writer, int* stripes_resumed) {
+                          const std::function<container::PyramidFileWriter&()>& open_output,
+                          int* stripes_resumed) {
   SingleProcess alone;
   ProcessGroup& group = so.group ? *so.group : alone;
   const int rank = group.rank(), ranks = group.size();
@@ -315,7 +325,8 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const int K = int(std::clamp<int64_t>(so.stripes, 1, std::max<int64_t>(1, bands)));
   const auto stripe_rows = [&](int k) { return std::min(H, int64_t(k) * bands / K * S); };
   const uint32_t fp = codec::crc32c(so.fingerprint.data(), so.fingerprint.size());
-  const int levels = int(pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side).size());
+  const int levels =
+      int(pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side).size());
 
   // Set up by rank 0 before anyone looks at the directory.
   std::exception_ptr error;
@@ -346,8 +357,8 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       } else {
         PartWriter part(path, fp, k, K, info.width);
         auto reader = open_input();
-        BuildResult r =
-            build_pyramid_stripe(*reader, stripe_options, BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, coder, part);
+        BuildResult r = build_pyramid_stripe(*reader, stripe_options,
+                                             BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, coder, part);
         part.finish();
         if (!have_result) {
           result = std::move(r);
@@ -363,11 +374,12 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   }
   if (!group.all_true(!error)) {
     if (error) std::rethrow_exception(error);
-    throw Error(ErrorCode::WriteFailed, so.directory + ": another process failed; completed stripes are kept "
-                                                       "for a resumed build");
+    throw Error(ErrorCode::WriteFailed, so.directory +
+                                            ": another process failed; completed stripes are kept "
+                                            "for a resumed build");
   }
   if (stripes_resumed) *stripes_resumed = resumed;
-  if (rank != 0 || !writer) return result;
+  if (rank != 0) return result;
 
   // The header and D (the same for every stripe); a resumed rank 0 that coded nothing fits D again.
   if (!have_result) {
@@ -375,6 +387,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
     auto reader = open_input();
     result = build_pyramid_stripe(*reader, options, BuildStripe{0, 0}, coder, none);
   }
+  container::PyramidFileWriter* writer = &open_output();
   writer->begin(result.header);
   std::vector<LevelFigures> figures(static_cast<size_t>(levels));
   std::vector<uint8_t> data, bits, valid;
@@ -402,10 +415,12 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
         data = {};
       }
     }
-  for (int l = 0; l < levels; ++l) result.levels[size_t(l)] = figures[size_t(l)].stats(result.header.levels[size_t(l)]);
+  for (int l = 0; l < levels; ++l)
+    result.levels[size_t(l)] = figures[size_t(l)].stats(result.header.levels[size_t(l)]);
   result.void_count = voids;
   result.log.push_back("stripes: " + std::to_string(K) + " over " + std::to_string(ranks) + " process" +
-                       (ranks > 1 ? "es" : "") + (resumed ? ", " + std::to_string(resumed) + " resumed" : ""));
+                       (ranks > 1 ? "es" : "") +
+                       (resumed ? ", " + std::to_string(resumed) + " resumed" : ""));
   return result;
 }
 

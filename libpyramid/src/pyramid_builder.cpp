@@ -454,7 +454,8 @@ class StreamingBuilder {
       } else if (in_cascade) {
         levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
         mask_.append(cur.valid.data(), cur.rows);
-        if (finest_ > 0) engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
+        if (finest_ > 0)
+          engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
       }
       if (filter_ready_) pump(false);
       if (producer.joinable()) producer.join();
@@ -466,7 +467,8 @@ class StreamingBuilder {
       for (int l = finest_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
     pump(true);
     for (int l = 0; l < level_count_; ++l)
-      if (next_band_[size_t(l)] != need_hi_[size_t(l)]) throw std::logic_error("pyramid: level not completed");
+      if (next_band_[size_t(l)] != need_hi_[size_t(l)])
+        throw std::logic_error("pyramid: level not completed");
 
     for (int l = 0; l < level_count_; ++l)
       result_.levels[size_t(l)] = figures_[size_t(l)].stats(sizes_[size_t(l)]);

@@ -46,14 +46,17 @@ struct Band {
 // Keeps every band with its figures and (finest level) mask rows, per level in arrival order.
 class Recorder final : public PyramidSink {
  public:
-  void begin(const PyramidHeader& h) override { levels.resize(h.levels.size()), width = h.levels.back().width; }
+  void begin(const PyramidHeader& h) override {
+    levels.resize(h.levels.size()), width = h.levels.back().width;
+  }
   void mask_rows(int64_t, int64_t rows, const uint8_t* valid) override {
     mask.assign(valid, valid + rows * width);
   }
   void band_figures(int, int64_t, const BandFigures& f) override { figures = f; }
   void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
     const bool finest = size_t(level) + 1 == levels.size();
-    levels[size_t(level)].push_back(Band{level, y0, rows, bytes, finest ? mask : std::vector<uint8_t>{}, figures});
+    levels[size_t(level)].push_back(
+        Band{level, y0, rows, bytes, finest ? mask : std::vector<uint8_t>{}, figures});
   }
   std::vector<std::vector<Band>> levels;
   std::vector<uint8_t> mask;

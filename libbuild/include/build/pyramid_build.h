@@ -52,8 +52,8 @@ struct BuildFileResult {
   uint64_t file_bytes = 0;
   double seconds_calibrate = 0, seconds_build = 0;
   int64_t finest_samples = 0;
-  int stripes = 0;          // striped build: stripes (0: the plain build)
-  int stripes_resumed = 0;  // parts an earlier, killed build had completed
+  int stripes = 0;           // striped build: stripes (0: the plain build)
+  int stripes_resumed = 0;   // parts an earlier, killed build had completed
   bool wrote_output = true;  // false on the ranks other than 0 of a group
 };
 

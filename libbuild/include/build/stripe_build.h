@@ -40,10 +40,10 @@ class SingleProcess final : public ProcessGroup {
 };
 
 struct StripeBuildOptions {
-  std::string directory;    // OUT.build
-  std::string fingerprint;  // input and options: parts of another build are never reused
-  int stripes = 1;          // stripes of whole finest bands (fewer when the input has fewer bands)
-  bool resume = true;       // false: complete parts of a matching journal are coded again
+  std::string directory;          // OUT.build
+  std::string fingerprint;        // input and options: parts of another build are never reused
+  int stripes = 1;                // stripes of whole finest bands (fewer when the input has fewer bands)
+  bool resume = true;             // false: complete parts of a matching journal are coded again
   ProcessGroup* group = nullptr;  // null: this process alone
   std::function<void(double)> progress;  // fraction of this process's stripes done
 };
@@ -53,7 +53,8 @@ std::string stripe_directory(const std::string& output);
 
 // Codes this process's stripes (stripe k goes to rank k % size) into parts, skipping those a
 // matching journal already has complete, then (rank 0, when every process succeeded) feeds the parts
-// into `writer`, level by level, stripe by stripe. Returns, on rank 0, the whole build's result as
+// into the writer `open_output` creates (only then: a killed build leaves no temporary output), level
+// by level, stripe by stripe. Returns, on rank 0, the whole build's result as
 // build_pyramid gives it (figures added in band order); elsewhere the result of this process's
 // first stripe. `open_input` opens the input again at row 0 (each stripe reads from the top).
 // `stripes_resumed` (if not null) receives the number of parts reused. Throws as build_pyramid;
@@ -61,8 +62,10 @@ std::string stripe_directory(const std::string& output);
 // damaged part (naming it: remove OUT.build), Error(WriteFailed, "another process failed") on the
 // processes that did not fail themselves.
 BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& open_input,
-                          const BuildOptions& options, ResidualCoder& coder, const StripeBuildOptions& stripes,
-                          container::PyramidFileWriter* writer, int* stripes_resumed = nullptr);
+                          const BuildOptions& options, ResidualCoder& coder,
+                          const StripeBuildOptions& stripes,
+                          const std::function<container::PyramidFileWriter&()>& open_output,
+                          int* stripes_resumed = nullptr);
 
 // The stripe count of the journal in `directory` when its fingerprint starts with `base` (the input
 // and options without the stripe count), else 0: a resumed build keeps the stripes of the killed one
