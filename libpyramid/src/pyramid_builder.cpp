@@ -313,8 +313,9 @@ class StreamingBuilder {
   // need: those plus the coarser bands whose T^ their U windows read, level by level up the
   // pyramid. The cascade runs on input rows [read_a_, read_b_), which reach kDHalo rows beyond the
   // needed rows at every level: D read past the stripe's ends (reflected at its edges, not the
-  // input's) makes at most 5 rows wrong at each end of every level (11 taps: a wrong zone of t
-  // rows gives ceil((t + 5) / 2) coarse ones, whose fixed point is 5). read_a_ and read_b_ are
+  // input's) makes at most 5 rows wrong at each end of every level (11 taps: coarse row j reads fine
+  // rows 2j - 5 .. 2j + 5, so t wrong rows at an end give floor((t + 4) / 2) + 1 coarse ones: 3,
+  // 4, 5, 5, ...; the test cuts stripes everywhere and compares bytes). read_a_ and read_b_ are
   // multiples of 2^m (each level's rows then keep the input's parity) and of the fill band (a
   // band is filled whole, as in the whole build), or the input's end.
   void plan_stripe(const BuildStripe& stripe) {
@@ -487,7 +488,9 @@ class StreamingBuilder {
 
  private:
   // Rows beyond the needed ones a stripe's cascade runs on, at every level (see plan_stripe).
-  static constexpr int64_t kDHalo = 8;
+  // 6: the 5 wrong rows and one to spare; at the coarsest level it costs 6 * 2^m input rows of D
+  // per stripe edge, most of a stripe's extra work.
+  static constexpr int64_t kDHalo = 6;
 
   // Fits D on the top fit_rows rows (all still held: nothing is coded before the filter exists),
   // then starts the D cascade with every row received so far.
