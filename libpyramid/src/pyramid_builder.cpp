@@ -476,6 +476,7 @@ class StreamingBuilder {
         mask_.append(cur.valid.data(), cur.rows);
         if (finest_ > 0)
           engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
+        drop_halo_rows(finest_);
       }
       if (filter_ready_) pump(false);
       if (producer.joinable()) producer.join();
@@ -557,6 +558,7 @@ class StreamingBuilder {
         out.resize(size_t(n * cw));
         for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = detail::round_to_int32(rows[k]);
         levels_[size_t(l - 1)].append(out.data(), n);
+        drop_halo_rows(l - 1);
         if (l - 1 >= 1) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
       };
     }
@@ -571,6 +573,14 @@ class StreamingBuilder {
         engines_[size_t(finest_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(finest_)]);
       }
     }
+    drop_halo_rows(finest_);
+  }
+
+  // A stripe's rows above its first needed band only feed D (its halo): once the cascade has them,
+  // the level does not keep them (held, they were a third more memory on the last of two stripes).
+  void drop_halo_rows(int l) {
+    levels_[size_t(l)].drop_before(need_lo_[size_t(l)]);
+    if (l == finest_) mask_.drop_before(need_lo_[size_t(l)]);
   }
 
   // Last row of T^_{l-1} that U needs for fine rows [y0, y1) of level l, plus one.
