@@ -221,6 +221,16 @@ class PartReader {
     if (fd_ >= 0) ::close(fd_);
   }
   const std::vector<PartRecord>& records() const { return records_; }
+  // Whether every record's CRC holds (a resumed build codes a damaged part again).
+  bool intact() const {
+    std::vector<uint8_t> data, mask;
+    try {
+      for (const PartRecord& r : records_) payload(r, data, mask);
+    } catch (const Error&) {
+      return false;
+    }
+    return true;
+  }
   // The record's stream and mask bits, its CRC checked.
   void payload(const PartRecord& r, std::vector<uint8_t>& data, std::vector<uint8_t>& mask) const {
     uint8_t h[kRecordHeader];
@@ -352,7 +362,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
     for (int k = rank; k < K; k += ranks) {
       const std::string path = part_path(so.directory, K, k);
       PartReader existing;
-      if (so.resume && existing.open(path, fp, k, K, levels, info.width, false)) {
+      if (so.resume && existing.open(path, fp, k, K, levels, info.width, false) && existing.intact()) {
         ++resumed;
       } else {
         PartWriter part(path, fp, k, K, info.width);
