@@ -1,5 +1,6 @@
 // pyramid-build: heightmap file -> compressed, error-controlled multiresolution pyramid (.pyr).
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -107,6 +108,10 @@ int run(int argc, char** argv) {
           std::max(1, int(std::thread::hardware_concurrency()) / terrain::build::local_process_count());
     if (rank != 0) common.quiet = true, json_path.clear();  // rank 0 reports
   }
+#else
+  // Without MPI every rank would build the whole pyramid on its own, all into the same output.
+  if (const char* n = std::getenv("OMPI_COMM_WORLD_SIZE"); n && std::atoi(n) > 1)
+    throw cli::UsageError("this pyramid-build was built without MPI (TERRAIN_MPI): run it without mpirun");
 #endif
   (void)rank;
 
