@@ -59,8 +59,11 @@ std::string stripe_directory(const std::string& output);
 // first stripe. `open_input` opens the input again at row 0 (each stripe reads from the top).
 // `stripes_resumed` (if not null) receives the number of parts reused. Throws as build_pyramid;
 // Error(WriteFailed) for a part that cannot be written, Error(CorruptData/ChecksumMismatch) for a
-// damaged part (naming it: remove OUT.build), Error(WriteFailed, "another process failed") on the
-// processes that did not fail themselves.
+// part damaged between the check and the assembly (a damaged part found at the start is coded
+// again), Error(WriteFailed, "another process failed") on the processes that did not fail
+// themselves. Collective: every process of the group calls it, from one thread (the builder uses
+// options.threads workers inside). The parts are trusted as files this build wrote: their records
+// are bounds- and CRC-checked, not defended against a forger.
 BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& open_input,
                           const BuildOptions& options, ResidualCoder& coder,
                           const StripeBuildOptions& stripes,
