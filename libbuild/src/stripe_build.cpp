@@ -410,6 +410,11 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       for (const PartRecord& r : part.records()) {
         if (r.level != l) continue;
         part.payload(r, data, bits);
+        const int64_t level_height = result.header.levels[size_t(l)].height;
+        if (r.rows < 1 || r.y0 < 0 || r.y0 > level_height - r.rows)
+          throw Error(ErrorCode::CorruptData, part_path(so.directory, K, k) + ": record at byte " +
+                                                  std::to_string(r.offset) + " has rows outside level " +
+                                                  std::to_string(l));
         if (l == levels - 1) {
           valid.assign(size_t(r.rows * W), 1);
           if (!bits.empty()) {
