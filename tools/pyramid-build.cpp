@@ -1,10 +1,15 @@
 // pyramid-build: heightmap file -> compressed, error-controlled multiresolution pyramid (.pyr).
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <thread>
 
 #include "build/pyramid_build.h"
+#ifdef TERRAIN_HAVE_MPI
+#include "build/mpi_group.h"
+#endif
 #include "cli.h"
 #include "json_writer.h"
 #include "progress.h"
@@ -15,6 +20,11 @@ namespace {
 using terrain::container::ErrorMode;
 
 int run(int argc, char** argv) {
+#ifdef TERRAIN_HAVE_MPI
+  // Under mpirun every rank runs this tool with the same arguments; MPI only when launched so.
+  std::unique_ptr<terrain::build::ProcessGroup> group;
+  if (terrain::build::launched_by_mpi()) group = terrain::build::mpi_world(&argc, &argv);
+#endif
   std::string input, output, json_path;
   cli::CommonFlags common;
   terrain::ReadOptions read_options;
@@ -36,7 +46,11 @@ int run(int argc, char** argv) {
       "the whole input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; "
       "integer "
       "input).\n"
-      "The output is written to OUT.pyr.tmp.XXXXXX (a new random name) and renamed when complete.");
+      "The output is written to OUT.pyr.tmp.XXXXXX (a new random name) and renamed when complete.\n"
+      "Striped build (--resume, --stripes, or mpirun -np N pyramid-build ...): the rows are cut into\n"
+      "stripes coded into part files in OUT.pyr.build/, shared out among the MPI ranks; rank 0 writes\n"
+      "OUT.pyr from them, byte-identical to the one-process build. A killed striped build run again\n"
+      "with the same input and options resumes from its completed stripes (docs/scale.md).");
   parser.positional("INPUT", "heightmap to read", &input);
   parser.option("-o,--output", "OUT", "pyramid file to write (required)", &output);
   parser.option("--rms", "M", "target rms error in metres",
@@ -71,6 +85,11 @@ int run(int argc, char** argv) {
                     throw cli::UsageError("--level-error must be absolute or screen");
                   o.screen_level_error = v == "screen";
                 });
+  parser.flag("--resume",
+              "striped, journalled build: a killed build run again continues from its completed stripes",
+              &o.journal);
+  parser.option("--stripes", "N", "stripes of a striped build (default: one per MPI rank, 4 for one process)",
+                [&](const std::string& v) { o.stripes = int(cli::parse_int("--stripes", v, 1, 100000)); });
   parser.option("--json", "FILE", "write a JSON build report to FILE ('-' for stdout)", &json_path);
   cli::add_read_options(parser, read_options);
   parser.add_common(common, false);
@@ -78,6 +97,23 @@ int run(int argc, char** argv) {
   if (output.empty()) throw cli::UsageError("missing -o OUT.pyr");
   if (lossless) ++targets;
   if (targets > 1) throw cli::UsageError("give at most one of --rms, --max-error, --step, --lossless");
+  int rank = 0, ranks = 1;
+#ifdef TERRAIN_HAVE_MPI
+  if (group) {
+    rank = group->rank(), ranks = group->size();
+    o.group = group.get();
+    // The host's cores shared among its ranks (each rank's builder has its own threads).
+    if (o.threads == 0)
+      o.threads =
+          std::max(1, int(std::thread::hardware_concurrency()) / terrain::build::local_process_count());
+    if (rank != 0) common.quiet = true, json_path.clear();  // rank 0 reports
+  }
+#else
+  // Without MPI every rank would build the whole pyramid on its own, all into the same output.
+  if (const char* n = std::getenv("OMPI_COMM_WORLD_SIZE"); n && std::atoi(n) > 1)
+    throw cli::UsageError("this pyramid-build was built without MPI (TERRAIN_MPI): run it without mpirun");
+#endif
+  (void)rank;
 
   std::ostringstream opts;
   opts << "{\"target\":\"" << terrain::container::error_mode_name(o.mode)
@@ -110,6 +146,9 @@ int run(int argc, char** argv) {
     if (common.verbose)
       for (const auto& line : r.calibration_log) std::cerr << "pyramid-build: calibration: " << line << "\n";
     for (const auto& line : r.build.log) std::cerr << "pyramid-build: " << line << "\n";
+    if (r.stripes)
+      std::fprintf(stderr, "pyramid-build: striped build: %d stripes, %d processes, %d stripes resumed\n",
+                   r.stripes, ranks, r.stripes_resumed);
     std::fprintf(stderr,
                  "pyramid-build: %s: %zu levels, step %.4g m, %llu bytes = %.4f bits/sample, finest rms %.4g "
                  "m, max %.4g m, %.1f Msamples/s\n",
@@ -132,6 +171,8 @@ int run(int argc, char** argv) {
     j.field("seconds_calibrate", r.seconds_calibrate).field("seconds_build", r.seconds_build);
     j.field("build_msamples_per_s", double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
     j.field("voids", r.build.void_count);
+    j.field("stripes", int64_t(r.stripes)).field("processes", int64_t(ranks));
+    j.field("stripes_resumed", int64_t(r.stripes_resumed));
     j.key("levels").begin_array();
     for (size_t l = 0; l < lv.size(); ++l) {
       j.begin_object();

@@ -309,10 +309,41 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
 
   const auto t_build = std::chrono::steady_clock::now();
   PtcResidualCoder coder(co);
-  PyramidFileWriter writer(output);
-  ProgressReader preader(*reader, progress);
-  ProgressSink psink(writer, progress);
-  out.build = build_pyramid(preader, bo, coder, psink);
+  const int rank = o.group ? o.group->rank() : 0;
+  std::optional<PyramidFileWriter> writer;
+  const auto open_output = [&]() -> PyramidFileWriter& { return writer.emplace(output); };
+  StripeBuildOptions so;
+  so.directory = stripe_directory(output);
+  // Everything the output depends on: parts of another input or other options are never reused.
+  std::ostringstream fp;
+  fp.precision(17);
+  std::error_code ec;
+  const auto input_bytes = std::filesystem::file_size(input, ec);
+  const auto input_time = std::filesystem::last_write_time(input, ec).time_since_epoch().count();
+  fp << "pyramid-build stripe journal 1\ninput " << input << " " << input_bytes << " " << input_time << " "
+     << g.width << "x" << g.height << " " << sample_type_name(g.sample_type) << " " << g.nodata.value_or(0)
+     << "\noptions " << metadata_json_extra << " step " << co.step << " max " << co.max_error << " "
+     << co.bound_max_error << " tile " << co.tile_size << " band " << coder.band_rows() << " screen "
+     << co.screen_level_error << " levels " << bo.level_count << " scale " << bo.value_scale << " offset "
+     << bo.value_offset << "\n";
+  const int journal_stripes = read_journal_stripes(so.directory, fp.str());
+  const int processes = o.group ? o.group->size() : 1;
+  if (o.journal || o.stripes > 0 || processes > 1 || journal_stripes > 0) {
+    so.stripes = o.stripes > 0         ? o.stripes
+                 : journal_stripes > 0 ? journal_stripes
+                 : processes > 1       ? processes
+                                       : 4;
+    so.fingerprint = fp.str() + "stripes " + std::to_string(so.stripes) + "\n";
+    so.group = o.group;
+    if (progress && rank == 0) so.progress = [&](double f) { progress("coding stripes", f); };
+    out.build = build_stripes([&] { return open_band_reader(input, read_options); }, bo, coder, so,
+                              open_output, &out.stripes_resumed);
+    out.stripes = so.stripes;
+  } else {
+    ProgressReader preader(*reader, progress);
+    ProgressSink psink(open_output(), progress);
+    out.build = build_pyramid(preader, bo, coder, psink);
+  }
   out.seconds_build = seconds_since(t_build);
   const int levels = int(out.build.levels.size());
   for (int l = 0; l < levels; ++l) out.level_step_units.push_back(coder.level_options(levels - 1 - l).step);
@@ -349,7 +380,12 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
        << (co.screen_level_error ? "screen" : "absolute") << "\""
        << ",\"filter\":" << json_quote(out.build.filter_report.summary())
        << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
-  writer.finish(out.build, info, meta.str());
+  if (!writer) {
+    out.wrote_output = false;
+    return out;
+  }
+  writer->finish(out.build, info, meta.str());
+  if (out.stripes) remove_stripe_directory(so.directory);
   out.file_bytes = uint64_t(std::filesystem::file_size(output));
   return out;
 }

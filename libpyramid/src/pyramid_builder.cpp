@@ -25,6 +25,7 @@
 #include <deque>
 #include <limits>
 #include <memory>
+#include <numeric>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -125,19 +126,24 @@ struct BandWork {
   std::vector<int32_t> t, pred, res, rhat;
   std::vector<uint8_t> valid, bytes;
   UpsampleScratch scratch;
-  double res_sq = 0, err_sq = 0;
-  int64_t res_max = 0, err_max = 0, counted = 0;
+  BandFigures figures;
 };
 
 // Rows [first, end) of one level. Each row is its own buffer, recycled through a free list: the
 // store never copies rows to grow and holds no slack (these rows are most of the builder's memory).
 template <class T> class RowRing {
  public:
-  void reset(int64_t width) {
+  void reset(int64_t width, int64_t first = 0) {
     width_ = width;
-    first_ = end_ = peak_ = 0;
+    first_ = end_ = first;
+    peak_ = 0;
     rows_.clear();
     free_.clear();
+  }
+  // Drops the rows before r; an empty ring then continues at r (a stripe's rows start there).
+  void skip_to(int64_t r) {
+    drop_before(r);
+    if (first_ == end_ && end_ < r) first_ = end_ = r;
   }
   int64_t first() const { return first_; }
   int64_t end() const { return end_; }
@@ -180,11 +186,12 @@ template <class T> class RowRing {
 // the builder's memory).
 class LevelRows {
  public:
-  void reset(int64_t width, bool narrow) {
+  void reset(int64_t width, bool narrow, int64_t first = 0) {
     narrow_ = narrow;
-    r16_.reset(width);
-    r32_.reset(width);
+    r16_.reset(width, first);
+    r32_.reset(width, first);
   }
+  void skip_to(int64_t r) { narrow_ ? r16_.skip_to(r) : r32_.skip_to(r); }
   void append(const int32_t* rows, int64_t n) { narrow_ ? r16_.append(rows, n) : r32_.append(rows, n); }
   void copy_rows(int64_t r0, int64_t n, int32_t* out) const {
     narrow_ ? r16_.copy_rows(r0, n, out) : r32_.copy_rows(r0, n, out);
@@ -237,6 +244,10 @@ class MaskRows {
       ++first_;
     }
   }
+  void skip_to(int64_t r) {
+    drop_before(r);
+    if (rows_.empty() && first_ < r) first_ = r;
+  }
 
  private:
   int64_t width_ = 0, first_ = 0;
@@ -248,7 +259,8 @@ constexpr int64_t kMinCoarseBandRows = 16;
 
 class StreamingBuilder {
  public:
-  StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink)
+  StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink,
+                   const BuildStripe& stripe)
       : info_(info), opt_(opt), coder_(coder), sink_(sink) {
     validate(opt, info);
     sizes_ = pyramid_level_sizes({info.width, info.height}, opt.level_count, opt.min_coarsest_side);
@@ -270,17 +282,20 @@ class StreamingBuilder {
           std::min({kMinCoarseBandRows, finest_band_rows_, (4 * finest_band_rows_) >> shift});
       level_band_rows_[size_t(l)] = std::max<int64_t>({int64_t(1), halved, floor_rows});
     }
+    plan_stripe(stripe);
     levels_.resize(size_t(level_count_));
     reconstructed_.resize(size_t(level_count_));
     for (int l = 0; l < level_count_; ++l) {
       const bool narrow = l == finest_ && info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
-      levels_[size_t(l)].reset(sizes_[size_t(l)].width, narrow);
-      reconstructed_[size_t(l)].reset(sizes_[size_t(l)].width);
+      // The finest level's rows start at 0 (D's fit reads the top rows); the cascade's at the stripe's.
+      levels_[size_t(l)].reset(sizes_[size_t(l)].width, narrow,
+                               l == finest_ ? 0 : shift_rows_down(read_a_, finest_ - l));
+      reconstructed_[size_t(l)].reset(sizes_[size_t(l)].width, need_lo_[size_t(l)]);
     }
     mask_.reset(info.width);
     row_scratch_.resize(size_t(info.width));
-    next_band_.assign(size_t(level_count_), 0);
-    acc_.resize(size_t(level_count_));
+    next_band_ = need_lo_;
+    figures_.resize(size_t(level_count_));
     work_.resize(size_t(level_count_));
     result_.levels.resize(size_t(level_count_));
     header_.levels = sizes_;
@@ -293,11 +308,82 @@ class StreamingBuilder {
     result_.log.push_back(s.str());
   }
 
+  // Which bands the stripe owns and codes, and which input rows its D cascade runs on (the whole
+  // build: every band, all rows). own: the bands whose first row times 2^(m-l) lies in the stripe.
+  // need: those plus the coarser bands whose T^ their U windows read, level by level up the
+  // pyramid. The cascade runs on input rows [read_a_, read_b_), which reach kDHalo rows beyond the
+  // needed rows at every level: D read past the stripe's ends (reflected at its edges, not the
+  // input's) makes at most 5 rows wrong at each end of every level (11 taps: coarse row j reads fine
+  // rows 2j - 5 .. 2j + 5, so t wrong rows at an end give floor((t + 4) / 2) + 1 coarse ones: 3,
+  // 4, 5, 5, ...; the test cuts stripes everywhere and compares bytes). read_a_ and read_b_ are
+  // multiples of 2^m (each level's rows then keep the input's parity) and of the fill band (a
+  // band is filled whole, as in the whole build), or the input's end.
+  void plan_stripe(const BuildStripe& stripe) {
+    const int64_t H = info_.height;
+    if (stripe.y0 < 0 || stripe.y1 < stripe.y0 || stripe.y1 > H)
+      throw std::invalid_argument("pyramid: stripe rows " + std::to_string(stripe.y0) + ".." +
+                                  std::to_string(stripe.y1) + " outside the input's 0.." + std::to_string(H));
+    const size_t L = size_t(level_count_);
+    own_lo_.assign(L, 0), own_hi_.assign(L, 0), need_lo_.assign(L, 0), need_hi_.assign(L, 0);
+    const auto round_up = [](int64_t v, int64_t m) { return (v + m - 1) / m * m; };
+    for (int l = 0; l < level_count_; ++l) {
+      const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
+      const int shift = finest_ - l;
+      own_lo_[size_t(l)] = std::min(h, round_up(shift_rows_up(stripe.y0, shift), S));
+      own_hi_[size_t(l)] = std::min(h, round_up(shift_rows_up(stripe.y1, shift), S));
+    }
+    need_lo_[size_t(finest_)] = own_lo_[size_t(finest_)];
+    need_hi_[size_t(finest_)] = own_hi_[size_t(finest_)];
+    for (int l = finest_; l >= 1; --l) {
+      int64_t lo = own_lo_[size_t(l - 1)], hi = own_hi_[size_t(l - 1)];
+      if (need_lo_[size_t(l)] < need_hi_[size_t(l)]) {
+        const GridSize fs = sizes_[size_t(l)];
+        const Rect w = upsample_required_window(
+            Rect{0, need_lo_[size_t(l)], fs.width, need_hi_[size_t(l)] - need_lo_[size_t(l)]}, fs);
+        const int64_t S = level_band_rows_[size_t(l - 1)], h = sizes_[size_t(l - 1)].height;
+        const int64_t wlo = w.y0 / S * S, whi = std::min(h, round_up(w.y0 + w.height, S));
+        if (lo >= hi) lo = wlo, hi = whi;
+        lo = std::min(lo, wlo), hi = std::max(hi, whi);
+      }
+      need_lo_[size_t(l - 1)] = lo, need_hi_[size_t(l - 1)] = hi;
+    }
+    int64_t a = H, b = 0;
+    for (int l = 0; l < level_count_; ++l) {
+      if (need_lo_[size_t(l)] >= need_hi_[size_t(l)]) continue;
+      const int shift = finest_ - l;
+      a = std::min(a, shift_rows_down_to_input(need_lo_[size_t(l)] - kDHalo, shift));
+      b = std::max(b, shift_rows_down_to_input(need_hi_[size_t(l)] + kDHalo, shift));
+    }
+    if (a >= b) {  // nothing to code: read only the rows D is fitted on
+      read_a_ = read_b_ = 0;
+      return;
+    }
+    const int64_t fill = std::min(opt_.fill_band_rows, H);
+    const int64_t align = finest_ >= 40 ? H : std::min(H, std::lcm(int64_t(1) << finest_, fill));
+    read_a_ = std::max<int64_t>(0, a) / align * align;
+    read_b_ = std::min(H, round_up(std::max<int64_t>(0, b), align));
+  }
+
+  // Level rows -> finest rows (saturated at the input height) and back.
+  int64_t shift_rows_down_to_input(int64_t level_row, int shift) const {
+    if (level_row <= 0) return 0;
+    if (shift >= 40 || level_row > (info_.height >> shift) + 1) return info_.height;
+    return level_row << shift;
+  }
+  static int64_t shift_rows_up(int64_t finest_row, int shift) {
+    return shift >= 62 ? (finest_row > 0 ? 1 : 0) : (finest_row + (int64_t(1) << shift) - 1) >> shift;
+  }
+  static int64_t shift_rows_down(int64_t finest_row, int shift) {
+    return shift >= 62 ? 0 : finest_row >> shift;
+  }
+
   BuildResult run(BandReader& input) {
     const auto t_start = Clock::now();
     const int64_t W = info_.width, H = info_.height;
     const int64_t B = std::min(opt_.fill_band_rows, H);
     fit_rows_ = std::min(H, opt_.fit_rows);
+    // A stripe reads no further than its cascade or D's fit needs (whole fill bands).
+    const int64_t stop = std::min(H, std::max(read_b_, (fit_rows_ + B - 1) / B * B));
     InputConverter converter(opt_, info_);
     // Reading and converting band k+1 overlaps with processing band k (with threads > 1); the reader
     // and the converter are only ever used by one thread at a time, in band order.
@@ -317,10 +403,29 @@ class StreamingBuilder {
       b.valid.resize(size_t(B * W));
       b.ints.resize(size_t(B * W));
     }
+    // A band above a stripe's cascade and below D's fit rows matters only for the fill's carry,
+    // which only a band with voids changes: it is converted only then (read whole, since the fill
+    // sees the whole band). Saves a stripe a tenth of its time reading its way down the input.
+    std::vector<double> carry_values;
     auto produce = [&](InputBand& b, int64_t y) {
       b.y = y;
       b.rows = std::min(B, H - y);
       b.voids = 0;
+      if (y >= fit_rows_ && y + b.rows <= read_a_) {
+        carry_values.resize(size_t(b.rows * W));
+        for (int64_t got = 0; got < b.rows;) {
+          const int64_t n =
+              input.read_rows(b.rows - got, carry_values.data() + got * W, b.valid.data() + got * W);
+          if (n <= 0 || n > b.rows - got)
+            throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) +
+                                                  " of " + std::to_string(H) + " rows");
+          got += n;
+        }
+        if (std::find(b.valid.begin(), b.valid.begin() + b.rows * W, uint8_t(0)) !=
+            b.valid.begin() + b.rows * W)
+          converter.convert(carry_values.data(), b.valid.data(), y, b.rows, b.ints.data());
+        return;
+      }
       for (int64_t got = 0; got < b.rows;) {
         const int64_t want = std::min(kReadRows, b.rows - got);
         const int64_t n = input.read_rows(want, b.values.data(), b.valid.data() + got * W);
@@ -341,7 +446,7 @@ class StreamingBuilder {
       next.rows = 0;
       std::exception_ptr producer_error;
       std::thread producer;
-      if (next_y < H) {
+      if (next_y < stop) {
         if (opt_.threads > 1)
           producer = std::thread([&] {
             try {
@@ -359,33 +464,35 @@ class StreamingBuilder {
           if (t.joinable()) t.join();
         }
       } joiner{producer};
-      result_.void_count += cur.voids;
-      levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
-      mask_.append(cur.valid.data(), cur.rows);
+      // Rows above a stripe's cascade serve only D's fit (and the fill's carry, in the converter).
+      const bool in_cascade = cur.y + cur.rows > read_a_ && cur.y < read_b_;
+      if (in_cascade) result_.void_count += cur.voids;
       if (!filter_ready_) {
+        levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
+        mask_.append(cur.valid.data(), cur.rows);
         if (levels_[size_t(finest_)].end() >= fit_rows_) start_cascade();
-      } else if (finest_ > 0) {
-        engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
+      } else if (in_cascade) {
+        levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
+        mask_.append(cur.valid.data(), cur.rows);
+        if (finest_ > 0)
+          engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
+        drop_halo_rows(finest_);
       }
       if (filter_ready_) pump(false);
       if (producer.joinable()) producer.join();
       if (producer_error) std::rethrow_exception(producer_error);
-      if (next_y >= H) break;
+      if (next_y >= stop) break;
     }
     if (!filter_ready_) start_cascade();
-    for (int l = finest_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
+    if (read_a_ < read_b_)
+      for (int l = finest_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
     pump(true);
     for (int l = 0; l < level_count_; ++l)
-      if (next_band_[size_t(l)] != sizes_[size_t(l)].height)
+      if (next_band_[size_t(l)] != need_hi_[size_t(l)])
         throw std::logic_error("pyramid: level not completed");
 
-    for (int l = 0; l < level_count_; ++l) {
-      LevelBuildStats& st = result_.levels[size_t(l)];
-      const Acc& a = acc_[size_t(l)];
-      st.size = sizes_[size_t(l)];
-      st.residual_rms = a.counted ? std::sqrt(a.res_sq / double(a.counted)) : 0.0;
-      st.error_rms = a.counted ? std::sqrt(a.err_sq / double(a.counted)) : 0.0;
-    }
+    for (int l = 0; l < level_count_; ++l)
+      result_.levels[size_t(l)] = figures_[size_t(l)].stats(sizes_[size_t(l)]);
     result_.header = header_;
     std::ostringstream held;
     held << "rows held at most (level rows / decoded rows), coarsest first:";
@@ -400,10 +507,10 @@ class StreamingBuilder {
   }
 
  private:
-  struct Acc {
-    double res_sq = 0, err_sq = 0;
-    int64_t counted = 0;
-  };
+  // Rows beyond the needed ones a stripe's cascade runs on, at every level (see plan_stripe).
+  // 6: the 5 wrong rows and one to spare; at the coarsest level it costs 6 * 2^m input rows of D
+  // per stripe edge, most of a stripe's extra work.
+  static constexpr int64_t kDHalo = 6;
 
   // Fits D on the top fit_rows rows (all still held: nothing is coded before the filter exists),
   // then starts the D cascade with every row received so far.
@@ -436,29 +543,44 @@ class StreamingBuilder {
     engines_.resize(size_t(level_count_));
     emit_.resize(size_t(level_count_));
     emitted_.resize(size_t(level_count_));
-    for (int l = finest_; l >= 1; --l) {
+    // The cascade runs on the stripe's rows [read_a_, read_b_) as on a grid of its own (the whole
+    // build: the input); read_a_ is a multiple of 2^m, so level l's rows start at read_a_ >> (m - l).
+    int64_t cascade_height = read_b_ - read_a_;
+    for (int l = finest_; l >= 1 && cascade_height > 0; --l) {
       // Coarse engines emit in small batches for the same reason as the band heights.
       const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, finest_ - l));
-      engines_[size_t(l)] =
-          std::make_unique<detail::DownsampleEngine>(filter_, sizes_[size_t(l)], opt_.threads, batch);
+      engines_[size_t(l)] = std::make_unique<detail::DownsampleEngine>(
+          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, opt_.threads, batch);
+      cascade_height = coarse_extent(cascade_height);
       emit_[size_t(l)] = [this, l](int64_t, int64_t n, const double* rows) {
         const int64_t cw = sizes_[size_t(l - 1)].width;
         std::vector<int32_t>& out = emitted_[size_t(l - 1)];
         out.resize(size_t(n * cw));
         for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = detail::round_to_int32(rows[k]);
         levels_[size_t(l - 1)].append(out.data(), n);
+        drop_halo_rows(l - 1);
         if (l - 1 >= 1) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
       };
     }
     filter_ready_ = true;
     result_.seconds_pass_input += seconds_since(t);
-    if (finest_ > 0) {
+    levels_[size_t(finest_)].skip_to(read_a_);
+    mask_.skip_to(read_a_);
+    if (finest_ > 0 && read_a_ < read_b_) {
       const LevelRows& tm = levels_[size_t(finest_)];
-      for (int64_t r = tm.first(); r < tm.end(); ++r) {
+      for (int64_t r = tm.first(); r < std::min(tm.end(), read_b_); ++r) {
         tm.copy_rows(r, 1, row_scratch_.data());
         engines_[size_t(finest_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(finest_)]);
       }
     }
+    drop_halo_rows(finest_);
+  }
+
+  // A stripe's rows above its first needed band only feed D (its halo): once the cascade has them,
+  // the level does not keep them (held, they were a third more memory on the last of two stripes).
+  void drop_halo_rows(int l) {
+    levels_[size_t(l)].drop_before(need_lo_[size_t(l)]);
+    if (l == finest_) mask_.drop_before(need_lo_[size_t(l)]);
   }
 
   // Last row of T^_{l-1} that U needs for fine rows [y0, y1) of level l, plus one.
@@ -494,18 +616,18 @@ class StreamingBuilder {
       std::vector<Group> groups;
       for (int l = 0; l < level_count_; ++l) {
         const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
-        const int64_t y0 = next_band_[size_t(l)];
-        if (y0 >= h) continue;
+        const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
+        if (y0 >= end) continue;
         const int limit = opt_.threads;
         int64_t nb = 0;
-        while (nb < limit && y0 + nb * S < h && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
+        while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
           ++nb;
-        const bool more_after = y0 + nb * S < h;
+        const bool more_after = y0 + nb * S < end;
         if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
         Group g;
         g.level = l;
         g.gy0 = y0;
-        g.gy1 = std::min(h, y0 + nb * S);
+        g.gy1 = std::min(end, y0 + nb * S);
         g.tasks = size_t(nb);
         groups.push_back(g);
       }
@@ -578,16 +700,15 @@ class StreamingBuilder {
     const bool finest = l == finest_;
     for (size_t b = 0; b < g.tasks; ++b) {
       BandWork& bw = work_[size_t(l)][b];
-      if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
-      LevelBuildStats& st = result_.levels[size_t(l)];
-      st.bytes += bw.bytes.size();
-      st.residual_max_abs = std::max(st.residual_max_abs, bw.res_max);
-      st.error_max_abs = std::max(st.error_max_abs, bw.err_max);
-      Acc& a = acc_[size_t(l)];
-      a.res_sq += bw.res_sq, a.err_sq += bw.err_sq, a.counted += bw.counted;
-      sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
+      // A stripe's halo bands are coded only for the T^ rows finer bands read.
+      if (bw.y0 >= own_lo_[size_t(l)] && bw.y0 < own_hi_[size_t(l)]) {
+        if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
+        figures_[size_t(l)].add(bw.figures, bw.bytes.size());
+        sink_.band_figures(l, bw.y0, bw.figures);
+        sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
+        if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
+      }
       bw.bytes = {};
-      if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
       if (!finest) reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
     }
     next_band_[size_t(l)] = g.gy1;
@@ -636,9 +757,9 @@ class StreamingBuilder {
       }
       rhat[k] = rec;  // now T^ of this band
     }
-    bw.res_sq = (res_sq[0] + res_sq[1]) + (res_sq[2] + res_sq[3]);
-    bw.err_sq = (err_sq[0] + err_sq[1]) + (err_sq[2] + err_sq[3]);
-    bw.res_max = res_max, bw.err_max = err_max, bw.counted = counted;
+    bw.figures.res_sq = (res_sq[0] + res_sq[1]) + (res_sq[2] + res_sq[3]);
+    bw.figures.err_sq = (err_sq[0] + err_sq[1]) + (err_sq[2] + err_sq[3]);
+    bw.figures.res_max = res_max, bw.figures.err_max = err_max, bw.figures.counted = counted;
   }
 
   const GridInfo info_;
@@ -662,7 +783,10 @@ class StreamingBuilder {
   std::vector<detail::DownsampleEngine::Emit> emit_;
   std::vector<std::vector<int32_t>> emitted_;
   std::vector<int64_t> next_band_;  // per level: first row not yet coded
-  std::vector<Acc> acc_;
+  // Per level: the stripe's own bands [own_lo_, own_hi_) and the rows it codes [need_lo_, need_hi_).
+  std::vector<int64_t> own_lo_, own_hi_, need_lo_, need_hi_;
+  int64_t read_a_ = 0, read_b_ = 0;  // input rows the D cascade runs on
+  std::vector<LevelFigures> figures_;
   std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
   std::vector<std::vector<int32_t>> windows_;  // per group of a round: the coarse rows U reads
   BuildResult result_;
@@ -672,8 +796,32 @@ class StreamingBuilder {
 
 BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder,
                           PyramidSink& sink) {
-  StreamingBuilder builder(input.info(), opt, coder, sink);
+  StreamingBuilder builder(input.info(), opt, coder, sink, BuildStripe{0, input.info().height});
   return builder.run(input);
+}
+
+BuildResult build_pyramid_stripe(BandReader& input, const BuildOptions& opt, const BuildStripe& stripe,
+                                 ResidualCoder& coder, PyramidSink& sink) {
+  StreamingBuilder builder(input.info(), opt, coder, sink, stripe);
+  return builder.run(input);
+}
+
+void LevelFigures::add(const BandFigures& band, uint64_t bytes) {
+  res_sq_ += band.res_sq, err_sq_ += band.err_sq, counted_ += band.counted;
+  res_max_ = std::max(res_max_, band.res_max);
+  err_max_ = std::max(err_max_, band.err_max);
+  bytes_ += bytes;
+}
+
+LevelBuildStats LevelFigures::stats(GridSize size) const {
+  LevelBuildStats st;
+  st.size = size;
+  st.residual_rms = counted_ ? std::sqrt(res_sq_ / double(counted_)) : 0.0;
+  st.error_rms = counted_ ? std::sqrt(err_sq_ / double(counted_)) : 0.0;
+  st.residual_max_abs = res_max_;
+  st.error_max_abs = err_max_;
+  st.bytes = bytes_;
+  return st;
 }
 
 namespace {

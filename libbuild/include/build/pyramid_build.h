@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "build/stripe_build.h"
 #include "container/container.h"
 #include "pyramid/level_units.h"
 #include "pyramid/pyramid.h"
@@ -31,6 +32,14 @@ struct BuildFileOptions {
   // times the finest level's, for the same screen-space error at every level. The rms / max-error
   // target and its calibration always refer to the finest level.
   bool screen_level_error = false;
+  // The striped build (build/stripe_build.h): the finest rows cut into stripes, each coded into a part
+  // file in OUTPUT.build/ and shared out among the processes of `group`; rank 0 writes the output from
+  // the parts. Used when journal is set, stripes > 0, the group has more than one process, or a
+  // journal of the same input and options is there (a killed build: its complete stripes are kept).
+  // The output is byte-identical to the plain build's.
+  bool journal = false;
+  int stripes = 0;                // 0: the journal's, else one per process (4 for one process)
+  ProcessGroup* group = nullptr;  // null: this process alone
 };
 
 struct BuildFileResult {
@@ -43,6 +52,9 @@ struct BuildFileResult {
   uint64_t file_bytes = 0;
   double seconds_calibrate = 0, seconds_build = 0;
   int64_t finest_samples = 0;
+  int stripes = 0;           // striped build: stripes (0: the plain build)
+  int stripes_resumed = 0;   // parts an earlier, killed build had completed
+  bool wrote_output = true;  // false on the ranks other than 0 of a group
 };
 
 // Progress: phase name and fraction done in [0, 1]; called from the building thread.
@@ -50,7 +62,9 @@ using BuildProgress = std::function<void(const std::string& phase, double fracti
 
 // Builds `output` from `input`. Throws Error for input problems (naming the file), Error for
 // output problems, std::invalid_argument for options the input cannot honour (e.g. a step below the
-// input's quantum, lossless on float input without a quantum). Nothing is left at `output` on failure.
+// input's quantum, lossless on float input without a quantum). Nothing is left at `output` on failure
+// (a striped build keeps its complete parts in OUTPUT.build/ for a resumed run). With a group: every
+// process calls it with the same arguments (collective); only rank 0 writes `output`.
 BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
                                    const std::string& output, const BuildFileOptions& options,
                                    const std::string& metadata_json_extra = "{}",

@@ -60,6 +60,27 @@ struct LevelBuildStats {
   uint64_t bytes = 0;  // coded residual bytes
 };
 
+// What one coded band contributes to its level's figures (LevelBuildStats); a level's figures are
+// these added in band order, top to bottom (LevelFigures), so that they do not depend on how the
+// bands were shared out among threads or processes.
+struct BandFigures {
+  double res_sq = 0, err_sq = 0;  // sums of squared residuals / errors over the counted samples
+  int64_t res_max = 0, err_max = 0, counted = 0;
+};
+
+// Adds a level's band figures in band order and gives its LevelBuildStats.
+class LevelFigures {
+ public:
+  void add(const BandFigures& band, uint64_t bytes);
+  // The level's stats: rms from the sums, the largest values, the bytes.
+  LevelBuildStats stats(GridSize size) const;
+
+ private:
+  double res_sq_ = 0, err_sq_ = 0;
+  int64_t counted_ = 0, res_max_ = 0, err_max_ = 0;
+  uint64_t bytes_ = 0;
+};
+
 struct BuildResult {
   PyramidHeader header;
   FilterFitReport filter_report;
@@ -82,6 +103,10 @@ class PyramidSink {
   virtual ~PyramidSink() = default;
   virtual void begin(const PyramidHeader& header) { (void)header; }
   virtual void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) = 0;
+  // The figures of the band band() receives next (called just before it).
+  virtual void band_figures(int level, int64_t y0, const BandFigures& figures) {
+    (void)level, (void)y0, (void)figures;
+  }
   // Validity of finest-level rows y0..y0+rows-1, rows x width bytes (1 = data, 0 = void).
   virtual void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) {
     (void)y0, (void)rows, (void)valid;
@@ -110,6 +135,22 @@ class CountingSink final : public PyramidSink {
 // (naming the file) and std::invalid_argument for unusable input or options.
 BuildResult build_pyramid(BandReader& input, const BuildOptions& options, ResidualCoder& coder,
                           PyramidSink& sink);
+
+// A build spread over processes (libbuild's stripe build) gives each part a stripe of finest rows
+// [y0, y1). A band of level l belongs to the stripe that holds its first row times 2^(m-l), so the
+// stripes of a partition of the rows share out every level's bands. The stripe's part reads the
+// input from row 0 (the rows above it only for D's fit and the void fill's carry), runs the D
+// cascade on its rows plus a halo (D's 11-row support grows to ~11 * 2^m finest rows at the
+// coarsest level), codes the bands it owns plus the coarser bands their U windows need, and hands
+// only its own bands to the sink (band_figures, mask_rows and band as the whole build does). Every
+// band's bytes and figures equal the whole build's. An empty stripe (y0 == y1) codes nothing and
+// only fits D (the result's header and filter_report). Throws as build_pyramid, and
+// std::invalid_argument for a stripe outside 0..height.
+struct BuildStripe {
+  int64_t y0 = 0, y1 = 0;
+};
+BuildResult build_pyramid_stripe(BandReader& input, const BuildOptions& options, const BuildStripe& stripe,
+                                 ResidualCoder& coder, PyramidSink& sink);
 
 // The same builder fed from memory (the grid is streamed from `map` through a BandReader).
 BuildResult build_pyramid(const Heightmap& map, const BuildOptions& options, ResidualCoder& coder,

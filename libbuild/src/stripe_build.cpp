@@ -1,0 +1,442 @@
+// Stripe builds into part files, the journal that lets a killed build resume, and the assembly of
+// the parts into one .pyr on rank 0.
+//
+// Part file (little endian): header "PYRPART1", u32 CRC-32C of the fingerprint, u32 stripe, u32
+// stripes, u32 levels, u64 finest width; then one record per band the stripe owns, in the order
+// the builder gives them (levels interleaved, each top to bottom): u32 "PREC", u32 level, u64 y0,
+// u64 rows, f64 res_sq, f64 err_sq, u64 res_max, u64 err_max, u64 counted, u64 stream bytes, u64
+// mask bytes (0: the rows have no void; else rows * width bits), u32 CRC-32C of the record's
+// header and payload; then the stream and the mask bits. Trailer: u32 "PEND", u32 record count,
+// u32 CRC-32C of the header's fingerprint CRC and the count. A part is complete when its trailer is
+// there and its records chain up to it; the assembly checks every record's CRC.
+#include "build/stripe_build.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <csignal>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "codec/crc32c.h"
+#include "core/bytes.h"
+#include "core/error.h"
+#include "core/file.h"
+
+namespace terrain::build {
+namespace {
+
+constexpr char kPartMagic[8] = {'P', 'Y', 'R', 'P', 'A', 'R', 'T', '1'};
+constexpr uint32_t kRecordMagic = 0x43455250;   // "PREC"
+constexpr uint32_t kTrailerMagic = 0x444e4550;  // "PEND"
+constexpr size_t kHeaderBytes = 32, kRecordHeader = 84, kTrailerBytes = 12;
+
+[[noreturn]] void write_failed(const std::string& path, const std::string& what) {
+  throw Error(ErrorCode::WriteFailed, path + ": " + what + ": " + std::strerror(errno));
+}
+
+std::string part_path(const std::string& dir, int stripes, int k) {
+  return dir + "/stripe-" + std::to_string(stripes) + "-" + std::to_string(k) + ".part";
+}
+
+// The builder's output of one stripe, written to a temporary part and renamed when complete.
+class PartWriter final : public PyramidSink {
+ public:
+  PartWriter(const std::string& path, uint32_t fingerprint, int k, int stripes, int64_t width)
+      : path_(path), fingerprint_(fingerprint), width_(width) {
+    fd_ = create_temp_beside(path, "", &temp_);
+    uint8_t h[kHeaderBytes];
+    std::memcpy(h, kPartMagic, 8);
+    bytes::put_u32(h + 8, fingerprint);
+    bytes::put_u32(h + 12, uint32_t(k));
+    bytes::put_u32(h + 16, uint32_t(stripes));
+    bytes::put_u32(h + 20, 0);  // levels: patched in at begin()
+    bytes::put_u64(h + 24, uint64_t(width));
+    buffer_.assign(h, h + kHeaderBytes);
+    // A test hook: the process kills itself after this many bands (a killed build, for the resume test).
+    if (const char* env = std::getenv("TERRAIN_TEST_KILL_AFTER_BANDS")) kill_after_ = std::atol(env);
+  }
+  ~PartWriter() override {
+    if (fd_ >= 0) {
+      ::close(fd_);
+      ::unlink(temp_.c_str());
+    }
+  }
+  void begin(const PyramidHeader& header) override {
+    bytes::put_u32(buffer_.data() + 20, uint32_t(header.levels.size()));
+  }
+  void mask_rows(int64_t, int64_t rows, const uint8_t* valid) override {
+    mask_.clear();
+    const int64_t n = rows * width_;
+    if (std::find(valid, valid + n, uint8_t(0)) == valid + n) return;
+    mask_.assign(size_t((n + 7) / 8), 0);
+    for (int64_t i = 0; i < n; ++i)
+      if (valid[i]) mask_[size_t(i / 8)] |= uint8_t(1u << (i % 8));
+  }
+  void band_figures(int, int64_t, const BandFigures& f) override { figures_ = f; }
+  void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& data) override {
+    uint8_t h[kRecordHeader];
+    bytes::put_u32(h, kRecordMagic);
+    bytes::put_u32(h + 4, uint32_t(level));
+    bytes::put_u64(h + 8, uint64_t(y0));
+    bytes::put_u64(h + 16, uint64_t(rows));
+    bytes::put_f64(h + 24, figures_.res_sq);
+    bytes::put_f64(h + 32, figures_.err_sq);
+    bytes::put_u64(h + 40, uint64_t(figures_.res_max));
+    bytes::put_u64(h + 48, uint64_t(figures_.err_max));
+    bytes::put_u64(h + 56, uint64_t(figures_.counted));
+    bytes::put_u64(h + 64, data.size());
+    bytes::put_u64(h + 72, mask_.size());
+    uint32_t crc = codec::crc32c(h, 80);
+    crc = codec::crc32c(data.data(), data.size(), crc);
+    crc = codec::crc32c(mask_.data(), mask_.size(), crc);
+    bytes::put_u32(h + 80, crc);
+    append(h, kRecordHeader);
+    append(data.data(), data.size());
+    append(mask_.data(), mask_.size());
+    mask_.clear();
+    ++records_;
+    if (kill_after_ > 0 && ++bands_written_total() >= kill_after_) {
+      flush();
+      std::raise(SIGKILL);
+    }
+  }
+  // Writes the trailer, syncs and renames the part into place.
+  void finish() {
+    uint8_t t[kTrailerBytes];
+    bytes::put_u32(t, kTrailerMagic);
+    bytes::put_u32(t + 4, uint32_t(records_));
+    uint8_t c[8];
+    bytes::put_u32(c, fingerprint_);
+    bytes::put_u32(c + 4, uint32_t(records_));
+    bytes::put_u32(t + 8, codec::crc32c(c, 8));
+    append(t, kTrailerBytes);
+    flush();
+    if (::fsync(fd_) != 0) write_failed(temp_, "cannot sync");
+    ::close(fd_);
+    fd_ = -1;
+    if (::rename(temp_.c_str(), path_.c_str()) != 0)
+      write_failed(path_, "cannot rename " + temp_ + " onto it");
+  }
+
+ private:
+  static int64_t& bands_written_total() {
+    static int64_t n = 0;
+    return n;
+  }
+  void append(const uint8_t* p, size_t n) {
+    buffer_.insert(buffer_.end(), p, p + n);
+    if (buffer_.size() >= (size_t(1) << 20)) flush();
+  }
+  void flush() {
+    size_t done = 0;
+    while (done < buffer_.size()) {
+      const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) write_failed(temp_, "cannot write");
+      done += size_t(n);
+    }
+    buffer_.clear();
+  }
+  std::string path_, temp_;
+  int fd_ = -1;
+  uint32_t fingerprint_;
+  int64_t width_;
+  std::vector<uint8_t> buffer_, mask_;  // buffer_ starts with the header (begin() fills in the levels)
+  BandFigures figures_;
+  int64_t records_ = 0, kill_after_ = 0;
+};
+
+// A complete part's records, indexed for the assembly.
+struct PartRecord {
+  int level;
+  int64_t y0, rows;
+  BandFigures figures;
+  uint64_t offset, size, mask_size;  // offset: of the record header
+};
+
+class PartReader {
+ public:
+  // Opens a part; returns false when it is missing or not complete and `strict` is false.
+  bool open(const std::string& path, uint32_t fingerprint, int k, int stripes, int levels, int64_t width,
+            bool strict) {
+    path_ = path;
+    records_.clear();
+    if (fd_ >= 0) ::close(fd_), fd_ = -1;
+    if (!std::filesystem::exists(path)) {
+      if (strict) throw Error(ErrorCode::NotFound, path + ": part missing");
+      return false;
+    }
+    uint64_t size = 0;
+    fd_ = open_regular_file(path, &size);
+    const auto bad = [&](const std::string& why) {
+      if (strict)
+        throw Error(ErrorCode::CorruptData, path + ": " + why + " (remove the directory to start over)");
+      return false;
+    };
+    uint8_t h[kHeaderBytes];
+    if (size < kHeaderBytes + kTrailerBytes || !read_at(h, kHeaderBytes, 0)) return bad("too short");
+    if (std::memcmp(h, kPartMagic, 8) != 0 || bytes::get_u32(h + 8) != fingerprint ||
+        bytes::get_u32(h + 12) != uint32_t(k) || bytes::get_u32(h + 16) != uint32_t(stripes) ||
+        bytes::get_u32(h + 20) != uint32_t(levels) || bytes::get_u64(h + 24) != uint64_t(width))
+      return bad("header does not match this build");
+    uint64_t at = kHeaderBytes;
+    const uint64_t end = size - kTrailerBytes;
+    while (at < end) {
+      uint8_t r[kRecordHeader];
+      if (end - at < kRecordHeader || !read_at(r, kRecordHeader, at) || bytes::get_u32(r) != kRecordMagic)
+        return bad("record at byte " + std::to_string(at) + " is damaged");
+      PartRecord rec;
+      rec.level = int(bytes::get_u32(r + 4));
+      rec.y0 = int64_t(bytes::get_u64(r + 8));
+      rec.rows = int64_t(bytes::get_u64(r + 16));
+      rec.figures.res_sq = bytes::get_f64(r + 24);
+      rec.figures.err_sq = bytes::get_f64(r + 32);
+      rec.figures.res_max = int64_t(bytes::get_u64(r + 40));
+      rec.figures.err_max = int64_t(bytes::get_u64(r + 48));
+      rec.figures.counted = int64_t(bytes::get_u64(r + 56));
+      rec.size = bytes::get_u64(r + 64);
+      rec.mask_size = bytes::get_u64(r + 72);
+      rec.offset = at;
+      const uint64_t left = end - at - kRecordHeader;
+      if (rec.level < 0 || rec.level >= levels || rec.size > left || rec.mask_size > left - rec.size)
+        return bad("record at byte " + std::to_string(at) + " is damaged");
+      records_.push_back(rec);
+      at += kRecordHeader + rec.size + rec.mask_size;
+    }
+    uint8_t t[kTrailerBytes], c[8];
+    bytes::put_u32(c, fingerprint);
+    bytes::put_u32(c + 4, uint32_t(records_.size()));
+    if (at != end || !read_at(t, kTrailerBytes, end) || bytes::get_u32(t) != kTrailerMagic ||
+        bytes::get_u32(t + 4) != uint32_t(records_.size()) || bytes::get_u32(t + 8) != codec::crc32c(c, 8))
+      return bad("trailer missing or damaged");
+    return true;
+  }
+  ~PartReader() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  const std::vector<PartRecord>& records() const { return records_; }
+  // Whether every record's CRC holds (a resumed build codes a damaged part again).
+  bool intact() const {
+    std::vector<uint8_t> data, mask;
+    try {
+      for (const PartRecord& r : records_) payload(r, data, mask);
+    } catch (const Error&) {
+      return false;
+    }
+    return true;
+  }
+  // The record's stream and mask bits, its CRC checked.
+  void payload(const PartRecord& r, std::vector<uint8_t>& data, std::vector<uint8_t>& mask) const {
+    uint8_t h[kRecordHeader];
+    data.resize(r.size), mask.resize(r.mask_size);
+    if (!read_at(h, kRecordHeader, r.offset) || !read_at(data.data(), r.size, r.offset + kRecordHeader) ||
+        !read_at(mask.data(), r.mask_size, r.offset + kRecordHeader + r.size))
+      throw Error(ErrorCode::Truncated,
+                  path_ + ": cannot read the record at byte " + std::to_string(r.offset));
+    uint32_t crc = codec::crc32c(h, 80);
+    crc = codec::crc32c(data.data(), data.size(), crc);
+    crc = codec::crc32c(mask.data(), mask.size(), crc);
+    if (crc != bytes::get_u32(h + 80))
+      throw Error(ErrorCode::ChecksumMismatch,
+                  path_ + ": record at byte " + std::to_string(r.offset) +
+                      " fails its checksum (remove the directory to start over)");
+  }
+
+ private:
+  bool read_at(uint8_t* p, size_t n, uint64_t at) const {
+    while (n > 0) {
+      const ssize_t got = ::pread(fd_, p, n, off_t(at));
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) return false;
+      p += got, n -= size_t(got), at += uint64_t(got);
+    }
+    return true;
+  }
+  std::string path_;
+  int fd_ = -1;
+  std::vector<PartRecord> records_;
+};
+
+std::string read_text(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return f ? s.str() : std::string();
+}
+
+// Rank 0: a directory whose journal matches the fingerprint keeps its parts; any other starts over.
+void prepare_directory(const StripeBuildOptions& so) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const std::string journal = so.directory + "/journal";
+  if (fs::exists(so.directory, ec) && (!so.resume || read_text(journal) != so.fingerprint)) {
+    // Only what a stripe build writes is removed: another directory of that name is not ours.
+    if (!fs::is_directory(so.directory, ec) ||
+        (fs::exists(journal, ec) == false && !fs::is_empty(so.directory, ec)))
+      throw Error(ErrorCode::WriteFailed, so.directory + ": exists and is not a build journal directory");
+    for (const auto& e : fs::directory_iterator(so.directory, ec)) {
+      const std::string name = e.path().filename().string();
+      if (name == "journal" || name.rfind("stripe-", 0) == 0 || name.rfind("journal.tmp", 0) == 0)
+        fs::remove(e.path(), ec);
+    }
+  }
+  // The temporaries of parts a killed build was writing.
+  for (const auto& e : fs::directory_iterator(so.directory, ec))
+    if (e.path().filename().string().find(".part.tmp.") != std::string::npos) fs::remove(e.path(), ec);
+  fs::create_directories(so.directory, ec);
+  if (ec) throw Error(ErrorCode::WriteFailed, so.directory + ": cannot create: " + ec.message());
+  if (read_text(journal) == so.fingerprint) return;
+  std::string temp;
+  const int fd = create_temp_beside(journal, "", &temp);
+  const bool ok =
+      ::write(fd, so.fingerprint.data(), so.fingerprint.size()) == ssize_t(so.fingerprint.size()) &&
+      ::fsync(fd) == 0;
+  ::close(fd);
+  if (!ok || ::rename(temp.c_str(), journal.c_str()) != 0) {
+    ::unlink(temp.c_str());
+    write_failed(journal, "cannot write the journal");
+  }
+}
+
+}  // namespace
+
+std::string stripe_directory(const std::string& output) { return output + ".build"; }
+
+int read_journal_stripes(const std::string& directory, const std::string& base) {
+  const std::string text = read_text(directory + "/journal");
+  if (text.size() <= base.size() || text.compare(0, base.size(), base) != 0) return 0;
+  const std::string rest = text.substr(base.size());
+  if (rest.rfind("stripes ", 0) != 0) return 0;
+  const int k = std::atoi(rest.c_str() + 8);
+  return k > 0 && rest == "stripes " + std::to_string(k) + "\n" ? k : 0;
+}
+
+void remove_stripe_directory(const std::string& directory) {
+  std::error_code ec;
+  std::filesystem::remove_all(directory, ec);
+}
+
+BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& open_input,
+                          const BuildOptions& options, ResidualCoder& coder, const StripeBuildOptions& so,
+                          const std::function<container::PyramidFileWriter&()>& open_output,
+                          int* stripes_resumed) {
+  SingleProcess alone;
+  ProcessGroup& group = so.group ? *so.group : alone;
+  const int rank = group.rank(), ranks = group.size();
+  const GridInfo info = open_input()->info();
+  const int64_t H = info.height, S = coder.band_rows();
+  const int64_t bands = (H + S - 1) / S;
+  const int K = int(std::clamp<int64_t>(so.stripes, 1, std::max<int64_t>(1, bands)));
+  const auto stripe_rows = [&](int k) { return std::min(H, int64_t(k) * bands / K * S); };
+  const uint32_t fp = codec::crc32c(so.fingerprint.data(), so.fingerprint.size());
+  const int levels =
+      int(pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side).size());
+
+  // Set up by rank 0 before anyone looks at the directory.
+  std::exception_ptr error;
+  if (rank == 0) try {
+      prepare_directory(so);
+    } catch (...) {
+      error = std::current_exception();
+    }
+  if (!group.all_true(!error)) {
+    if (error) std::rethrow_exception(error);
+    throw Error(ErrorCode::WriteFailed, so.directory + ": another process failed to set up the build");
+  }
+
+  // D is fitted by this process's first stripe and given to its later ones as a fixed filter (the
+  // same taps, so the same coarse levels): the fit is a stripe's largest fixed cost.
+  BuildResult result;
+  bool have_result = false;
+  BuildOptions stripe_options = options;
+  int resumed = 0;
+  try {
+    int mine = 0, done = 0;
+    for (int k = rank; k < K; k += ranks) ++mine;
+    for (int k = rank; k < K; k += ranks) {
+      const std::string path = part_path(so.directory, K, k);
+      PartReader existing;
+      if (so.resume && existing.open(path, fp, k, K, levels, info.width, false) && existing.intact()) {
+        ++resumed;
+      } else {
+        PartWriter part(path, fp, k, K, info.width);
+        auto reader = open_input();
+        BuildResult r = build_pyramid_stripe(*reader, stripe_options,
+                                             BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, coder, part);
+        part.finish();
+        if (!have_result) {
+          result = std::move(r);
+          have_result = true;
+          stripe_options.use_fixed_filter = true;
+          stripe_options.fixed_filter = result.header.filter;
+        }
+      }
+      if (so.progress) so.progress(double(++done) / double(std::max(1, mine)));
+    }
+  } catch (...) {
+    error = std::current_exception();
+  }
+  if (!group.all_true(!error)) {
+    if (error) std::rethrow_exception(error);
+    throw Error(ErrorCode::WriteFailed, so.directory +
+                                            ": another process failed; completed stripes are kept "
+                                            "for a resumed build");
+  }
+  if (stripes_resumed) *stripes_resumed = resumed;
+  if (rank != 0) return result;
+
+  // The header and D (the same for every stripe); a resumed rank 0 that coded nothing fits D again.
+  if (!have_result) {
+    CountingSink none;
+    auto reader = open_input();
+    result = build_pyramid_stripe(*reader, options, BuildStripe{0, 0}, coder, none);
+  }
+  container::PyramidFileWriter* writer = &open_output();
+  writer->begin(result.header);
+  std::vector<LevelFigures> figures(static_cast<size_t>(levels));
+  std::vector<uint8_t> data, bits, valid;
+  int64_t voids = 0;
+  const int64_t W = info.width;
+  for (int l = 0; l < levels; ++l)
+    for (int k = 0; k < K; ++k) {
+      PartReader part;
+      part.open(part_path(so.directory, K, k), fp, k, K, levels, W, true);
+      for (const PartRecord& r : part.records()) {
+        if (r.level != l) continue;
+        part.payload(r, data, bits);
+        const int64_t level_height = result.header.levels[size_t(l)].height;
+        if (r.rows < 1 || r.y0 < 0 || r.y0 > level_height - r.rows)
+          throw Error(ErrorCode::CorruptData, part_path(so.directory, K, k) + ": record at byte " +
+                                                  std::to_string(r.offset) + " has rows outside level " +
+                                                  std::to_string(l));
+        if (l == levels - 1) {
+          valid.assign(size_t(r.rows * W), 1);
+          if (!bits.empty()) {
+            if (bits.size() != size_t((r.rows * W + 7) / 8))
+              throw Error(ErrorCode::CorruptData, part_path(so.directory, K, k) + ": mask of the wrong size");
+            for (int64_t i = 0; i < r.rows * W; ++i) valid[size_t(i)] = (bits[size_t(i / 8)] >> (i % 8)) & 1;
+            voids += int64_t(std::count(valid.begin(), valid.end(), uint8_t(0)));
+          }
+          writer->mask_rows(r.y0, r.rows, valid.data());
+        }
+        figures[size_t(l)].add(r.figures, data.size());
+        writer->band(l, r.y0, r.rows, std::move(data));
+        data = {};
+      }
+    }
+  for (int l = 0; l < levels; ++l)
+    result.levels[size_t(l)] = figures[size_t(l)].stats(result.header.levels[size_t(l)]);
+  result.void_count = voids;
+  result.log.push_back("stripes: " + std::to_string(K) + " over " + std::to_string(ranks) + " process" +
+                       (ranks > 1 ? "es" : "") +
+                       (resumed ? ", " + std::to_string(resumed) + " resumed" : ""));
+  return result;
+}
+
+}  // namespace terrain::build

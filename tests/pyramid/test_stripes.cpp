@@ -1,0 +1,125 @@
+// Stripe builds (build_pyramid_stripe, the parts of a build spread over processes): the stripes of
+// any partition of the rows, put together level by level, give the whole build's bands, figures and
+// mask, byte for byte.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <random>
+
+#include "build/ptc_coder.h"
+#include "pyramid/pyramid.h"
+
+using namespace terrain;
+
+namespace {
+
+Heightmap rough(int64_t w, int64_t h, uint32_t seed, bool voids) {
+  Heightmap m;
+  m.info.width = w, m.info.height = h;
+  m.info.sample_type = SampleType::Int16;
+  m.values.resize(size_t(w * h));
+  std::mt19937 rng(seed);
+  for (int64_t y = 0; y < h; ++y)
+    for (int64_t x = 0; x < w; ++x)
+      m.values[size_t(y * w + x)] = std::round(700 * std::sin(x * 0.017 + seed) * std::cos(y * 0.013) +
+                                               90 * std::sin(x * 0.11 + y * 0.07) + double(rng() % 9));
+  if (voids) {  // a lake and a run of whole void rows (the fill's carry crosses them)
+    m.valid.assign(size_t(w * h), 1);
+    for (int64_t y = h / 3; y < h / 3 + 70 && y < h; ++y)
+      for (int64_t x = 0; x < w; ++x)
+        if (y > h / 3 + 20 || (x - w / 2) * (x - w / 2) < 400) m.valid[size_t(y * w + x)] = 0;
+  }
+  return m;
+}
+
+struct Band {
+  int level;
+  int64_t y0, rows;
+  std::vector<uint8_t> bytes, mask;
+  BandFigures f;
+  bool operator==(const Band& o) const {
+    return level == o.level && y0 == o.y0 && rows == o.rows && bytes == o.bytes && mask == o.mask &&
+           f.res_sq == o.f.res_sq && f.err_sq == o.f.err_sq && f.res_max == o.f.res_max &&
+           f.err_max == o.f.err_max && f.counted == o.f.counted;
+  }
+};
+
+// Keeps every band with its figures and (finest level) mask rows, per level in arrival order.
+class Recorder final : public PyramidSink {
+ public:
+  void begin(const PyramidHeader& h) override {
+    levels.resize(h.levels.size()), width = h.levels.back().width;
+  }
+  void mask_rows(int64_t, int64_t rows, const uint8_t* valid) override {
+    mask.assign(valid, valid + rows * width);
+  }
+  void band_figures(int, int64_t, const BandFigures& f) override { figures = f; }
+  void band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
+    const bool finest = size_t(level) + 1 == levels.size();
+    levels[size_t(level)].push_back(
+        Band{level, y0, rows, bytes, finest ? mask : std::vector<uint8_t>{}, figures});
+  }
+  std::vector<std::vector<Band>> levels;
+  std::vector<uint8_t> mask;
+  BandFigures figures;
+  int64_t width = 0;
+};
+
+}  // namespace
+
+TEST_CASE("stripe builds put together equal the whole build", "[pyramid][stripes]") {
+  struct Case {
+    int64_t w, h;
+    bool voids;
+    double step;
+    int levels;
+  };
+  const Case cases[] = {{257, 700, false, 1, 0}, {301, 517, true, 3, 0}, {120, 1201, false, 2, 5}};
+  for (const Case& c : cases) {
+    const Heightmap map = rough(c.w, c.h, uint32_t(c.w), c.voids);
+    PtcCoderOptions co;
+    co.step = c.step;
+    co.tile_size = 16;
+    co.band_rows = 32;  // many bands, so that stripes cut every level
+    PtcResidualCoder coder(co);
+    BuildOptions bo;
+    bo.level_count = c.levels;
+    bo.min_coarsest_side = 16;
+    bo.threads = 2;
+    bo.fit_rows = 96;
+    bo.fill_band_rows = 8;  // stripe reads aligned to 8 rows (and 2^m): little slack beyond the D halo
+    Recorder whole;
+    const BuildResult ref = build_pyramid(map, bo, coder, whole);
+    for (int stripes : {1, 2, 3, 7}) {
+      INFO(c.w << "x" << c.h << ", " << stripes << " stripes");
+      std::vector<std::vector<Band>> joined(whole.levels.size());
+      for (int k = 0; k < stripes; ++k) {
+        // Stripe edges off the band grid too: ownership follows each band's first row.
+        const BuildStripe s{k * c.h / stripes, (k + 1) * c.h / stripes};
+        Recorder part;
+        auto reader = make_memory_band_reader(map, 37);
+        const BuildResult r = build_pyramid_stripe(*reader, bo, s, coder, part);
+        CHECK(r.header.filter.taps == ref.header.filter.taps);
+        for (size_t l = 0; l < part.levels.size(); ++l)
+          joined[l].insert(joined[l].end(), part.levels[l].begin(), part.levels[l].end());
+      }
+      for (size_t l = 0; l < joined.size(); ++l) {
+        INFO("level " << l);
+        REQUIRE(joined[l].size() == whole.levels[l].size());
+        for (size_t b = 0; b < joined[l].size(); ++b) CHECK(joined[l][b] == whole.levels[l][b]);
+      }
+    }
+    // An empty stripe codes nothing and fits the same D.
+    Recorder none;
+    auto reader = make_memory_band_reader(map);
+    const BuildResult r = build_pyramid_stripe(*reader, bo, BuildStripe{c.h / 2, c.h / 2}, coder, none);
+    CHECK(r.header.filter.taps == ref.header.filter.taps);
+    CHECK(r.filter_report.summary() == ref.filter_report.summary());
+    for (const auto& level : none.levels) CHECK(level.empty());
+  }
+  Recorder sink;
+  const Heightmap map = rough(40, 40, 1, false);
+  PtcResidualCoder coder(PtcCoderOptions{});
+  auto reader = make_memory_band_reader(map);
+  CHECK_THROWS_AS(build_pyramid_stripe(*reader, BuildOptions{}, BuildStripe{10, 41}, coder, sink),
+                  std::invalid_argument);
+}
