@@ -71,7 +71,7 @@ int run_bench_render(const Flight& flight, int frames) {
         lg.patches.push_back(rs.patches);
       }
       psnr.push_back(image_psnr(pixels[1], pixels[0]));
-      if (f == frames / 2) {
+      if (f == frames / 2 && o.png_every > 0) {  // --png-every 0: no PNG (no image plugin needed)
         for (int m = 0; m < 2; ++m) {
           char name[96];
           std::snprintf(name, sizeof name, "/mesh_%s_%dx%d.png", m == 0 ? "footprints" : "tessellation",
@@ -94,7 +94,7 @@ int run_bench_render(const Flight& flight, int frames) {
                 "", frames, percentile(psnr, 0.5), percentile(psnr, 0.0));
     std::fflush(stdout);
   }
-  if (!o.quiet)
+  if (!o.quiet && o.png_every > 0)
     std::fprintf(stderr, "clipmap-view: frames of both meshes (frame %d) in %s/mesh_*.png\n", frames / 2,
                  o.out_dir.c_str());
   return 0;

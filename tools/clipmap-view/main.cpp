@@ -170,7 +170,8 @@ int run(int argc, char** argv) {
   p.option("--bench-render", "FRAMES",
            "benchmark instead of a flight: the first FRAMES frames of the flight drawn with both meshes at\n"
            "640x480 and 1280x720 (same clipmap, same renderer); prints CPU (submission), render and GPU ms,\n"
-           "fps and triangles per mesh and the image PSNR between them; the middle frames go to --out",
+           "fps and triangles per mesh and the image PSNR between them; the middle frames go to --out\n"
+           "(none with --png-every 0)",
            [&](const std::string& v) { bench_render = int(cli::parse_int("--bench-render", v, 3, 100000)); });
   p.option("--drape", "IMAGE",
            "an 8-bit RGB(A) image (e.g. an orthophoto) draped over the terrain with --shading hypsometric:\n"
