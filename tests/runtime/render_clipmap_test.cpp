@@ -157,8 +157,11 @@ TEST_CASE("render: cropped active regions stay watertight", "[render]") {
 
 TEST_CASE("render: frustum culling never removes a visible block", "[render]") {
   GlLeakCheckPause pause;
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   Scene scene(31);
   RenderOptions on, off;
+  on.mesh = off.mesh = mesh;
   off.culling = false;
   int culled = 0;
   for (int i = 0; i < 12; ++i) {
@@ -196,8 +199,12 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
                      8.0 * std::sin(xm * 0.007 + ym * 0.005) + 2.0 * std::cos(xm * 0.031 - ym * 0.023));
       },
       false);
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   ClipmapRenderer renderer((gl(), n), kGrazingLevels, kW, kH);
-  RenderOptions on = rendertest::crack_check_options(), off = on;
+  RenderOptions on = rendertest::crack_check_options();
+  on.mesh = mesh;
+  RenderOptions off = on;
   off.culling = false;
   std::vector<uint8_t> culled_image, pixels;
   int culled = 0, drawn = 0;
@@ -224,7 +231,8 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
     CHECK(culled_image == pixels);
   }
   CHECK(culled > 0);
-  WARN("low grazing views: culled " << culled << " of " << culled + drawn << " pieces");
+  WARN("low grazing views, " << mesh_name(mesh) << ": culled " << culled << " of " << culled + drawn
+                             << " pieces");
 }
 
 TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") {

@@ -85,11 +85,12 @@ struct RenderOptions {
 struct RenderStats {
   int64_t triangles = 0;  // Footprints: submitted, zero-area stitching triangles included;
                           // Tessellation: what the tessellator generated (GL_PRIMITIVES_GENERATED)
-  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;  // footprint pieces (blocks, fix-ups, trims)
-  int patches = 0;                                          // Tessellation: quads patches drawn
-  int levels_drawn = 0;                                     // levels with a non-empty active region
-  double seconds_upload = 0;                                // texture uploads of the last upload()
-  double seconds_render = 0;                                // draw + glFinish
+  // Pieces drawn and culled: footprints' blocks, fix-ups and trims, or the tessellation's patches.
+  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;
+  int patches = 0;               // Tessellation: quads patches drawn (= blocks_drawn); Footprints: 0
+  int levels_drawn = 0;          // levels with a non-empty active region
+  double seconds_upload = 0;     // texture uploads of the last upload()
+  double seconds_render = 0;     // draw + glFinish
   double seconds_submit = 0;     // of seconds_render, the CPU's part: until the commands are issued
   double seconds_gpu = 0;        // the terrain's draws as the GPU timed them (GL_TIME_ELAPSED); 0 if none
   int64_t samples_uploaded = 0;  // height samples of the last upload()
