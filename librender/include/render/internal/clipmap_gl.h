@@ -49,7 +49,7 @@ struct TerrainUniforms {
 // level's perimeter get the doubled factor.
 class TessellationMesh {
  public:
-  static constexpr int64_t kCell = 16, kFrame = 32;
+  static constexpr int64_t kCell = 8, kFrame = 32;
   // Needs a current OpenGL 4.5 context (tessellation shaders are core there). Throws
   // std::runtime_error on GL errors (shader log included).
   TessellationMesh();
