@@ -1,9 +1,10 @@
 // The tessellation mesh of the clipmap renderer (Song et al. 2016): per level, only the corners of
-// the footprints' blocks go to the GPU, as quads patches; the tessellator makes the level's grid and
-// the evaluation shader reads the heights. Cracks between levels: the coarser level's edges shared
-// with the finer level's perimeter get twice their factor (paper §3.3), so their vertices fall on
-// every perimeter vertex of the finer level, halfway between the coarser samples, at exactly the
-// height the finer level's zc gives them there (0.5 (a + b), as the CPU computes it).
+// quads patches go to the GPU (cells of a fixed grid clamped to the ring, and a one-quad frame around
+// the finer level); the tessellator makes the level's grid and the evaluation shader reads the
+// heights. Cracks between levels: the frame's edges shared with the finer level's perimeter get twice
+// their factor (paper §3.3), so their vertices fall on every perimeter vertex of the finer level,
+// halfway between the coarser samples, at exactly the height the finer level's zc gives them there
+// (0.5 (a + b), as the CPU computes it).
 #include <algorithm>
 #include <functional>
 #include <stdexcept>

@@ -47,12 +47,13 @@ enum class Shading { Flat, Hypsometric };
 
 // How each level's render region becomes triangles. Footprints: the constant vertex/index buffers of
 // A&H 2005 (above), one draw call per block, zero-area stitches. Tessellation: Song et al. 2016 —
-// only the corners of the same blocks (split into patches of at most 64 quads a side, the smallest
-// GL_MAX_TESS_GEN_LEVEL) go to the GPU, one GL 4.5 quads patch each; the tessellator makes one vertex
-// per sample (always the level's full resolution: the clipmap's levels are the level of detail), the
-// evaluation shader reads heights and morphs as the footprints' vertex shader does, and the coarser
-// level's edges shared with a finer level get twice the factor (paper §3.3), so that its vertices
-// meet every vertex of the finer level's perimeter: no T-junction, no stitching triangle.
+// only the corners of GL 4.5 quads patches go to the GPU (8 x 8-quad cells of a fixed grid of each
+// level, each clamped to its part of the ring, and a one-quad frame around the finer level), one
+// draw call per level; the tessellator makes one vertex per sample (always the level's full
+// resolution: the clipmap's levels are the level of detail), the evaluation shader reads heights and
+// morphs as the footprints' vertex shader does, and the frame's edges shared with the finer level get
+// twice the factor (paper §3.3), so that they meet every vertex of the finer level's perimeter: no
+// T-junction, no stitching triangle. Same vertices as the footprints, the tessellator's triangulation.
 enum class Mesh { Footprints, Tessellation };
 
 struct RenderOptions {
