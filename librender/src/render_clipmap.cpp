@@ -1,17 +1,17 @@
 // Drawing a geometry clipmap with OpenGL 4.5 core: toroidal height textures read in the vertex
-// shader, footprints from constant vertex/index buffers, transition morph, T-junction stitching, per-block
+// shader (or, for the tessellation mesh of render_tessellation.cpp, the evaluation shader),
+// footprints from constant vertex/index buffers, transition morph, T-junction stitching, per-block
 // view-frustum culling; shading from the slope (normal) maps: hypsometric tints with hillshade, a sky
 // gradient and distance haze, or the plain relative-z ramp.
-#define GL_GLEXT_PROTOTYPES 1
-#include <GL/glcorearb.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
+#include "render/internal/clipmap_gl.h"
 #include "render/renderer.h"
 
 namespace terrain::render {
@@ -23,12 +23,11 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-const char* kVertexShader = R"(#version 450 core
-layout(location = 0) in ivec2 a_local;  // footprint vertex (constant vertex buffer), local grid units
-uniform ivec2 u_origin;      // where the footprint's (0, 0) goes, level grid
-uniform ivec2 u_extent;      // local coordinates are clamped to this: a cropped piece's extra
-                             // quads collapse onto its edge (zero area, never rasterised)
-uniform int u_transpose;     // 1: swap the footprint's axes (fix-ups, trims, stitches along x or y)
+}  // namespace
+
+namespace internal {
+
+const char* const kClipmapVertexGlsl = R"(
 uniform int u_level;
 uniform int u_n;
 uniform ivec2 u_wrap_base;   // a multiple of n making every vertex coordinate non-negative
@@ -46,21 +45,33 @@ out float v_height;
 out vec3 v_world;            // metres, for the distance haze
 invariant gl_Position;
 
-void main() {
-  ivec2 p = u_transpose != 0 ? a_local.yx : a_local;
-  ivec2 g = u_origin + min(p, u_extent);
-  ivec3 t = ivec3((g + u_wrap_base) % u_n, u_level);
-  float zf = texelFetch(u_z, t, 0).r;
-  float zc = texelFetch(u_zc, t, 0).r;
+// The level's triangulation at twice-grid position h: the sample, or halfway between two samples the
+// midpoint of the quad edge or of the (0,0)-(1,1) diagonal, computed as the CPU computes zc there
+// (0.5 (a + b)), so that a coarser level's vertex halfway between its samples meets the finer
+// level's perimeter vertex (height zc) exactly.
+float surface(sampler2DArray s, ivec2 h) {
+  ivec2 w = h + 2 * u_wrap_base;
+  ivec2 g = w >> 1, o = w & 1;
+  float a = texelFetch(s, ivec3(g % u_n, u_level), 0).r;
+  if (o.x == 0 && o.y == 0) return a;
+  float b = texelFetch(s, ivec3((g + o) % u_n, u_level), 0).r;
+  precise float m = 0.5 * (a + b);
+  return m;
+}
+
+void clipmap_vertex(ivec2 h) {
+  vec2 g = vec2(h) * 0.5;
+  float zf = surface(u_z, h);
+  float zc = surface(u_zc, h);
   // Distance to the active region's edge: alpha must be exactly 1 on the perimeter (watertight
   // against the coarser level) and exactly 0 on the finer level's perimeter.
-  vec2 d = vec2(min(g - u_active.xy, u_active.zw - g));
+  vec2 d = min(g - vec2(u_active.xy), vec2(u_active.zw) - g);
   vec2 a;
   if (u_transitions == 2) {
     // L&H 2004 §6.2: a ramp that tracks the continuous viewer position (no popping), joined by a
     // ramp from the edge itself for regions cropped off-centre.
     vec2 half_extent = vec2(u_active.zw - u_active.xy) * 0.5;
-    a = clamp((abs(vec2(g) - u_viewer) - (half_extent - u_w - 1.0)) / u_w, 0.0, 1.0);
+    a = clamp((abs(g - u_viewer) - (half_extent - u_w - 1.0)) / u_w, 0.0, 1.0);
     a = max(a, clamp((u_w - d) / u_w, 0.0, 1.0));
   } else if (u_transitions == 1) {
     a = vec2(d.x == 0.0 ? 1.0 : 0.0, d.y == 0.0 ? 1.0 : 0.0);
@@ -68,16 +79,16 @@ void main() {
     a = vec2(0.0);
   }
   float alpha = max(a.x, a.y);
-  float z = (1.0 - alpha) * zf + alpha * zc;
-  v_grid = vec2(g);
+  precise float z = (1.0 - alpha) * zf + alpha * zc;
+  v_grid = g;
   v_alpha = alpha;
   v_height = z;
-  v_world = vec3(vec2(g) * u_g, z);
-  gl_Position = u_mvp * vec4(vec2(g) * u_g, z, 1.0);
+  v_world = vec3(g * u_g, z);
+  gl_Position = u_mvp * vec4(g * u_g, z, 1.0);
 }
 )";
 
-const char* kFragmentShader = R"(#version 450 core
+const char* const kTerrainFragmentShader = R"(#version 450 core
 in vec2 v_grid;
 in float v_alpha;
 in float v_height;
@@ -176,6 +187,28 @@ void main() {
 }
 )";
 
+}  // namespace internal
+
+namespace {
+
+using namespace internal;
+
+// The footprints' vertex shader: a footprint vertex translated (and for strips transposed) into the
+// level, clamped to the piece's extent.
+const char* const kFootprintVertexHead = R"(#version 450 core
+layout(location = 0) in ivec2 a_local;  // footprint vertex (constant vertex buffer), local grid units
+uniform ivec2 u_origin;      // where the footprint's (0, 0) goes, level grid
+uniform ivec2 u_extent;      // local coordinates are clamped to this: a cropped piece's extra
+                             // quads collapse onto its edge (zero area, never rasterised)
+uniform int u_transpose;     // 1: swap the footprint's axes (fix-ups, trims, stitches along x or y)
+)";
+const char* const kFootprintVertexMain = R"(
+void main() {
+  ivec2 p = u_transpose != 0 ? a_local.yx : a_local;
+  clipmap_vertex(2 * (u_origin + min(p, u_extent)));
+}
+)";
+
 // The sky behind the terrain: one full-screen triangle, coloured by the elevation of each pixel's
 // view ray (horizon colour below the horizon, where only the distant haze is).
 const char* kSkyVertexShader = R"(#version 450 core
@@ -211,27 +244,35 @@ void check_status(GLuint object, GLenum status, GetIv get_iv, GetLog get_log, co
   throw std::runtime_error(std::string("clipmap renderer: ") + what + " failed: " + log);
 }
 
-GLuint compile(GLenum kind, const char* src) {
-  GLuint s = glCreateShader(kind);
-  glShaderSource(s, 1, &src, nullptr);
-  glCompileShader(s);
-  check_status(s, GL_COMPILE_STATUS, glGetShaderiv, glGetShaderInfoLog, "shader compile");
-  return s;
-}
+}  // namespace
 
-GLuint link(const char* vertex, const char* fragment) {
-  const GLuint vs = compile(GL_VERTEX_SHADER, vertex), fs = compile(GL_FRAGMENT_SHADER, fragment);
+GLuint internal::link(const std::vector<Stage>& stages) {
   const GLuint program = glCreateProgram();
-  glAttachShader(program, vs);
-  glAttachShader(program, fs);
+  for (const Stage& st : stages) {
+    const GLuint sh = glCreateShader(st.kind);
+    glShaderSource(sh, GLsizei(st.sources.size()), st.sources.data(), nullptr);
+    glCompileShader(sh);
+    try {
+      check_status(sh, GL_COMPILE_STATUS, glGetShaderiv, glGetShaderInfoLog, "shader compile");
+    } catch (...) {
+      glDeleteShader(sh);
+      glDeleteProgram(program);
+      throw;
+    }
+    glAttachShader(program, sh);
+    glDeleteShader(sh);  // freed with the program
+  }
   glLinkProgram(program);
-  glDeleteShader(vs);
-  glDeleteShader(fs);
-  check_status(program, GL_LINK_STATUS, glGetProgramiv, glGetProgramInfoLog, "program link");
+  try {
+    check_status(program, GL_LINK_STATUS, glGetProgramiv, glGetProgramInfoLog, "program link");
+  } catch (...) {
+    glDeleteProgram(program);
+    throw;
+  }
   return program;
 }
 
-void check_gl(const char* step) {
+void internal::check_gl(const char* step) {
   const GLenum e = glGetError();
   if (e != GL_NO_ERROR) {
     char code[16];
@@ -239,6 +280,26 @@ void check_gl(const char* step) {
     throw std::runtime_error(std::string("clipmap renderer: OpenGL error ") + code + " in " + step);
   }
 }
+
+internal::TerrainUniforms::TerrainUniforms(GLuint program) {
+  auto loc = [&](const char* name) { return glGetUniformLocation(program, name); };
+  level = loc("u_level"), n = loc("u_n"), wrap_base = loc("u_wrap_base"), g = loc("u_g");
+  viewer = loc("u_viewer"), active = loc("u_active"), w = loc("u_w"), transitions = loc("u_transitions");
+  mvp = loc("u_mvp"), coarse_layer = loc("u_coarse_layer"), coarse_scale = loc("u_coarse_scale");
+  light = loc("u_light"), flat = loc("u_flat"), flat_rgb = loc("u_flat_rgb"), zrange = loc("u_zrange");
+  shading = loc("u_shading"), eye = loc("u_eye"), haze_rgb = loc("u_haze_rgb");
+  haze_distance = loc("u_haze_distance"), haze_max = loc("u_haze_max");
+  level_colours = loc("u_level_colours");
+  hillshade_light = loc("u_hillshade_light"), relief = loc("u_relief");
+  drape = loc("u_drape"), drape_rect = loc("u_drape_rect");
+  glUseProgram(program);
+  glUniform1i(loc("u_z"), 0);
+  glUniform1i(loc("u_zc"), 1);
+  glUniform1i(loc("u_normal"), 2);
+  glUniform1i(loc("u_drape_image"), 3);
+}
+
+namespace {
 
 using Mat4 = std::array<double, 16>;  // column-major, like GL
 
@@ -371,11 +432,11 @@ struct ClipmapRenderer::Gl {
   // dirty rectangles never reached upload() is noticed and the level sent whole.
   std::vector<Rect> uploaded_clip;
   std::vector<bool> uploaded;
-  GLint u_origin = -1, u_extent = -1, u_transpose = -1, u_level = -1, u_n = -1, u_wrap_base = -1, u_g = -1,
-        u_viewer = -1, u_active = -1, u_w = -1, u_transitions = -1, u_mvp = -1, u_coarse_layer = -1,
-        u_coarse_scale = -1, u_light = -1, u_flat = -1, u_flat_rgb = -1, u_zrange = -1, u_shading = -1,
-        u_eye = -1, u_haze_rgb = -1, u_haze_distance = -1, u_haze_max = -1, u_level_colours = -1,
-        u_hillshade_light = -1, u_relief = -1, u_drape = -1, u_drape_rect = -1;
+  TerrainUniforms u;  // the footprints' program
+  GLint u_origin = -1, u_extent = -1, u_transpose = -1;
+  // The tessellation mesh, made on the first frame that asks for it.
+  std::unique_ptr<TessellationMesh> tessellation;
+  GLuint timer = 0, primitives = 0;  // GL_TIME_ELAPSED, GL_PRIMITIVES_GENERATED queries
   // The draped image (set_drape): an RGBA8 texture with mipmaps and the world rectangle it covers.
   GLuint drape = 0;
   double drape_rect[4] = {0, 0, 0, 0};
@@ -391,30 +452,19 @@ ClipmapRenderer::ClipmapRenderer(int n, int levels, int width, int height)
   Gl& g = *gl_;
   g.uploaded_clip.assign(size_t(levels), Rect{});
   g.uploaded.assign(size_t(levels), false);
-  g.program = link(kVertexShader, kFragmentShader);
-  g.sky_program = link(kSkyVertexShader, kSkyFragmentShader);
+  g.program = link({{GL_VERTEX_SHADER, {kFootprintVertexHead, kClipmapVertexGlsl, kFootprintVertexMain}},
+                    {GL_FRAGMENT_SHADER, {kTerrainFragmentShader}}});
+  g.sky_program = link({{GL_VERTEX_SHADER, {kSkyVertexShader}}, {GL_FRAGMENT_SHADER, {kSkyFragmentShader}}});
+  glCreateQueries(GL_TIME_ELAPSED, 1, &g.timer);
+  glCreateQueries(GL_PRIMITIVES_GENERATED, 1, &g.primitives);
   glCreateVertexArrays(1, &g.sky_vao);
   auto sloc = [&](const char* name) { return glGetUniformLocation(g.sky_program, name); };
   g.s_forward = sloc("u_forward"), g.s_right = sloc("u_right"), g.s_up = sloc("u_up");
   g.s_tan_half = sloc("u_tan_half"), g.s_zenith = sloc("u_zenith_rgb"), g.s_horizon = sloc("u_horizon_rgb");
-  auto loc = [&](const char* name) { return glGetUniformLocation(g.program, name); };
-  g.u_origin = loc("u_origin"), g.u_extent = loc("u_extent"), g.u_transpose = loc("u_transpose");
-  g.u_level = loc("u_level"), g.u_n = loc("u_n"), g.u_wrap_base = loc("u_wrap_base"), g.u_g = loc("u_g");
-  g.u_viewer = loc("u_viewer"), g.u_active = loc("u_active"), g.u_w = loc("u_w"),
-  g.u_transitions = loc("u_transitions");
-  g.u_mvp = loc("u_mvp"), g.u_coarse_layer = loc("u_coarse_layer"), g.u_coarse_scale = loc("u_coarse_scale");
-  g.u_light = loc("u_light"), g.u_flat = loc("u_flat"), g.u_flat_rgb = loc("u_flat_rgb"),
-  g.u_zrange = loc("u_zrange");
-  g.u_shading = loc("u_shading"), g.u_eye = loc("u_eye"), g.u_haze_rgb = loc("u_haze_rgb");
-  g.u_haze_distance = loc("u_haze_distance"), g.u_haze_max = loc("u_haze_max");
-  g.u_level_colours = loc("u_level_colours");
-  g.u_hillshade_light = loc("u_hillshade_light"), g.u_relief = loc("u_relief");
-  g.u_drape = loc("u_drape"), g.u_drape_rect = loc("u_drape_rect");
-  glUseProgram(g.program);
-  glUniform1i(loc("u_drape_image"), 3);
-  glUniform1i(loc("u_z"), 0);
-  glUniform1i(loc("u_zc"), 1);
-  glUniform1i(loc("u_normal"), 2);
+  g.u = TerrainUniforms(g.program);
+  g.u_origin = glGetUniformLocation(g.program, "u_origin");
+  g.u_extent = glGetUniformLocation(g.program, "u_extent");
+  g.u_transpose = glGetUniformLocation(g.program, "u_transpose");
 
   // Footprints, local coordinates as short2: m x m block (m = (n+1)/4), the 3 x m fix-up (2 quads
   // wide), the 2 x n trim (1 quad wide, up to a ring side long) and the line of zero-area stitching
@@ -497,6 +547,9 @@ ClipmapRenderer::~ClipmapRenderer() {
   glDeleteVertexArrays(1, &g.sky_vao);
   glDeleteProgram(g.program);
   glDeleteProgram(g.sky_program);
+  glDeleteQueries(1, &g.timer);
+  glDeleteQueries(1, &g.primitives);
+  g.tessellation.reset();
   if (g.drape) glDeleteTextures(1, &g.drape);
 }
 
@@ -600,42 +653,47 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LEQUAL);
   glDisable(GL_CULL_FACE);  // stitching triangles have no meaningful orientation
-  glUseProgram(g.program);
+  const bool tessellate = opt.mesh == Mesh::Tessellation;
+  if (tessellate && !g.tessellation) g.tessellation = std::make_unique<TessellationMesh>();
+  const TerrainUniforms& u = tessellate ? g.tessellation->uniforms() : g.u;
+  glUseProgram(tessellate ? g.tessellation->program() : g.program);
   glBindVertexArray(g.vao);
   glBindTextureUnit(0, g.tex_z);
   glBindTextureUnit(1, g.tex_zc);
   glBindTextureUnit(2, g.tex_normal);
-  glUniformMatrix4fv(g.u_mvp, 1, GL_FALSE, mvp);
-  glUniform1i(g.u_n, n_);
-  glUniform1i(g.u_transitions, opt.transitions ? 2 : opt.snap_perimeter ? 1 : 0);
-  glUniform3f(g.u_light, opt.light_dir[0], opt.light_dir[1], opt.light_dir[2]);
-  glUniform1i(g.u_flat, opt.flat_colour ? 1 : 0);
-  glUniform3f(g.u_flat_rgb, opt.terrain_rgb[0], opt.terrain_rgb[1], opt.terrain_rgb[2]);
-  glUniform1i(g.u_shading, hypsometric ? 1 : 0);
-  glUniform1i(g.u_level_colours, opt.level_colours ? 1 : 0);
-  glUniform3f(g.u_eye, float(cam.position[0]), float(cam.position[1]), float(cam.position[2]));
-  glUniform3f(g.u_haze_rgb, opt.sky_horizon_rgb[0], opt.sky_horizon_rgb[1], opt.sky_horizon_rgb[2]);
+  glUniformMatrix4fv(u.mvp, 1, GL_FALSE, mvp);
+  glUniform1i(u.n, n_);
+  glUniform1i(u.transitions, opt.transitions ? 2 : opt.snap_perimeter ? 1 : 0);
+  glUniform3f(u.light, opt.light_dir[0], opt.light_dir[1], opt.light_dir[2]);
+  glUniform1i(u.flat, opt.flat_colour ? 1 : 0);
+  glUniform3f(u.flat_rgb, opt.terrain_rgb[0], opt.terrain_rgb[1], opt.terrain_rgb[2]);
+  glUniform1i(u.shading, hypsometric ? 1 : 0);
+  glUniform1i(u.level_colours, opt.level_colours ? 1 : 0);
+  glUniform3f(u.eye, float(cam.position[0]), float(cam.position[1]), float(cam.position[2]));
+  glUniform3f(u.haze_rgb, opt.sky_horizon_rgb[0], opt.sky_horizon_rgb[1], opt.sky_horizon_rgb[2]);
   // Haze: 1 - 1/e of haze_max at half the coarsest level's extent unless given (scales with the scene).
   const double haze_m = opt.haze_distance_m > 0 ? opt.haze_distance_m : 0.5 * n_ * cm.spacing(0);
-  glUniform1f(g.u_haze_distance, hypsometric && opt.haze_max > 0 ? float(haze_m) : 0.0f);
-  glUniform1f(g.u_haze_max, opt.haze_max);
-  glUniform3f(g.u_hillshade_light, opt.hillshade_dir[0], opt.hillshade_dir[1], opt.hillshade_dir[2]);
-  glUniform1f(g.u_relief, opt.relief);
+  glUniform1f(u.haze_distance, hypsometric && opt.haze_max > 0 ? float(haze_m) : 0.0f);
+  glUniform1f(u.haze_max, opt.haze_max);
+  glUniform3f(u.hillshade_light, opt.hillshade_dir[0], opt.hillshade_dir[1], opt.hillshade_dir[2]);
+  glUniform1f(u.relief, opt.relief);
   const bool drape = opt.drape && g.drape != 0;
-  glUniform1i(g.u_drape, drape ? 1 : 0);
+  glUniform1i(u.drape, drape ? 1 : 0);
   if (drape) {
     glBindTextureUnit(3, g.drape);
-    glUniform4f(g.u_drape_rect, float(g.drape_rect[0]), float(g.drape_rect[1]), float(1 / g.drape_rect[2]),
+    glUniform4f(u.drape_rect, float(g.drape_rect[0]), float(g.drape_rect[1]), float(1 / g.drape_rect[2]),
                 float(1 / g.drape_rect[3]));
   }
   if (opt.z_hi > opt.z_lo) {
-    glUniform2f(g.u_zrange, opt.z_lo, opt.z_hi);
+    glUniform2f(u.zrange, opt.z_lo, opt.z_hi);
   } else {
     const ZRange zr = cm.z_bounds(0, cm.active_region(0));
-    glUniform2f(g.u_zrange, zr.lo, zr.hi);
+    glUniform2f(u.zrange, zr.lo, zr.hi);
   }
 
   const int64_t B = g.block.cols;  // quads per side of the m x m block
+  glBeginQuery(GL_TIME_ELAPSED, g.timer);
+  if (tessellate) glBeginQuery(GL_PRIMITIVES_GENERATED, g.primitives);
   // One footprint instance: local (0,0) at `origin`, clamped to extent (ex, ey) quads in world axes;
   // only the local rows that hold visible quads are submitted.
   auto draw = [&](const Gl::Footprint& f, int64_t ox, int64_t oy, int64_t ex, int64_t ey, bool transpose) {
@@ -657,14 +715,14 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
     const Rect clip = cm.clip_region(l);
     const GLint base_x = GLint(n_ * (std::abs(clip.x0) / n_ + 2)),
                 base_y = GLint(n_ * (std::abs(clip.y0) / n_ + 2));
-    glUniform1i(g.u_level, l);
-    glUniform2i(g.u_wrap_base, base_x, base_y);
-    glUniform1f(g.u_g, float(gm));
-    glUniform2f(g.u_viewer, float(v[0]), float(v[1]));
-    glUniform4i(g.u_active, GLint(a.x0), GLint(a.y0), GLint(a.x1), GLint(a.y1));
-    glUniform1f(g.u_w, float(cm.transition_width(l)));
-    glUniform1i(g.u_coarse_layer, l > 0 ? l - 1 : 0);
-    glUniform1f(g.u_coarse_scale, l > 0 ? 0.5f : 1.0f);
+    glUniform1i(u.level, l);
+    glUniform2i(u.wrap_base, base_x, base_y);
+    glUniform1f(u.g, float(gm));
+    glUniform2f(u.viewer, float(v[0]), float(v[1]));
+    glUniform4i(u.active, GLint(a.x0), GLint(a.y0), GLint(a.x1), GLint(a.y1));
+    glUniform1f(u.w, float(cm.transition_width(l)));
+    glUniform1i(u.coarse_layer, l > 0 ? l - 1 : 0);
+    glUniform1f(u.coarse_scale, l > 0 ? 0.5f : 1.0f);
 
     // A piece of the render region (x0..x1, y0..y1 vertices), culled against its extruded z range.
     auto visible = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1) {
@@ -717,7 +775,13 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
       const LevelRegion f = cm.active_region(l + 1);
       inner = LevelRegion{f.x0 / 2, f.y0 / 2, f.x1 / 2, f.y1 / 2};
     }
-    if (inner.empty()) {
+    if (tessellate) {
+      stats.patches += g.tessellation->draw_level(
+          a, inner, opt.stitch, [&](const LevelRegion& p) { return visible(p.x0, p.y0, p.x1, p.y1); },
+          stats.blocks_drawn);
+      ++stats.draw_calls;
+      glBindVertexArray(g.vao);
+    } else if (inner.empty()) {
       tile(a);
     } else {
       tile(LevelRegion{a.x0, a.y0, a.x1, inner.y0});
@@ -726,7 +790,7 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
       tile(LevelRegion{inner.x1, inner.y0, a.x1, inner.y1});
     }
     // Zero-area triangles (v0, v1, v2) on each outer side close the T-junctions against level l-1.
-    if (opt.stitch && l > 0) {
+    if (opt.stitch && l > 0 && !tessellate) {
       const int64_t wx = a.x1 - a.x0, wy = a.y1 - a.y0;
       const struct {
         int64_t x, y, len;
@@ -747,8 +811,19 @@ RenderStats ClipmapRenderer::render(const Clipmap& cm, const Camera& cam, const 
       }
     }
   }
+  glEndQuery(GL_TIME_ELAPSED);
+  if (tessellate) glEndQuery(GL_PRIMITIVES_GENERATED);
   glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+  stats.seconds_submit = since(t0);
   glFinish();
+  GLuint64 gpu_ns = 0;
+  glGetQueryObjectui64v(g.timer, GL_QUERY_RESULT, &gpu_ns);
+  stats.seconds_gpu = double(gpu_ns) * 1e-9;
+  if (tessellate) {
+    GLuint64 generated = 0;
+    glGetQueryObjectui64v(g.primitives, GL_QUERY_RESULT, &generated);
+    stats.triangles = int64_t(generated);
+  }
   check_gl("render");
   stats.seconds_render = since(t0);
   return stats;

@@ -40,11 +40,12 @@ FunctionHeightSource smooth_source() {
 }
 
 struct Scene {
-  FunctionHeightSource source = smooth_source();
+  FunctionHeightSource source;
   Clipmap clipmap;
   ClipmapRenderer renderer;
   std::vector<uint8_t> pixels;
-  explicit Scene(int n) : clipmap(source, options(n)), renderer((gl(), n), kLevels, kW, kH) {}
+  explicit Scene(int n, FunctionHeightSource s = smooth_source())
+      : source(std::move(s)), clipmap(source, options(n)), renderer((gl(), n), kLevels, kW, kH) {}
   static ClipmapOptions options(int n) {
     ClipmapOptions o;
     o.n = n;
@@ -82,13 +83,21 @@ TEST_CASE("render: a headless OpenGL 4.5 core context comes up", "[render]") {
   WARN("OpenGL renderer: " << gl().renderer_name() << " (EGL " << gl().platform() << ")");
 }
 
+// Both meshes: the footprints (stitched) and the tessellation patches (shared edges doubled).
+Mesh any_mesh() { return GENERATE(Mesh::Footprints, Mesh::Tessellation); }
+const char* mesh_name(Mesh m) { return m == Mesh::Footprints ? "footprints" : "tessellation"; }
+
 TEST_CASE("render: rings are watertight from many viewpoints", "[render]") {
   GlLeakCheckPause pause;
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   Scene scene(31);
-  const RenderOptions opt = rendertest::crack_check_options();
-  // Negative control: no morph, no perimeter snap, no stitching leaves real cracks at the ring
-  // boundaries; the same views must then show background pixels, or the test could not see cracks.
-  const RenderOptions broken = rendertest::cracked_options();
+  RenderOptions opt = rendertest::crack_check_options();
+  // Negative control: no morph, no perimeter snap, no stitching (no doubled shared edges) leaves
+  // real cracks at the ring boundaries; the same views must then show background pixels, or the test
+  // could not see cracks.
+  RenderOptions broken = rendertest::cracked_options();
+  opt.mesh = broken.mesh = mesh;
   int levels_seen = 0;
   int64_t broken_background = 0;
   for (int i = 0; i < 24; ++i) {
@@ -118,9 +127,12 @@ TEST_CASE("render: cropped active regions stay watertight", "[render]") {
   // active regions are cropped off-centre (L&H 2004 §6.1), and the footprints are clamped to
   // pieces of every size. No crack may open.
   constexpr int n = 63;
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   Scene scene(n);
   scene.clipmap.set_budget(int64_t(n) * n);
-  const RenderOptions opt = rendertest::crack_check_options();
+  RenderOptions opt = rendertest::crack_check_options();
+  opt.mesh = mesh;
   Camera cam = camera_at(500.0, 300.0, 40.0, 0.3, -1.1);
   for (int i = 0; i < kLevels; ++i) scene.move(cam);  // one full level per update
   int cropped_frames = 0;
@@ -145,8 +157,11 @@ TEST_CASE("render: cropped active regions stay watertight", "[render]") {
 
 TEST_CASE("render: frustum culling never removes a visible block", "[render]") {
   GlLeakCheckPause pause;
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   Scene scene(31);
   RenderOptions on, off;
+  on.mesh = off.mesh = mesh;
   off.culling = false;
   int culled = 0;
   for (int i = 0; i < 12; ++i) {
@@ -184,8 +199,12 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
                      8.0 * std::sin(xm * 0.007 + ym * 0.005) + 2.0 * std::cos(xm * 0.031 - ym * 0.023));
       },
       false);
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   ClipmapRenderer renderer((gl(), n), kGrazingLevels, kW, kH);
-  RenderOptions on = rendertest::crack_check_options(), off = on;
+  RenderOptions on = rendertest::crack_check_options();
+  on.mesh = mesh;
+  RenderOptions off = on;
   off.culling = false;
   std::vector<uint8_t> culled_image, pixels;
   int culled = 0, drawn = 0;
@@ -212,7 +231,8 @@ TEST_CASE("render: frustum culling never removes visible terrain in low grazing 
     CHECK(culled_image == pixels);
   }
   CHECK(culled > 0);
-  WARN("low grazing views: culled " << culled << " of " << culled + drawn << " pieces");
+  WARN("low grazing views, " << mesh_name(mesh) << ": culled " << culled << " of " << culled + drawn
+                             << " pieces");
 }
 
 TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") {
@@ -225,11 +245,14 @@ TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") 
   // colour changes by more than kStep (of 255) in some channel; worst over the flight.
   constexpr int kStep = 8;
   constexpr int64_t kBound = 20;  // pixels of 160 x 120
+  const Mesh mesh = any_mesh();
+  INFO("mesh " << mesh_name(mesh));
   int64_t worst[2] = {0, 0};
   int level_shifts = 0;
   for (int transitions = 0; transitions < 2; ++transitions) {
     Scene scene(31);
     RenderOptions opt;
+    opt.mesh = mesh;
     opt.transitions = transitions == 1;
     // The relative ramp this measure was calibrated on (issue 6). The hypsometric look would count
     // the coastline of this +-100 m terrain (water at 0 m is flat-lit, a colour edge that moves with
@@ -268,8 +291,8 @@ TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") 
   CHECK(level_shifts >= 3);   // the flight did move the levels
   CHECK(worst[1] <= kBound);  // with transitions: no pop
   CHECK(worst[0] > kBound);   // without: pops, so the measure does see them
-  WARN("popping measure (pixels changing by > " << kStep << "): without transitions " << worst[0] << ", with "
-                                                << worst[1]);
+  WARN("popping measure (pixels changing by > "
+       << kStep << "), " << mesh_name(mesh) << ": without transitions " << worst[0] << ", with " << worst[1]);
 }
 
 TEST_CASE("render: hypsometric shading tints by absolute height, with sky; flat keeps its background",
@@ -320,4 +343,63 @@ TEST_CASE("render: hypsometric shading tints by absolute height, with sky; flat 
   const std::vector<uint8_t> plain = frame(100, 0.35, flat);
   CHECK(int(plain[0]) == int(std::lround(flat.background_rgb[0] * 255)));
   CHECK(int(plain[2]) == int(std::lround(flat.background_rgb[2] * 255)));
+}
+
+TEST_CASE("render: the tessellation mesh draws the footprints' surface", "[render]") {
+  GlLeakCheckPause pause;
+  // The tessellator makes one vertex per sample at the samples' heights, as the footprints do; its
+  // triangulation is its own (llvmpipe's diagonals flip about each patch's centre; the footprints
+  // split every quad along (0,0)-(1,1)), which on curved terrain moves a few silhouette and shading
+  // pixels. On a tilted plane every triangulation is the same surface: the frames must then agree
+  // but for the rasteriser's tie-breaks.
+  auto compare = [](Scene& scene, double (*height_m)(double, double), double max_rms, int64_t max_differ) {
+    RenderOptions fp, tess;
+    fp.shading = tess.shading = Shading::Flat;
+    fp.z_lo = tess.z_lo = -100;
+    fp.z_hi = tess.z_hi = 100;
+    tess.mesh = Mesh::Tessellation;
+    for (int i = 0; i < 6; ++i) {
+      const double x = 700.0 + 211.0 * i, y = 150.0 * i;
+      Camera cam = camera_at(x, y, 0, 0.7 * i, -0.25 - 0.15 * (i % 4));
+      cam.position[2] = height_m(x, y) + 25.0 + 30.0 * (i % 3);
+      scene.move(cam);
+      const RenderStats a = scene.draw(cam, fp);
+      const std::vector<uint8_t> footprints = scene.pixels;
+      const RenderStats b = scene.draw(cam, tess);
+      double se = 0;
+      int64_t differ = 0;
+      for (size_t p = 0; p < footprints.size(); p += 4) {
+        bool d = false;
+        for (size_t c = 0; c < 3; ++c) {
+          const int e = int(footprints[p + c]) - int(scene.pixels[p + c]);
+          se += double(e * e);
+          d = d || std::abs(e) > 8;
+        }
+        differ += d ? 1 : 0;
+      }
+      const double rms = std::sqrt(se / double(footprints.size() / 4 * 3));
+      INFO("view " << i << ": footprints " << a.triangles << " triangles, tessellation " << b.triangles
+                   << " in " << b.patches << " patches; rms " << rms << ", " << differ
+                   << " pixels differ by > 8");
+      CHECK(b.patches > 0);
+      CHECK(b.triangles > a.triangles / 2);  // it did draw the rings
+      CHECK(rms < max_rms);
+      CHECK(differ <= max_differ);
+    }
+  };
+  SECTION("tilted plane: the same surface") {
+    static double (*const tilt)(double, double) = [](double x, double y) { return 0.04 * x - 0.03 * y; };
+    Scene plane(31, FunctionHeightSource(
+                        kLevels, GridSize{1 << 14, 1 << 14}, kSpacing,
+                        [](int level, int64_t x, int64_t y) {
+                          const double s = std::ldexp(kSpacing, kLevels - 1 - level);
+                          return float(tilt(double(x) * s, double(y) * s));
+                        },
+                        true));
+    compare(plane, tilt, 0.5, kW * kH / 500);
+  }
+  SECTION("curved terrain: the same vertices, another triangulation") {
+    Scene curved(31);
+    compare(curved, terrain_m, 6.0, kW * kH / 25);
+  }
 }

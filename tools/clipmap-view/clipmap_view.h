@@ -1,6 +1,6 @@
 // clipmap-view's parts: main.cpp (options, dispatch), flight.cpp (the camera flight, its frames and
 // statistics), verify.cpp (the reference flight and the screen-space error against the original),
-// bench.cpp (--bench: refill and region-decode timing).
+// bench.cpp (--bench: refill and region-decode timing), bench_render.cpp (--bench-render: both meshes).
 #pragma once
 
 #include <chrono>
@@ -58,6 +58,7 @@ struct ViewOptions {
   bool window = false;
   std::string script, screenshot, screenshot_window, record_path;
   std::string drape;  // --drape: an 8-bit RGB(A) image over the terrain's extent
+  terrain::render::Mesh mesh = terrain::render::Mesh::Footprints;  // --mesh
 };
 
 // The renderer's options from the command line.
@@ -139,5 +140,11 @@ double image_psnr(const std::vector<uint8_t>& pixels, const std::vector<uint8_t>
 // split into U and residual. Prints the tables on stdout; returns the exit status.
 int run_bench(const std::shared_ptr<const terrain::container::PyramidFile>& file, double spacing,
               terrain::runtime::ClipmapOptions options, int reps, bool quiet);
+
+// --bench-render: the flight's first `frames` frames drawn with both meshes at 640 x 480 and
+// 1280 x 720: a table of CPU (submission), render and GPU milliseconds, fps and triangles per mesh
+// and the image PSNR between them on stdout, the middle frame of each mesh as PNG in options.out_dir.
+// Returns the exit status; throws Error when a frame cannot be written.
+int run_bench_render(const Flight& flight, int frames);
 
 }  // namespace clipmap_view

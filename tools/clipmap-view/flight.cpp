@@ -44,6 +44,7 @@ RenderOptions render_options(const ViewOptions& o) {
   r.culling = !o.no_culling;
   r.shading = o.shading;
   r.drape = !o.drape.empty();
+  r.mesh = o.mesh;
   return r;
 }
 
@@ -205,7 +206,8 @@ void write_stats_json(const std::string& json_path, const Flight& flight, const 
   j.field("pyramid", o.pyramid)
       .field("renderer", renderer_name)
       .field("n", flight.clipmap.n)
-      .field("levels", clipmap.level_count());
+      .field("levels", clipmap.level_count())
+      .field("mesh", o.mesh == Mesh::Tessellation ? "tessellation" : "footprints");
   if (o.max_screen_error) j.field("max_screen_error_px", *o.max_screen_error);
   j.field("width", o.width).field("height", o.height).field("fov_y_deg", o.fov).field("frames", o.frames);
   j.field("budget", clipmap.budget()).field("transitions", !o.no_transitions).field("culling", !o.no_culling);

@@ -64,7 +64,7 @@ int clipmap_size_for(const ViewOptions& o, const ContainerInfo& info, RegionDeco
 
 int run(int argc, char** argv) {
   ViewOptions o;
-  int bench = 0, synth_levels = 0;
+  int bench = 0, bench_render = 0, synth_levels = 0;
   double synth_detail = 1.0;
   int n = 255, levels = 0;
   int64_t budget = 0;
@@ -156,6 +156,23 @@ int run(int argc, char** argv) {
              else
                throw cli::UsageError("--shading must be flat or hypsometric, got " + v);
            });
+  p.option("--mesh", "MESH",
+           "footprints (default: A&H 2005's constant vertex/index buffers) or tessellation (Song et al.\n"
+           "2016: only patch corners go to the GPU, GL 4.5 tessellation shaders make the grid)",
+           [&](const std::string& v) {
+             if (v == "footprints")
+               o.mesh = terrain::render::Mesh::Footprints;
+             else if (v == "tessellation")
+               o.mesh = terrain::render::Mesh::Tessellation;
+             else
+               throw cli::UsageError("--mesh must be footprints or tessellation, got " + v);
+           });
+  p.option("--bench-render", "FRAMES",
+           "benchmark instead of a flight: the first FRAMES frames of the flight drawn with both meshes at\n"
+           "640x480 and 1280x720 (same clipmap, same renderer); prints CPU (submission), render and GPU ms,\n"
+           "fps and triangles per mesh and the image PSNR between them; the middle frames go to --out\n"
+           "(none with --png-every 0)",
+           [&](const std::string& v) { bench_render = int(cli::parse_int("--bench-render", v, 3, 100000)); });
   p.option("--drape", "IMAGE",
            "an 8-bit RGB(A) image (e.g. an orthophoto) draped over the terrain with --shading hypsometric:\n"
            "it covers the pyramid's whole extent (same georeferencing; transparent pixels keep the tints)",
@@ -238,6 +255,12 @@ int run(int argc, char** argv) {
   }
   copt.n = n;
   if (bench > 0) return run_bench(file, spacing, copt, bench, o.quiet);
+  if (bench_render > 0) {
+    if (o.window || bench > 0 || !o.reference.empty() || !o.original.empty())
+      throw cli::UsageError(
+          "--bench-render cannot be combined with --window, --bench, --reference or --original");
+    return run_bench_render(Flight{o, file, ref_file, decoder, source, heights, copt, spacing}, bench_render);
+  }
   if (o.window) return run_window(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
   return run_flight(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
 }

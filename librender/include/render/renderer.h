@@ -45,10 +45,22 @@ struct Camera {
 // the north-west, a sky gradient and distance haze.
 enum class Shading { Flat, Hypsometric };
 
+// How each level's render region becomes triangles. Footprints: the constant vertex/index buffers of
+// A&H 2005 (above), one draw call per block, zero-area stitches. Tessellation: Song et al. 2016 —
+// only the corners of GL 4.5 quads patches go to the GPU (8 x 8-quad cells of a fixed grid of each
+// level, each clamped to its part of the ring, and a one-quad frame around the finer level), one
+// draw call per level; the tessellator makes one vertex per sample (always the level's full
+// resolution: the clipmap's levels are the level of detail), the evaluation shader reads heights and
+// morphs as the footprints' vertex shader does, and the frame's edges shared with the finer level get
+// twice the factor (paper §3.3), so that they meet every vertex of the finer level's perimeter: no
+// T-junction, no stitching triangle. Same vertices as the footprints, the tessellator's triangulation.
+enum class Mesh { Footprints, Tessellation };
+
 struct RenderOptions {
   bool transitions = true;           // geometry and normal morph near each ring's outer edge
   bool culling = true;               // per-block view-frustum culling against the z bounds
-  bool stitch = true;                // zero-area triangles along each ring's outer edge
+  bool stitch = true;                // zero-area triangles along each ring's outer edge (Footprints);
+                                     // the doubled factor of the shared edges (Tessellation)
   bool snap_perimeter = true;        // with transitions off, still put the ring's outer vertices on
                                      // the coarser level; false leaves cracks (tests show they are caught)
   bool flat_colour = false;          // every terrain pixel gets `terrain_rgb` (crack tests)
@@ -68,15 +80,21 @@ struct RenderOptions {
   bool drape = false;          // Hypsometric: colour from the image set_drape() gave, where it covers
   bool level_colours = false;  // tint each clipmap level (viewer toggle)
   bool wireframe = false;      // triangle edges only (viewer toggle)
+  Mesh mesh = Mesh::Footprints;
 };
 
 struct RenderStats {
-  int64_t triangles = 0;  // submitted, zero-area stitching triangles included
-  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;  // footprint pieces (blocks, fix-ups, trims)
-  int levels_drawn = 0;                                     // levels with a non-empty active region
-  double seconds_upload = 0;                                // texture uploads of the last upload()
-  double seconds_render = 0;                                // draw + glFinish
-  int64_t samples_uploaded = 0;                             // height samples of the last upload()
+  int64_t triangles = 0;  // Footprints: submitted, zero-area stitching triangles included;
+                          // Tessellation: what the tessellator generated (GL_PRIMITIVES_GENERATED)
+  // Pieces drawn and culled: footprints' blocks, fix-ups and trims, or the tessellation's patches.
+  int blocks_drawn = 0, blocks_culled = 0, draw_calls = 0;
+  int patches = 0;               // Tessellation: quads patches drawn (= blocks_drawn); Footprints: 0
+  int levels_drawn = 0;          // levels with a non-empty active region
+  double seconds_upload = 0;     // texture uploads of the last upload()
+  double seconds_render = 0;     // draw + glFinish
+  double seconds_submit = 0;     // of seconds_render, the CPU's part: until the commands are issued
+  double seconds_gpu = 0;        // the terrain's draws as the GPU timed them (GL_TIME_ELAPSED); 0 if none
+  int64_t samples_uploaded = 0;  // height samples of the last upload()
 };
 
 // An EGL display + OpenGL 4.5 core context, current on the calling thread. Throws
@@ -114,7 +132,7 @@ class ClipmapRenderer {
   // level count differs from the renderer's, std::runtime_error on GL errors.
   void upload(const runtime::Clipmap& clipmap, bool everything = false);
   // Draws the clipmap's active regions into the framebuffer and waits for the GPU (the textures are
-  // what the last upload() put there). Throws as upload().
+  // what the last upload() put there), with options.mesh's geometry. Throws as upload().
   RenderStats render(const runtime::Clipmap& clipmap, const Camera& camera, const RenderOptions& options);
   // An image draped over the terrain (RenderOptions::drape, Hypsometric shading): RGBA8, top row first,
   // covering world x0_m .. x0_m + width_m, y0_m .. y0_m + height_m (its first row at y0_m); its alpha
