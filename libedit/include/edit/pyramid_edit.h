@@ -7,16 +7,22 @@
 // switches the superblock (docs/format.md, "Editing (2.2)"): a crash at any point leaves the
 // previous version readable. compact() rewrites the file without dead bytes.
 //
-// What an edit is measured against: the editor has the file, not the heightmap it was built from,
-// so the new level l is T^_l (decoded) + Delta_l, where Delta_{finest} is the edit in level units
-// and Delta_l = round(D(Delta_{l+1})). Re-coded tiles meet the file's step / max error against that
-// target; against a rebuild from the edited heightmap they add the stored level's own error.
+// What an edit is measured against. Given the heightmap the file was built from (set_source), the
+// edits apply to it and every level's target is the builder's own T_l of the edited heightmap: the
+// re-coded tiles then get exactly the residual a rebuild from the edited heightmap codes, so the
+// edited file decodes like that rebuild and keeps the file's error guarantees against it. Without a
+// source the editor has only the file: the new level l is T^_l (decoded) + Delta_l, Delta_finest the
+// edit in level units and Delta_l = round(D(Delta_{l+1})); re-coded tiles meet the file's step / max
+// error against that target, which itself is T^_l's error away from the edited input (so up to twice
+// the bound there).
 #pragma once
 
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
+
+#include "readers/heightmap.h"
 
 namespace terrain::edit {
 
@@ -42,9 +48,9 @@ struct Patch {
 };
 
 struct LevelEditStats {
-  int64_t bands_recoded = 0;  // bands whose stream was rebuilt (appended)
-  int64_t tiles_recoded = 0;  // libcodec tiles coded afresh
-  int64_t tiles_kept = 0;     // tiles of rebuilt bands whose payload bytes were copied verbatim
+  int64_t bands_recoded = 0;       // bands whose stream was rebuilt (appended)
+  int64_t tiles_recoded = 0;       // libcodec tiles coded afresh
+  int64_t tiles_kept = 0;          // tiles of rebuilt bands whose payload bytes were copied verbatim
   double max_abs_delta_units = 0;  // largest |Delta_l| in level units
 };
 
@@ -74,6 +80,10 @@ class PyramidEditor {
   // outside [0, 1] or a patch whose size does not match its heights.
   void apply(const Brush& brush);
   void apply(const Patch& patch);
+  // The heightmap the file was built from (see above); read whole, kept for the editor's life, and
+  // its pyramid computed twice per commit (memory about 3x the grid in int32). Throws Error naming
+  // the file (unreadable), std::invalid_argument when its size or level unit differs from the file's.
+  void set_source(const std::string& heightmap_path, const ReadOptions& read_options = {});
 
   // Re-codes what the queued edits reach and commits atomically (fsync ordering: new bytes, index
   // and tail superblock, fsync, superblock, fsync). Throws Error(WriteFailed) on I/O failure (the
