@@ -206,6 +206,12 @@ std::shared_ptr<const PyramidFile> PyramidFile::open(const std::string& path) {
         parse_table(v.data, v.size, int64_t(v.height), path + ": level " + std::to_string(l),
                     f->container_.edited() ? &f->container_ : nullptr);
   }
+  for (int l = 0; l < n; ++l) {
+    const LevelView v = f->container_.level(uint32_t(l));
+    uint64_t bytes = kFooterSize + get_u32(v.data + v.size - kFooterSize);  // parse_table checked it
+    for (const BandView& b : f->bands_[size_t(l)]) bytes += b.size;
+    f->level_bytes_.push_back(bytes);
+  }
   f->live_bytes_ = f->count_live_bytes();
   return f;
 }

@@ -24,6 +24,7 @@
 #include "codec/codec.h"
 #include "container/container.h"
 #include "container/pyramid_file.h"
+#include "core/error.h"
 #include "pyramid/builder.h"
 #include "pyramid/downsample.h"
 #include "pyramid/level_units.h"
@@ -267,6 +268,7 @@ void PyramidEditor::set_source(const std::string& heightmap_path, const ReadOpti
 PyramidEditor::PyramidEditor(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 PyramidEditor::~PyramidEditor() = default;
 const std::string& PyramidEditor::path() const { return impl_->path; }
+const Heightmap* PyramidEditor::source() const { return impl_->source ? &*impl_->source : nullptr; }
 
 std::unique_ptr<PyramidEditor> PyramidEditor::open(const std::string& path) {
   auto impl = std::make_unique<Impl>();
@@ -320,8 +322,9 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
   for (const Edit& e : impl_->edits) ebox = unite(ebox, edit_box(e, fs));
   std::vector<Window> delta(static_cast<size_t>(n));
   std::vector<std::vector<int32_t>> reference;  // source: T_l before the edit, every level
+  std::optional<Heightmap> edited_source;
   if (impl_->source && !ebox.empty()) {
-    Heightmap edited = *impl_->source;
+    Heightmap& edited = edited_source.emplace(*impl_->source);
     std::vector<double> cur(size_t(ebox.width() * ebox.height()));
     for (int64_t y = ebox.y0; y < ebox.y1; ++y)
       for (int64_t x = ebox.x0; x < ebox.x1; ++x)
@@ -355,8 +358,9 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
         const size_t i = size_t((y - ebox.y0) * ebox.width() + (x - ebox.x0));
         const double units = std::nearbyint((cur[i] - offset) / scale) - double(base.v[i]);
         if (!(std::abs(units) <= double(codec::kMaxAbsSample)))
-          throw std::invalid_argument(impl_->path + ": the edit changes sample (" + std::to_string(x) + ", " +
-                                      std::to_string(y) + ") by more than the coder's range");
+          throw Error(ErrorCode::InvalidOption, impl_->path + ": the edit changes sample (" +
+                                                    std::to_string(x) + ", " + std::to_string(y) +
+                                                    ") by more than the coder's range");
         // Voids stay voids: the mask is not edited.
         d.v[i] = valid[size_t((y - ebox.y0) * fs.width + x)] ? int32_t(units) : 0;
       }
@@ -380,6 +384,7 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
     std::vector<std::vector<uint8_t>> streams;
     std::vector<int> stream_of;  // per record: index into streams, or -1 (old stream / zero run)
     bool any = false;
+    double recoded_error_max = 0;  // largest |T^ - target| over the re-coded tiles, level units
   };
   std::vector<NewLevel> levels(static_cast<size_t>(n));
   UpsampleScratch up_scratch;
@@ -465,8 +470,13 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
           }
         std::vector<int32_t> recon(area, 0);
         if (any_dirty) {
-          const std::vector<uint8_t> fresh =
-              coder.encode(residual.data(), s.width, band.rows, recon.data(), finest - l);
+          std::vector<uint8_t> fresh;
+          try {
+            fresh = coder.encode(residual.data(), s.width, band.rows, recon.data(), finest - l);
+          } catch (const std::runtime_error& e) {  // a residual beyond libcodec's range
+            throw Error(ErrorCode::InvalidOption, impl_->path + ": level " + std::to_string(l) +
+                                                      ": the edit is too large to code: " + e.what());
+          }
           std::vector<uint8_t> spliced;
           const codec::Status st =
               band.size == 0 && fresh.empty()
@@ -499,6 +509,8 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
             const size_t i = size_t(y * s.width + x);
             const bool dt = dirty[size_t((y / t) * tiles_x + x / t)] != 0;
             const int32_t v = dt ? u_new[i] + recon[i] : old_t[i];
+            if (dt)
+              nl.recoded_error_max = std::max(nl.recoded_error_max, std::abs(double(v) - double(target[i])));
             now.at(x, band.y0 + y) = v;
             if (v != old_t[i]) diff = unite(diff, Box{x, band.y0 + y, x + 1, band.y0 + y + 1});
           }
@@ -542,6 +554,11 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
     const uint64_t placed = up.append(blob.data(), blob.size());
     if (placed != at) throw std::logic_error("edit: band map placed at an unexpected offset");
     up.set_level(uint32_t(l), placed, blob.size(), container::crc32c(blob.data(), blob.size()));
+    // The recorded max error must still bound the level (a viewer bounds its screen error with it);
+    // the rms stays the build's (the edit touches a small part of the level).
+    if (const auto& e = info.levels[size_t(l)].error)
+      up.set_level_error(uint32_t(l),
+                         container::LevelError{e->rms, std::max(e->max_abs, nl.recoded_error_max)});
   }
   const container::CommitStop stop = crash == CrashPoint::AfterBlobs   ? container::CommitStop::AfterBlobs
                                      : crash == CrashPoint::AfterIndex ? container::CommitStop::AfterIndex
@@ -549,6 +566,7 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
                                          ? container::CommitStop::TornSuperblock
                                          : container::CommitStop::None;
   up.commit(stop);
+  if (edited_source) impl_->source = std::move(*edited_source);  // later commits edit the edited input
   stats.bytes_appended = up.bytes_appended();
   stats.changed = true;
   impl_->file = PyramidFile::open(impl_->path);

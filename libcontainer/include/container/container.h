@@ -328,6 +328,8 @@ class ContainerUpdater {
   uint64_t append(const uint8_t* data, size_t size);
   // Points level `level`'s record at an appended blob with CRC-32C `crc`. Throws std::out_of_range.
   void set_level(uint32_t level, uint64_t offset, uint64_t size, uint32_t crc);
+  // Replaces level `level`'s recorded error figures (LevelInfo::error). Throws std::out_of_range.
+  void set_level_error(uint32_t level, const LevelError& error) { info_.levels.at(level).error = error; }
   uint64_t bytes_appended() const { return end_ - start_; }
   // Where the next append() will place its bytes.
   uint64_t next_offset() const { return (end_ + 7) & ~uint64_t(7); }

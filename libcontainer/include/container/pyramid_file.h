@@ -97,6 +97,8 @@ class PyramidFile {
   // rest (earlier generations' streams, band maps and indices), which compaction drops.
   uint64_t live_bytes() const { return live_bytes_; }
   uint64_t dead_bytes() const { return container_.committed_size() - live_bytes_; }
+  // A level's bytes wherever they lie: its band streams plus its band table and footer.
+  uint64_t level_bytes(int level) const { return level_bytes_.at(size_t(level)); }
 
  private:
   explicit PyramidFile(Container&& c) : container_(std::move(c)) {}
@@ -104,6 +106,7 @@ class PyramidFile {
   Container container_;
   std::vector<std::vector<BandView>> bands_;
   uint64_t live_bytes_ = 0;
+  std::vector<uint64_t> level_bytes_;
 };
 
 // Band-map blobs (2.2, written by an edit): the band table's stream records carry the stream's file

@@ -87,11 +87,13 @@ class PyramidEditor {
 
   // Re-codes what the queued edits reach and commits atomically (fsync ordering: new bytes, index
   // and tail superblock, fsync, superblock, fsync). Throws Error(WriteFailed) on I/O failure (the
-  // previous version stays), Error(ValueOutOfRange)-like std::runtime_error when an edit drives a
-  // residual beyond libcodec's range. Clears the queue. Not thread-safe.
+  // previous version stays), Error(InvalidOption) when an edit drives a sample or residual beyond
+  // libcodec's range (nothing is written then). Clears the queue. Not thread-safe.
   EditStats commit(CrashPoint crash = CrashPoint::None);
 
   const std::string& path() const;
+  // The source heightmap as the committed edits left it (set_source), or nullptr without one.
+  const Heightmap* source() const;
 
  private:
   struct Impl;
