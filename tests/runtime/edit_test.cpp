@@ -264,3 +264,71 @@ TEST_CASE("edit: a crash at any commit step leaves a readable version; compactio
   g->verify();
   CHECK(decode_all(clean) == edited);
 }
+
+TEST_CASE("terrain-edit: options, named errors, --json, --compact", "[runtime][edit]") {
+  iotest::TempDir dir;
+  const edit::Brush brush{100, 100, 8, 12.0, edit::BrushShape::Flat};
+  write_inputs(dir, brush);
+  const std::string pyr = dir.file("t.pyr");
+  build_file(dir, pyr, ErrorMode::Step, 2.0);
+  const auto before = decode_all(pyr);
+  const auto bytes_before = iotest::read_file(pyr);
+  // Refused, file untouched: outside the grid, NaN, bad shape, nothing to do, not a pyramid.
+  const auto outside = iotest::run_tool(dir, {"terrain-edit", {pyr, "--brush", "5000,10,4,1"}});
+  CHECK(outside.status == 1);
+  CHECK_THAT(outside.err, Catch::Contains("outside the 300x260 grid"));
+  CHECK(iotest::run_tool(dir, {"terrain-edit", {pyr, "--brush", "nan,10,4,1"}}).status == 1);
+  CHECK(iotest::run_tool(dir, {"terrain-edit", {pyr, "--brush", "10,10,4,1,square"}}).status == 1);
+  CHECK(iotest::run_tool(dir, {"terrain-edit", {pyr}}).status == 1);
+  CHECK(iotest::run_tool(dir, {"terrain-edit", {dir.file("t.raw"), "--brush", "10,10,4,1"}}).status == 6);
+  CHECK(iotest::read_file(pyr) == bytes_before);
+  const auto help = iotest::run_tool(dir, {"terrain-edit", {"--help"}});
+  CHECK(help.status == 0);
+  CHECK_THAT(help.out, Catch::Contains("Exit status"));
+
+  const auto r = iotest::run_tool(dir, {"terrain-edit", {pyr, "--brush", "100,100,8,12,flat", "--json"}});
+  REQUIRE(r.status == 0);
+  CHECK_THAT(r.out, Catch::Contains("\"generation\": 1"));
+  CHECK_THAT(r.out, Catch::Contains("\"tiles_recoded\""));
+  const auto info = iotest::run_tool(dir, {"terrain-info", {pyr, "--verify", "--json"}});
+  REQUIRE(info.status == 0);
+  CHECK_THAT(info.out, Catch::Contains("\"edit_generation\": 1"));
+  const auto after = decode_all(pyr);
+  CHECK(after[kLevels - 1][size_t(100 * kW + 100)] - before[kLevels - 1][size_t(100 * kW + 100)] == 12);
+  REQUIRE(iotest::run_tool(dir, {"terrain-edit", {pyr, "--compact", "-q"}}).status == 0);
+  CHECK(decode_all(pyr) == after);
+  CHECK_THAT(iotest::run_tool(dir, {"terrain-info", {pyr, "--json"}}).out,
+             Catch::Contains("\"dead_bytes\": 0"));
+}
+
+TEST_CASE("terrain-edit killed at any moment leaves the old or the new version", "[runtime][edit]") {
+  iotest::TempDir dir;
+  const edit::Brush brush{150, 128, 30, 25.0, edit::BrushShape::Smooth};
+  write_inputs(dir, brush);
+  const std::string base = dir.file("base.pyr");
+  build_file(dir, base, ErrorMode::Step, 2.0);
+  const auto old_levels = decode_all(base);
+  const std::string done = dir.file("done.pyr");
+  std::filesystem::copy_file(base, done);
+  REQUIRE(iotest::run_tool(dir, {"terrain-edit", {done, "--brush", "150,128,30,25", "-q"}}).status == 0);
+  const auto new_levels = decode_all(done);
+  int saw_old = 0, saw_new = 0;
+  for (int k = 0; k < 8; ++k) {
+    const std::string p = dir.file("k.pyr");
+    std::filesystem::remove(p);
+    std::filesystem::copy_file(base, p);
+    // SIGKILL after k milliseconds (the edit takes a few): no cleanup runs.
+    const std::string cmd = iotest::shell_quote(iotest::tool_path("terrain-edit")) + " " +
+                            iotest::shell_quote(p) + " --brush 150,128,30,25 -q & pid=$!; sleep 0.00" +
+                            std::to_string(k) + "; kill -9 $pid 2>/dev/null; wait $pid 2>/dev/null; true";
+    REQUIRE(std::system(cmd.c_str()) == 0);
+    const auto f = PyramidFile::open(p);
+    f->verify();
+    const auto now = decode_all(p);
+    INFO("killed after " << k << " ms");
+    CHECK((now == old_levels || now == new_levels));
+    saw_old += now == old_levels;
+    saw_new += now == new_levels;
+  }
+  CHECK(saw_old + saw_new == 8);
+}
