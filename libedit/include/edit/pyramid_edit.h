@@ -13,8 +13,8 @@
 // edited file decodes like that rebuild and keeps the file's error guarantees against it. Without a
 // source the editor has only the file: the new level l is T^_l (decoded) + Delta_l, Delta_finest the
 // edit in level units and Delta_l = round(D(Delta_{l+1})); re-coded tiles meet the file's step / max
-// error against that target, which itself is T^_l's error away from the edited input (so up to twice
-// the bound there).
+// error against that target, which itself is T^_l's error away from the edited input, plus the
+// rounding of Delta_l (so about twice the bound there: measured 5 m at --max-error 2 on N46W122).
 #pragma once
 
 #include <cstdint>
