@@ -3,6 +3,7 @@
 // offset 0, fsync. The superblock write is the commit point; the tail copy makes a torn one
 // recoverable (the reader falls back to it), and until it happens the old index stays reachable.
 #include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -37,6 +38,23 @@ ContainerUpdater::ContainerUpdater(const Container& current)
   mask_crc_ = current.mask_crc();
   start_ = end_ = current.committed_size();
   try {
+    // One editor at a time, and only on the version it read: another process's commit in between
+    // would otherwise be overwritten by this one's.
+    if (::flock(fd_, LOCK_EX | LOCK_NB) != 0)
+      throw Error(ErrorCode::WriteFailed,
+                  path_ + ": another process is editing it (" + std::strerror(errno) + ")");
+    uint8_t now[sb::kSizeV1];
+    if (::pread(fd_, now, sizeof now, 0) != ssize_t(sizeof now))
+      throw Error(ErrorCode::WriteFailed, path_ + ": cannot read its superblock: " + std::strerror(errno));
+    const bool same = current.from_tail_superblock()
+                          ? crc32c(now, sb::kCrc) != get_u32(now + sb::kCrc)  // still the torn one
+                          : get_u64(now + sb::kFileSize) == current.committed_size() &&
+                                get_u64(now + sb::kIndexOffset) == current.index_offset() &&
+                                (get_u32(now + sb::kFlags) & sb::kFlagEdited ? get_u64(now + sb::kGeneration)
+                                                                             : 0) == current.generation();
+    if (!same)
+      throw Error(ErrorCode::WriteFailed,
+                  path_ + ": changed by another writer since it was opened; open it again");
     // An interrupted edit's tail is no part of any version: drop it so the new bytes follow the end.
     if (current.uncommitted_bytes() > 0 && ::ftruncate(fd_, off_t(start_)) != 0)
       throw Error(ErrorCode::WriteFailed,

@@ -252,6 +252,24 @@ TEST_CASE("edit: a crash at any commit step leaves a readable version; compactio
     CHECK(decode_all(p) == edited);
   }
 
+  {
+    // Two editors of one version: the second commit would overwrite the first's, so it is refused.
+    const std::string p = dir.file("two.pyr");
+    std::filesystem::copy_file(base, p);
+    auto a = edit::PyramidEditor::open(p), b = edit::PyramidEditor::open(p);
+    a->apply(brush);
+    b->apply(edit::Brush{20, 20, 5, 3.0, edit::BrushShape::Flat});
+    REQUIRE(a->commit().changed);
+    try {
+      b->commit();
+      FAIL("the stale editor committed");
+    } catch (const Error& e) {
+      CHECK(e.code() == ErrorCode::WriteFailed);
+      CHECK_THAT(e.what(), Catch::Contains("changed by another writer"));
+    }
+    CHECK(decode_all(p) == edited);
+  }
+
   // Compaction: no dead bytes, the same decode, a plain (unedited) layout.
   const auto f = PyramidFile::open(clean);
   const uint64_t dead = f->dead_bytes();

@@ -317,7 +317,9 @@ enum class CommitStop { None, AfterBlobs, AfterIndex, TornSuperblock };
 // Not thread-safe; the Container must stay open (its mapping serves the old bytes) until commit.
 class ContainerUpdater {
  public:
-  // Throws Error(WriteFailed) naming the file when it cannot be opened for writing.
+  // Takes an exclusive flock on the file (held until destruction). Throws Error(WriteFailed) naming
+  // the file when it cannot be opened for writing, another process holds the lock, or its superblock
+  // no longer describes the version `current` read (another writer committed since).
   explicit ContainerUpdater(const Container& current);
   ~ContainerUpdater();
   ContainerUpdater(const ContainerUpdater&) = delete;
