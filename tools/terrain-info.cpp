@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -51,8 +52,18 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
   // Checksums can be consistent and the structure still wrong (a forged band table, resealed):
   // --verify also parses every level's band table and decodes every tile of every band. The band
   // tables also give each level's bytes wherever an edit left them, and the dead bytes.
-  const auto pf = terrain::container::PyramidFile::open(path);
+  // Without --verify the description needs the index only: a damaged band table is reported by
+  // --verify, and the sizes then fall back to the level blobs' (dead bytes unknown).
+  std::shared_ptr<const terrain::container::PyramidFile> pf;
+  try {
+    pf = terrain::container::PyramidFile::open(path);
+  } catch (const terrain::Error&) {
+    if (verify) throw;
+  }
   if (verify) pf->verify();
+  const auto level_bytes = [&](uint32_t l) {
+    return pf ? pf->level_bytes(int(l)) : uint64_t(c.level(l).size);
+  };
   const ContainerInfo& info = c.info();
   const uint64_t file_bytes = uint64_t(std::filesystem::file_size(path));
   const double finest_samples = double(info.width) * double(info.height);
@@ -100,7 +111,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
       const auto& li = info.levels[l];
       j.begin_object();
       j.field("level", int64_t(l)).field("width", int64_t(li.width)).field("height", int64_t(li.height));
-      j.field("bytes", int64_t(pf->level_bytes(int(l))));
+      j.field("bytes", int64_t(level_bytes(l)));
       j.field("residual_rms_units", li.stats.rms);
       const auto error = terrain::container::level_error_metres(info, l);
       j.key("error_rms_m");
@@ -159,7 +170,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
   for (uint32_t l = 0; l < c.level_count(); ++l) {
     const auto& li = info.levels[l];
     const std::string size = std::to_string(li.width) + "x" + std::to_string(li.height);
-    const size_t bytes = size_t(pf->level_bytes(int(l)));
+    const size_t bytes = size_t(level_bytes(l));
     std::printf("%5u %13s %12zu %9.4f", l, size.c_str(), bytes,
                 double(bytes) * 8 / double(li.width * li.height));
     if (const auto error = terrain::container::level_error_metres(info, l))

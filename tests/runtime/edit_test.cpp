@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 
 #include "build/pyramid_build.h"
 #include "container/pyramid_file.h"
@@ -349,4 +350,44 @@ TEST_CASE("terrain-edit killed at any moment leaves the old or the new version",
     saw_new += now == new_levels;
   }
   CHECK(saw_old + saw_new == 8);
+}
+
+TEST_CASE("edit: a patch blended in meets the file's max error against its heights", "[runtime][edit]") {
+  iotest::TempDir dir;
+  write_inputs(dir, edit::Brush{0, 0, 1, 0.0, edit::BrushShape::Flat});
+  const std::string pyr = dir.file("t.pyr");
+  build_file(dir, pyr, ErrorMode::MaxError, 2.0);  // 1 m units: E = 2
+  const auto before = decode_all(pyr);
+  edit::Patch p;
+  p.x = 250;  // hangs over the right edge: only its first 50 columns land
+  p.y = 40;
+  p.width = 80;
+  p.height = 30;
+  for (int64_t y = 0; y < p.height; ++y)
+    for (int64_t x = 0; x < p.width; ++x) p.heights.push_back(float(500 + 3 * x + 2 * y));
+  p.heights[5] = std::numeric_limits<float>::quiet_NaN();  // left alone
+  auto editor = edit::PyramidEditor::open(pyr);
+  editor->apply(p);
+  edit::Patch half = p;
+  half.blend = 0.5;
+  half.x = 10;
+  editor->apply(half);
+  REQUIRE(editor->commit().changed);
+  const auto after = decode_all(pyr);
+  const auto& fine = after[kLevels - 1];
+  double worst = 0;
+  for (int64_t y = p.y; y < p.y + p.height; ++y)
+    for (int64_t x = p.x; x < kW; ++x) {
+      if (x == p.x + 5 && y == p.y) continue;
+      worst =
+          std::max(worst, std::abs(fine[size_t(y * kW + x)] - double(500 + 3 * (x - p.x) + 2 * (y - p.y))));
+    }
+  CHECK(worst <= 2.0);
+  // blend 0.5: halfway between the decoded height and the patch, within E.
+  const size_t i = size_t(50 * kW + 30);
+  const double expect = 0.5 * before[kLevels - 1][i] + 0.5 * (500 + 3 * 20 + 2 * 10);
+  CHECK(std::abs(fine[i] - expect) <= 2.5);
+  CHECK_THROWS_AS(editor->apply(edit::Patch{5000, 0, 1, 1, {1.0f}, 1.0}), std::invalid_argument);
+  CHECK_THROWS_AS(editor->apply(edit::Patch{0, 0, 2, 1, {1.0f}, 1.0}), std::invalid_argument);
+  CHECK_THROWS_AS(editor->apply(edit::Patch{0, 0, 1, 1, {1.0f}, 1.5}), std::invalid_argument);
 }
