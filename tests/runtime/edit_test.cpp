@@ -192,7 +192,7 @@ TEST_CASE("edit: without a source the edit is carried down through D, untouched 
   }
 }
 
-TEST_CASE("edit: a crash at any commit step leaves a readable version; compaction drops dead bytes",
+TEST_CASE("edit: a crash at any commit step leaves a readable version, compaction drops dead bytes",
           "[runtime][edit]") {
   iotest::TempDir dir;
   const edit::Brush brush{220, 130, 10, 15.0, edit::BrushShape::Cone};
