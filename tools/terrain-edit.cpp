@@ -149,6 +149,9 @@ int run(int argc, char** argv) {
       j.field("level", int64_t(l)).field("bands_recoded", ls.bands_recoded);
       j.field("tiles_recoded", ls.tiles_recoded).field("tiles_kept", ls.tiles_kept);
       j.field("max_abs_delta_units", ls.max_abs_delta_units);
+      j.key("changed").begin_array();  // x0, y0, width, height of where the level changed
+      for (int64_t v : {ls.changed.x0, ls.changed.y0, ls.changed.width, ls.changed.height}) j.value(v);
+      j.end_array();
       j.end_object();
     }
     j.end_array();

@@ -525,6 +525,7 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
       }
     }
     changed_box[size_t(l)] = diff;
+    if (!diff.empty()) ls.changed = diff.rect();
   }
 
   // --- Write: one band-map blob per changed level (its new streams first, then the map), then commit.

@@ -153,6 +153,13 @@ TEST_CASE("edit: a brush with the source meets the max error against the edited 
           ++changed_far;
     INFO("level " << l);
     CHECK(changed_far == 0);
+    // The reported box holds every changed sample.
+    const Rect& c = st.levels[size_t(l)].changed;
+    for (int64_t y = 0; y < s.height; ++y)
+      for (int64_t x = 0; x < s.width; ++x)
+        if (before[size_t(l)][size_t(y * s.width + x)] != after[size_t(l)][size_t(y * s.width + x)])
+          REQUIRE((x >= c.x0 && x < c.x0 + c.width && y >= c.y0 && y < c.y0 + c.height));
+    CHECK(c.width > 0);
     for (const auto& p : places_before[size_t(l)])
       kept_total += std::count(places_after[size_t(l)].begin(), places_after[size_t(l)].end(), p);
   }

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "core/rect.h"
 #include "readers/heightmap.h"
 
 namespace terrain::edit {
@@ -52,6 +53,9 @@ struct LevelEditStats {
   int64_t tiles_recoded = 0;       // libcodec tiles coded afresh
   int64_t tiles_kept = 0;          // tiles of rebuilt bands whose payload bytes were copied verbatim
   double max_abs_delta_units = 0;  // largest |Delta_l| in level units
+  // Bounding box (level samples) of where T^_l changed: what a viewer's clipmap must reload
+  // (empty when nothing changed at this level).
+  Rect changed;
 };
 
 struct EditStats {
