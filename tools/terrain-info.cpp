@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -49,8 +50,20 @@ void print_crs(uint32_t epsg, const std::string& text) {
 int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bool verify) {
   const Container c = Container::open(path);
   // Checksums can be consistent and the structure still wrong (a forged band table, resealed):
-  // --verify also parses every level's band table and decodes every tile of every band.
-  if (verify) terrain::container::PyramidFile::open(path)->verify();
+  // --verify also parses every level's band table and decodes every tile of every band. The band
+  // tables also give each level's bytes wherever an edit left them, and the dead bytes.
+  // Without --verify the description needs the index only: a damaged band table is reported by
+  // --verify, and the sizes then fall back to the level blobs' (dead bytes unknown).
+  std::shared_ptr<const terrain::container::PyramidFile> pf;
+  try {
+    pf = terrain::container::PyramidFile::open(path);
+  } catch (const terrain::Error&) {
+    if (verify) throw;
+  }
+  if (verify) pf->verify();
+  const auto level_bytes = [&](uint32_t l) {
+    return pf ? pf->level_bytes(int(l)) : uint64_t(c.level(l).size);
+  };
   const ContainerInfo& info = c.info();
   const uint64_t file_bytes = uint64_t(std::filesystem::file_size(path));
   const double finest_samples = double(info.width) * double(info.height);
@@ -89,12 +102,16 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
     j.field("file_bytes", int64_t(file_bytes))
         .field("bits_per_sample", double(file_bytes) * 8 / finest_samples);
     j.field("checksums_verified", verify).field("tiles_decoded", verify);
+    j.field("edited", c.edited()).field("edit_generation", int64_t(c.generation()));
+    j.field("dead_bytes", int64_t(pf->dead_bytes()))
+        .field("uncommitted_bytes", int64_t(c.uncommitted_bytes()));
+    j.field("from_tail_superblock", c.from_tail_superblock());
     j.key("levels").begin_array();
     for (uint32_t l = 0; l < c.level_count(); ++l) {
       const auto& li = info.levels[l];
       j.begin_object();
       j.field("level", int64_t(l)).field("width", int64_t(li.width)).field("height", int64_t(li.height));
-      j.field("bytes", int64_t(c.level(l).size));
+      j.field("bytes", int64_t(level_bytes(l)));
       j.field("residual_rms_units", li.stats.rms);
       const auto error = terrain::container::level_error_metres(info, l);
       j.key("error_rms_m");
@@ -136,6 +153,15 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
   std::printf("voids:        %" PRIu64 " of %.0f samples\n", info.void_count, finest_samples);
   std::printf("size:         %" PRIu64 " bytes, %.4f bits per finest sample\n", file_bytes,
               double(file_bytes) * 8 / finest_samples);
+  if (c.edited() || c.uncommitted_bytes() > 0)
+    std::printf("edits:        generation %" PRIu64 ", %" PRIu64
+                " dead bytes (terrain-edit --compact drops them)%s%s\n",
+                c.generation(), pf->dead_bytes(),
+                c.uncommitted_bytes() ? (", " + std::to_string(c.uncommitted_bytes()) +
+                                         " uncommitted bytes of an interrupted edit")
+                                            .c_str()
+                                      : "",
+                c.from_tail_superblock() ? ", superblock torn: read through its tail copy" : "");
   std::printf("checksums:    %s\n", verify
                                         ? "every level verified, every band table parsed, every tile decoded"
                                         : "header and index verified (--verify: levels and tiles too)");
@@ -144,7 +170,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
   for (uint32_t l = 0; l < c.level_count(); ++l) {
     const auto& li = info.levels[l];
     const std::string size = std::to_string(li.width) + "x" + std::to_string(li.height);
-    const size_t bytes = c.level(l).size;
+    const size_t bytes = size_t(level_bytes(l));
     std::printf("%5u %13s %12zu %9.4f", l, size.c_str(), bytes,
                 double(bytes) * 8 / double(li.width * li.height));
     if (const auto error = terrain::container::level_error_metres(info, l))
