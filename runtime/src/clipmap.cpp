@@ -435,9 +435,9 @@ bool Clipmap::coarser_covers(int level, int64_t x0, int64_t y0, int64_t x1, int6
          (y1 >> 1) + 2 <= C.clip_y0 + n_ - 1;
 }
 
-void Clipmap::fill_strip(int level, ClipmapUpdateStats& stats) {
+void Clipmap::fill_strip(int level, int64_t rows, ClipmapUpdateStats& stats) {
   Level& L = levels_[size_t(level)];
-  const int64_t r0 = L.rows_done, r1 = std::min<int64_t>(n_, r0 + kPiece);
+  const int64_t r0 = L.rows_done, r1 = std::min<int64_t>(n_, r0 + rows);
   const Rect strip{L.clip_x0, L.clip_y0 + r0, n_, r1 - r0};
   auto t0 = Clock::now();
   FillSplit split;
@@ -487,15 +487,15 @@ void Clipmap::refill_invalid(int level, const Rect& r, ClipmapUpdateStats& stats
             stats);
 }
 
-Clipmap::Piece Clipmap::plan_piece(int level) const {
+Clipmap::Piece Clipmap::plan_piece(int level, int64_t lines) const {
   const Level& L = levels_[size_t(level)];
   Piece p;
-  const int64_t nn = int64_t(n_) * n_;
   auto fresh = [&] {
     p.kind = Piece::StartFill;
     p.x0 = L.desired.x0;
     p.y0 = L.desired.y0;
-    p.samples = int64_t(n_) * std::min(kPiece, n_);
+    p.rows = std::min<int64_t>(lines, n_);
+    p.samples = int64_t(n_) * p.rows;
     return p;
   };
   if (L.filling) {
@@ -506,7 +506,8 @@ Clipmap::Piece Clipmap::plan_piece(int level) const {
     if (far || !coarser_covers(level, L.clip_x0, L.clip_y0, L.clip_x0 + n_ - 1, L.clip_y0 + n_ - 1))
       return fresh();
     p.kind = Piece::Strip;
-    p.samples = int64_t(n_) * std::min<int64_t>(kPiece, n_ - L.rows_done);
+    p.rows = std::min<int64_t>(lines, n_ - L.rows_done);
+    p.samples = int64_t(n_) * p.rows;
     return p;
   }
   if (!at_desired(L)) {
@@ -517,19 +518,20 @@ Clipmap::Piece Clipmap::plan_piece(int level) const {
     if (!coarser_covers(level, bx0, by0, bx0 + n_ - 1 + std::abs(dx), by0 + n_ - 1 + std::abs(dy)))
       return fresh();
     p.kind = Piece::Move;
-    const int64_t sx = std::clamp<int64_t>(dx, -kPiece, kPiece),
-                  sy = dx != 0 ? 0 : std::clamp<int64_t>(dy, -kPiece, kPiece);
+    // Both axes in one piece (one L-shape, one pass over the clip border), lines even.
+    const int64_t step = std::max<int64_t>(2, lines & ~int64_t(1));
+    const int64_t sx = std::clamp<int64_t>(dx, -step, step), sy = std::clamp<int64_t>(dy, -step, step);
     p.x0 = L.clip_x0 + sx;
     p.y0 = L.clip_y0 + sy;
-    p.samples = std::min(nn, (std::abs(sx) + std::abs(sy)) * int64_t(n_));
+    p.samples = std::abs(sx) * n_ + std::abs(sy) * (n_ - std::abs(sx));
     return p;
   }
   if (!L.invalid.empty()) {
     const Rect& r = L.invalid.front();
     p.kind = Piece::Invalid;
-    p.rect = Rect{r.x0, r.y0, r.width,
-                  std::min<int64_t>(
-                      r.height, std::max<int64_t>(1, int64_t(kPiece) * n_ / std::max<int64_t>(r.width, 1)))};
+    p.rect =
+        Rect{r.x0, r.y0, r.width,
+             std::min<int64_t>(r.height, std::max<int64_t>(1, lines * n_ / std::max<int64_t>(r.width, 1)))};
     p.samples = p.rect.width * p.rect.height;
   }
   return p;
@@ -546,10 +548,10 @@ void Clipmap::run_piece(int level, const Piece& p, ClipmapUpdateStats& stats) {
       L.rows_done = 0;
       L.invalid.clear();
       L.dirty.clear();
-      fill_strip(level, stats);
+      fill_strip(level, p.rows, stats);
       break;
     case Piece::Strip:
-      fill_strip(level, stats);
+      fill_strip(level, p.rows, stats);
       break;
     case Piece::Move:
       refill(level, p.x0, p.y0, stats);
@@ -715,9 +717,19 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
         int moves = 0;
         bool fresh = false;
         size_t move_rects = 0;
-        for (Piece p = plan_piece(l); p.kind != Piece::None; p = plan_piece(l)) {
+        for (Piece p = plan_piece(l, kPiece); p.kind != Piece::None; p = plan_piece(l, kPiece)) {
+          // A move also redoes the clip border's normals and tiles: about 8 n samples' worth.
+          const double overhead = p.kind == Piece::Move ? 8.0 * n_ : 0.0;
+          const double per = seconds_per_sample_[p.kind];
           if (stats.pieces > 0) {
-            const double predicted = since(t_start) + double(p.samples) * seconds_per_sample_;
+            // Thinner pieces when the time left is short; stop when not even the thinnest fits (a kind
+            // of piece not timed yet counts as free: the next update knows it).
+            if (per > 0) {
+              const double left = budget_ms_ * 1e-3 - since(t_start);
+              const int64_t lines = std::clamp<int64_t>(int64_t((left / per - overhead) / n_), 1, kPiece);
+              if (lines < kPiece) p = plan_piece(l, lines);
+            }
+            const double predicted = since(t_start) + (double(p.samples) + overhead) * per;
             if (predicted > budget_ms_ * 1e-3 || spent + p.samples > budget_) {
               stats.out_of_time = predicted > budget_ms_ * 1e-3;
               blocked = true;
@@ -728,8 +740,9 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
           run_piece(l, p, stats);
           const double dt = since(t0);
           // Seconds per sample, smoothed over the recent pieces (the prediction of the next one).
-          const double sps = dt / double(std::max<int64_t>(p.samples, 1));
-          seconds_per_sample_ = seconds_per_sample_ > 0 ? 0.75 * seconds_per_sample_ + 0.25 * sps : sps;
+          const double sps = dt / (double(p.samples) + overhead);
+          double& e = seconds_per_sample_[p.kind];
+          e = e > 0 ? 0.75 * e + 0.25 * sps : sps;
           spent += p.samples;
           ++stats.pieces;
           if (p.kind == Piece::Move) ++moves, move_rects = L.dirty.size();

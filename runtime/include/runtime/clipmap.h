@@ -22,9 +22,9 @@
 // (paper §4: active region empty when height > 0.4 n g_l).
 //
 // A time budget (budget_ms, the paper's steady frame rate) refills in pieces instead: a level's clip
-// region moves towards the desired one by strips of at most kPiece columns or rows (each piece leaves
-// a whole, valid n x n clip region), a level that must be filled afresh is filled by row strips over
-// several updates (without data until the last strip), and the update stops before a piece whose
+// region moves towards the desired one by L-shaped strips of at most kPiece columns and rows (each
+// piece leaves a whole, valid n x n clip region), a level that must be filled afresh is filled by row strips
+// over several updates (without data until the last strip), and the update stops before a piece whose
 // predicted time (seconds per sample of the pieces so far) would pass the budget. What a frame gets
 // done then depends on the machine's speed: a time budget is not deterministic, the sample budget is.
 //
@@ -216,12 +216,14 @@ class Clipmap {
     enum Kind { None, StartFill, Strip, Move, Invalid } kind = None;
     int64_t x0 = 0, y0 = 0;  // StartFill, Move: the clip region's new corner
     Rect rect;               // Invalid: the strip
+    int64_t rows = 0;        // StartFill, Strip: rows of the fresh fill
     int64_t samples = 0;
   };
-  Piece plan_piece(int level) const;
+  // The level's next piece, at most `lines` (1..kPiece) columns or rows thick.
+  Piece plan_piece(int level, int64_t lines) const;
   void run_piece(int level, const Piece& piece, ClipmapUpdateStats& stats);
   void refill_invalid(int level, const Rect& r, ClipmapUpdateStats& stats);
-  void fill_strip(int level, ClipmapUpdateStats& stats);
+  void fill_strip(int level, int64_t rows, ClipmapUpdateStats& stats);
   void add_times(int level, double fill, const FillSplit& split, double coarse, double normals, double bounds,
                  int64_t samples, ClipmapUpdateStats& stats);
   void fill_rect(int level, const Rect& r, FillSplit& split);
@@ -237,7 +239,9 @@ class Clipmap {
   int64_t budget_;
   int64_t budget_request_;  // set_budget's argument (<= 0: the default)
   double budget_ms_ = 0;
-  double seconds_per_sample_ = 0;  // of the refill pieces so far (budget_ms's prediction)
+  // Seconds per sample of the refill pieces so far, per kind of piece (budget_ms's prediction: a move
+  // by a thin strip also recomputes the clip border's normals and tiles, a fresh fill's strip not).
+  std::array<double, 5> seconds_per_sample_{};
   ClipmapOptions options_;
   double viewer_[3] = {0, 0, 0};
   int tiles_;  // tile table side
