@@ -720,10 +720,12 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
         for (Piece p = plan_piece(l, kPiece); p.kind != Piece::None; p = plan_piece(l, kPiece)) {
           // A move also redoes the clip border's normals and tiles: about 8 n samples' worth.
           const double overhead = p.kind == Piece::Move ? 8.0 * n_ : 0.0;
-          const double per = seconds_per_sample_[p.kind];
+          // A kind of piece not timed yet takes the dearest estimate there is.
+          const double per = seconds_per_sample_[p.kind] > 0
+                                 ? seconds_per_sample_[p.kind]
+                                 : *std::max_element(seconds_per_sample_.begin(), seconds_per_sample_.end());
           if (stats.pieces > 0) {
-            // Thinner pieces when the time left is short; stop when not even the thinnest fits (a kind
-            // of piece not timed yet counts as free: the next update knows it).
+            // Thinner pieces when the time left is short; stop when not even the thinnest fits.
             if (per > 0) {
               const double left = budget_ms_ * 1e-3 - since(t_start);
               const int64_t lines = std::clamp<int64_t>(int64_t((left / per - overhead) / n_), 1, kPiece);

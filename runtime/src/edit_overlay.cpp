@@ -54,6 +54,16 @@ Rect EditOverlaySource::add(const TerrainEdit& e) {
 
 void EditOverlaySource::fill(int level, const Rect& rect, float* out, int64_t out_stride) {
   base_.fill(level, rect, out, out_stride);
+  add_edits(level, rect, out, out_stride);
+}
+
+void EditOverlaySource::fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out,
+                                   int32_t* units_out, int64_t out_stride, FillSplit* split) {
+  base_.fill_units(level, rect, coarser, out, units_out, out_stride, split);
+  add_edits(level, rect, out, out_stride);
+}
+
+void EditOverlaySource::add_edits(int level, const Rect& rect, float* out, int64_t out_stride) const {
   if (rect.width <= 0 || rect.height <= 0 || edits_.empty()) return;
   const GridSize size = level_size(level);
   const double k = std::ldexp(1.0, level_count() - 1 - level);  // finest samples per sample of `level`

@@ -239,6 +239,7 @@ double cpu_seconds() {
 // Per-frame times (ms) and counts of a flight, for the summaries.
 struct FlightLog {
   std::vector<double> frame_ms, update_ms, render_ms, upload_ms, psnr, rss_mib;
+  double peak_rss_mib = 0;  // at the end of the flight (before the plot and the summary are written)
   // The update's parts per frame, ms: decode (all of the fill), U, residual, zc, normals, bounds.
   std::array<std::vector<double>, 6> part_ms;
   int64_t triangles_total = 0;
@@ -268,7 +269,7 @@ void write_stats_json(const std::string& json_path, const Flight& flight, const 
       .field("update_ms_max", percentile(log.update_ms, 1.0));
   // Memory: the peak, and the resident size a tenth into the flight and at its end (a flight whose
   // memory is bounded has the two about equal, however long it is).
-  j.field("peak_rss_mib", peak_rss_mib())
+  j.field("peak_rss_mib", log.peak_rss_mib)
       .field("rss_mib_at_10_percent", log.rss_mib.empty() ? 0.0 : log.rss_mib[log.rss_mib.size() / 10])
       .field("rss_mib_at_end", log.rss_mib.empty() ? 0.0 : log.rss_mib.back());
   j.field("frame_ms_median", med).field("frame_ms_p99", p99);
@@ -347,7 +348,7 @@ void print_summary(const Flight& flight, const FlightLog& log) {
               flight.clipmap.budget_ms > 0
                   ? (" (budget " + cli::tick_label(flight.clipmap.budget_ms) + " ms)").c_str()
                   : "",
-              peak_rss_mib());
+              log.peak_rss_mib);
   if (!log.psnr.empty())
     std::printf("image PSNR against %s: median %.2f dB, min %.2f dB (99 = identical)\n",
                 (flight.ref_file ? o.reference : o.original).c_str(), percentile(log.psnr, 0.5),
@@ -528,6 +529,7 @@ int run_flight(const Flight& flight) {
   }
   // CPU per frame covers everything in the loop (reference renders and PNG writing included).
   log.cpu_ms_per_frame = (cpu_seconds() - cpu0) * 1e3 / o.frames;
+  log.peak_rss_mib = peak_rss_mib();
   csv_file.finish();
 
   damage.poll(*flight.decoder);

@@ -37,12 +37,18 @@ class EditOverlaySource final : public HeightSource {
   GridSize level_size(int level) const override { return base_.level_size(level); }
   double spacing_m() const override { return base_.spacing_m(); }
   void fill(int level, const Rect& rect, float* out, int64_t out_stride) override;
+  // The base's integer units pass through unchanged (a finer level refines the coarser one's base
+  // units, then gets its own edits added to the heights), so a compressed pyramid keeps its fast path.
+  bool refines_units() const override { return base_.refines_units(); }
+  void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
+                  int64_t out_stride, FillSplit* split) override;
   // Adds an edit (applied after those before it); returns the finest-level samples it changes
   // (for Clipmap::invalidate). Throws std::invalid_argument for a non-finite field or radius <= 0.
   Rect add(const TerrainEdit& edit);
   size_t edit_count() const { return edits_.size(); }
 
  private:
+  void add_edits(int level, const Rect& rect, float* out, int64_t out_stride) const;
   HeightSource& base_;
   std::vector<TerrainEdit> edits_;
 };
