@@ -101,6 +101,68 @@ bool all_zero(const int32_t* v, size_t n) {
   return std::all_of(v, v + n, [](int32_t x) { return x == 0; });
 }
 
+// What a stream's header records besides the payload size.
+struct StreamFields {
+  int64_t width, height;
+  uint32_t tile_size;
+  bool bound_max_error, wide_fraction;
+  uint32_t step_q8, max_error;
+};
+
+// The second half of encoding, shared with splice_tiles: `body` holds the payloads of the non-empty
+// tiles ([0, payload_end), raster order, sizes[i] bytes for tile i, 0 = empty); appends the tile
+// index and the row CRCs to it, then writes header, body and stream CRC to dst.
+Status finish_stream(const StreamFields& f, const StreamLayout& layout, const uint32_t* sizes,
+                     std::vector<uint8_t>& body, size_t payload_end, uint8_t* dst, size_t dst_capacity,
+                     size_t* bytes_written) {
+  size_t pos = payload_end;
+  const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
+  // Index records: size << 1 for a non-empty tile, (run - 1) << 1 | 1 for a run of empty tiles.
+  for (size_t i = 0; i < tile_count;) {
+    uint64_t record = uint64_t(sizes[i]) << 1;
+    size_t next = i + 1;
+    if (sizes[i] == 0) {
+      while (next < tile_count && sizes[next] == 0) ++next;
+      record = (uint64_t(next - i - 1) << 1) | 1;
+    }
+    if (body.size() < pos + terrain::bytes::kMaxVarintBytes) body.resize(2 * body.size() + 64);
+    pos = size_t(put_varint(body.data() + pos, record) - body.data());
+    i = next;
+  }
+  // A single tile row has no row CRC: the stream CRC covers its payloads.
+  const bool single_row = layout.tiles_y == 1;
+  size_t row_start = 0;
+  for (int64_t ty = 0; ty < layout.tiles_y && !single_row; ++ty) {
+    size_t row_bytes = 0;
+    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) row_bytes += sizes[size_t(ty * layout.tiles_x + tx)];
+    if (row_bytes == 0) continue;
+    if (body.size() < pos + 4) body.resize(2 * body.size() + 64);
+    put_u32(body.data() + pos, crc32c(body.data() + row_start, row_bytes));
+    pos += 4;
+    row_start += row_bytes;
+  }
+
+  uint8_t header[kMaxHeaderSize];
+  std::memcpy(header, kMagic, 4);
+  put_u16(header + 4, uint16_t(kFormatVersion));
+  uint8_t* h = header + kFixedHeader;
+  h = put_varint(h, uint64_t(f.width));
+  h = put_varint(h, uint64_t(f.height));
+  h = put_varint(h, f.tile_size / 16);
+  h = put_varint(h, (f.bound_max_error ? kFlagBoundMaxError : 0) | (f.wide_fraction ? kFlagWideFraction : 0));
+  h = put_varint(h, f.step_q8);
+  if (f.bound_max_error) h = put_varint(h, f.max_error);
+  h = put_varint(h, payload_end);
+  const size_t header_size = size_t(h - header);
+  if (dst_capacity < header_size + 4 || dst_capacity - header_size - 4 < pos) return Status::BufferTooSmall;
+  std::memcpy(dst, header, header_size);
+  std::memcpy(dst + header_size, body.data(), pos);
+  const size_t covered = single_row ? 0 : payload_end;
+  const uint32_t crc = crc32c(body.data() + covered, pos - covered, crc32c(header, header_size));
+  put_u32(dst + header_size + pos, crc);
+  *bytes_written = header_size + pos + 4;
+  return Status::Ok;
+}
 }  // namespace
 
 const char* status_name(Status status) {
@@ -210,53 +272,14 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
         }
       }
     }
-  const size_t payload_end = pos;
-  // Index records: size << 1 for a non-empty tile, (run - 1) << 1 | 1 for a run of empty tiles.
-  for (size_t i = 0; i < tile_count;) {
-    uint64_t record = uint64_t(sizes[i]) << 1;
-    size_t next = i + 1;
-    if (sizes[i] == 0) {
-      while (next < tile_count && sizes[next] == 0) ++next;
-      record = (uint64_t(next - i - 1) << 1) | 1;
-    }
-    if (body.size() < pos + terrain::bytes::kMaxVarintBytes) body.resize(2 * body.size() + 64);
-    pos = size_t(put_varint(body.data() + pos, record) - body.data());
-    i = next;
-  }
-  // A single tile row has no row CRC: the stream CRC covers its payloads.
-  const bool single_row = layout.tiles_y == 1;
-  size_t row_start = 0;
-  for (int64_t ty = 0; ty < layout.tiles_y && !single_row; ++ty) {
-    size_t row_bytes = 0;
-    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) row_bytes += sizes[size_t(ty * layout.tiles_x + tx)];
-    if (row_bytes == 0) continue;
-    if (body.size() < pos + 4) body.resize(2 * body.size() + 64);
-    put_u32(body.data() + pos, crc32c(body.data() + row_start, row_bytes));
-    pos += 4;
-    row_start += row_bytes;
-  }
-
-  uint8_t header[kMaxHeaderSize];
-  std::memcpy(header, kMagic, 4);
-  put_u16(header + 4, uint16_t(kFormatVersion));
-  uint8_t* h = header + kFixedHeader;
-  h = put_varint(h, uint64_t(width));
-  h = put_varint(h, uint64_t(height));
-  h = put_varint(h, options.tile_size / 16);
-  h = put_varint(h, (options.bound_max_error ? kFlagBoundMaxError : 0) |
-                        (params.fraction_bits == detail::kWideFractionBits ? kFlagWideFraction : 0));
-  h = put_varint(h, step_q8);
-  if (options.bound_max_error) h = put_varint(h, params.max_error);
-  h = put_varint(h, payload_end);
-  const size_t header_size = size_t(h - header);
-  if (dst_capacity < header_size + 4 || dst_capacity - header_size - 4 < pos) return Status::BufferTooSmall;
-  std::memcpy(dst, header, header_size);
-  std::memcpy(dst + header_size, body.data(), pos);
-  const size_t covered = single_row ? 0 : payload_end;
-  const uint32_t crc = crc32c(body.data() + covered, pos - covered, crc32c(header, header_size));
-  put_u32(dst + header_size + pos, crc);
-  *bytes_written = header_size + pos + 4;
-  return Status::Ok;
+  const StreamFields fields{width,
+                            height,
+                            options.tile_size,
+                            options.bound_max_error,
+                            params.fraction_bits == detail::kWideFractionBits,
+                            step_q8,
+                            params.max_error};
+  return finish_stream(fields, layout, sizes.data(), body, pos, dst, dst_capacity, bytes_written);
 }
 
 Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
@@ -468,6 +491,93 @@ Status decode_region(const uint8_t* data, size_t size, const Rect& rect, int32_t
   const Status s = decoder.open(data, size);
   if (s != Status::Ok) return s;
   return decoder.decode_region(rect, dst, dst_stride, scratch);
+}
+
+}  // namespace codec
+
+namespace codec {
+namespace {
+
+// One side of a splice: its header and, per tile, the payload (null/0 = empty).
+struct SpliceSource {
+  bool present = false;
+  HeaderInfo header;
+  std::vector<const uint8_t*> tile_data;
+  std::vector<uint32_t> tile_size;
+};
+
+Status open_splice_source(const uint8_t* data, size_t size, SpliceSource* src) {
+  if (!data || size == 0) return Status::Ok;
+  Status s = read_header(data, size, &src->header);
+  if (s != Status::Ok) return s;
+  std::vector<TileEntry> entries;
+  std::vector<RowChecksum> rows;
+  if ((s = read_tile_index(data, size, src->header, &entries, &rows)) != Status::Ok) return s;
+  // Payloads are copied verbatim: check them first, so a damaged row is never carried forward.
+  for (const RowChecksum& r : rows)
+    if (src->header.tiles_y > 1 && crc32c(data + r.offset, size_t(r.size)) != r.crc)
+      return Status::ChecksumMismatch;
+  const size_t n = size_t(src->header.tile_count());
+  src->tile_data.assign(n, nullptr);
+  src->tile_size.assign(n, 0);
+  for (const TileEntry& e : entries)
+    if (e.size > 0) {
+      src->tile_data[size_t(e.first_tile)] = data + e.offset;
+      src->tile_size[size_t(e.first_tile)] = e.size;
+    }
+  src->present = true;
+  return Status::Ok;
+}
+
+bool same_coding(const HeaderInfo& a, const HeaderInfo& b) {
+  return a.width == b.width && a.height == b.height && a.tile_size == b.tile_size &&
+         a.bound_max_error == b.bound_max_error && a.max_error == b.max_error && a.step == b.step &&
+         a.fraction_bits == b.fraction_bits;
+}
+
+}  // namespace
+
+Status splice_tiles(const uint8_t* old_data, size_t old_size, const uint8_t* fresh_data, size_t fresh_size,
+                    const std::vector<uint8_t>& take_fresh, std::vector<uint8_t>* out) {
+  assert(out);
+  out->clear();
+  SpliceSource old_src, fresh_src;
+  Status s = open_splice_source(old_data, old_size, &old_src);
+  if (s != Status::Ok) return s;
+  if ((s = open_splice_source(fresh_data, fresh_size, &fresh_src)) != Status::Ok) return s;
+  if (!old_src.present && !fresh_src.present) return Status::InvalidArgument;
+  if (old_src.present && fresh_src.present && !same_coding(old_src.header, fresh_src.header))
+    return Status::InvalidArgument;
+  const HeaderInfo& h = old_src.present ? old_src.header : fresh_src.header;
+  const size_t n = size_t(h.tile_count());
+  if (take_fresh.size() != n) return Status::InvalidArgument;
+  StreamLayout layout;
+  if (!layout_for(h.width, h.height, h.tile_size, &layout)) return Status::InvalidArgument;
+  std::vector<uint32_t> sizes(n, 0);
+  std::vector<uint8_t> body;
+  size_t pos = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const SpliceSource& src = take_fresh[i] ? fresh_src : old_src;
+    if (!src.present || src.tile_size[i] == 0) continue;
+    sizes[i] = src.tile_size[i];
+    body.insert(body.end(), src.tile_data[i], src.tile_data[i] + sizes[i]);
+    pos += sizes[i];
+  }
+  if (pos == 0) return Status::Ok;  // every tile empty: no stream
+  const StreamFields fields{h.width,
+                            h.height,
+                            h.tile_size,
+                            h.bound_max_error,
+                            h.fraction_bits == detail::kWideFractionBits,
+                            uint32_t(std::lround(h.step * 256.0)),
+                            h.max_error};
+  out->resize(kMaxHeaderSize + 4 + pos + size_t(layout.index_bound));
+  size_t written = 0;
+  if ((s = finish_stream(fields, layout, sizes.data(), body, pos, out->data(), out->size(), &written)) !=
+      Status::Ok)
+    return s;
+  out->resize(written);
+  return Status::Ok;
 }
 
 }  // namespace codec

@@ -109,7 +109,22 @@ Container Container::open(const std::string& path) {
   }
   if (size < 16)
     parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, too short for a header");
-  const uint16_t major = get_u16(base + sb::kMajor), minor = get_u16(base + sb::kMinor);
+  // 2.2: a superblock that fails its CRC may be a torn commit of an edit, which wrote (and synced) a
+  // copy of the new superblock as the last 64 bytes of the file before it touched offset 0.
+  const uint8_t* sbp = base;
+  if (size >= 2 * uint64_t(sb::kSizeV1)) {
+    const auto intact = [](const uint8_t* p) {
+      return get_u32(p + sb::kSize) == sb::kSizeV1 && crc32c(p, sb::kCrc) == get_u32(p + sb::kCrc);
+    };
+    const uint8_t* tail = base + size - sb::kSizeV1;
+    if (!intact(base) && std::memcmp(tail, kMagic, sizeof kMagic) == 0 && intact(tail) &&
+        get_u16(tail + sb::kMajor) == kFormatMajor && get_u16(tail + sb::kMinor) >= 2 &&
+        (get_u32(tail + sb::kFlags) & sb::kFlagEdited) && get_u64(tail + sb::kFileSize) == size) {
+      sbp = tail;
+      c.from_tail_superblock_ = true;
+    }
+  }
+  const uint16_t major = get_u16(sbp + sb::kMajor), minor = get_u16(sbp + sb::kMinor);
   if (major != kFormatMajor) {
     parse.fail(Code::UnsupportedVersion,
                "format version " + std::to_string(major) + "." + std::to_string(minor) +
@@ -119,30 +134,57 @@ Container Container::open(const std::string& path) {
   c.minor_version_ = minor;
   // Newer minor versions may grow fixed-size structures; this reader reads the fields it knows.
   const bool newer = minor > kFormatMinor;
-  const uint32_t sb_size = get_u32(base + sb::kSize);
+  const uint32_t sb_size = get_u32(sbp + sb::kSize);
   parse.require(
       newer ? (sb_size >= sb::kSizeV1 && sb_size % 8 == 0 && sb_size <= 65536) : sb_size == sb::kSizeV1,
       "superblock size " + std::to_string(sb_size) + " is invalid");
   if (size < sb_size)
     parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, shorter than its header");
-  parse.require_crc(base, sb_size - 4, get_u32(base + sb_size - 4), "superblock");
-  const uint64_t recorded_size = get_u64(base + sb::kFileSize);
+  parse.require_crc(sbp, sb_size - 4, get_u32(sbp + sb_size - 4), "superblock");
+  const uint64_t recorded_size = get_u64(sbp + sb::kFileSize);
   if (size < recorded_size) {
     parse.fail(Code::Truncated, "file is " + std::to_string(size) + " bytes, its header says " +
                                     std::to_string(recorded_size) + ": truncated");
   }
-  parse.require(size == recorded_size, "file is " + std::to_string(size) + " bytes, its header says " +
-                                           std::to_string(recorded_size) + ": trailing bytes");
+  // 2.2: bytes past file_size are what an interrupted edit appended and never committed, when they
+  // start with its pending record (or are the start of a torn copy of it).
+  if (size > recorded_size) {
+    const uint64_t at = align_up(recorded_size);
+    const uint64_t gen =
+        minor >= 2 && (get_u32(sbp + sb::kFlags) & sb::kFlagEdited) ? get_u64(sbp + sb::kGeneration) : 0;
+    const std::array<uint8_t, sb::kSizeV1> pending = encode_pending(recorded_size, gen + 1);
+    bool ok =
+        at <= size && Parser::all_zero(base + recorded_size, size_t(std::min(at, size) - recorded_size));
+    if (ok) {
+      const size_t have = size_t(std::min<uint64_t>(size - at, sb::kSizeV1));
+      ok = std::memcmp(base + at, pending.data(), have) == 0;
+    }
+    parse.require(ok, "file is " + std::to_string(size) + " bytes, its header says " +
+                          std::to_string(recorded_size) + ": trailing bytes");
+  }
+  c.committed_size_ = recorded_size;
+  const Parser committed(path, recorded_size);  // every region lies in the committed bytes
+  c.file_bytes_ = size;
+  const uint32_t sb_flags = get_u32(sbp + sb::kFlags);
+  const bool edited = minor >= 2 && (sb_flags & sb::kFlagEdited) != 0;
+  c.edited_ = edited;
+  if (edited) c.generation_ = get_u64(sbp + sb::kGeneration);
   if (!newer) {
+    const uint32_t known_flags = minor >= 2 ? sb::kFlagEdited : 0;
+    const size_t reserved_from = edited ? sb::kGeneration + 8 : sb::kReserved;
     parse.require(
-        get_u32(base + sb::kFlags) == 0 && Parser::all_zero(base + sb::kReserved, sb::kCrc - sb::kReserved),
+        (sb_flags & ~known_flags) == 0 && Parser::all_zero(sbp + reserved_from, sb::kCrc - reserved_from),
         "reserved superblock fields are not zero");
   }
-  const uint64_t index_offset = get_u64(base + sb::kIndexOffset), index_size = get_u64(base + sb::kIndexSize);
-  parse.require_region(index_offset, index_size, sb_size, "index");
+  parse.require(!edited || recorded_size >= 2 * uint64_t(sb::kSizeV1),
+                "edited file of " + std::to_string(recorded_size) + " bytes has no tail superblock");
+  const uint64_t index_offset = get_u64(sbp + sb::kIndexOffset), index_size = get_u64(sbp + sb::kIndexSize);
+  committed.require_region(index_offset, index_size, sb_size, "index");
   parse.require(index_size >= info::kSizeV1, "index is " + std::to_string(index_size) + " bytes, too small");
   const uint8_t* idx = base + index_offset;
-  parse.require_crc(idx, index_size, get_u32(base + sb::kIndexCrc), "index");
+  c.index_offset_ = index_offset;
+  c.index_size_ = index_size;
+  parse.require_crc(idx, index_size, get_u32(sbp + sb::kIndexCrc), "index");
 
   // --- index: sizes first, so every later read is known to be inside it
   const uint32_t info_size = get_u32(idx + info::kInfoSize);
@@ -255,7 +297,7 @@ Container Container::open(const std::string& path) {
     } else {
       parse.require(error_rms == 0 && error_max == 0, name + " has error figures but its flag is not set");
     }
-    parse.require_region(li.blob_offset, li.blob_size, sb_size, name + " blob");
+    committed.require_region(li.blob_offset, li.blob_size, sb_size, name + " blob");
     regions.push_back({li.blob_offset, li.blob_size, name + " blob"});
   }
   info.filter_size = filter_size;
@@ -278,9 +320,11 @@ Container Container::open(const std::string& path) {
   // --- metadata and mask, each with its own checksum
   const uint64_t metadata_offset = get_u64(idx + info::kMetadataOffset);
   const uint64_t metadata_size = get_u64(idx + info::kMetadataSize);
-  parse.require_region(metadata_offset, metadata_size, sb_size, "metadata");
+  committed.require_region(metadata_offset, metadata_size, sb_size, "metadata");
   parse.require_crc(base + metadata_offset, metadata_size, get_u32(idx + info::kMetadataCrc), "metadata");
   regions.push_back({metadata_offset, metadata_size, "metadata"});
+  c.metadata_offset_ = metadata_offset;
+  c.metadata_crc_ = get_u32(idx + info::kMetadataCrc);
   c.metadata_json_ =
       std::string_view(reinterpret_cast<const char*>(base + metadata_offset), size_t(metadata_size));
 
@@ -294,45 +338,62 @@ Container Container::open(const std::string& path) {
   } else {
     parse.require(mask_encoding == kMaskRunsLeb128, "unknown mask encoding " + std::to_string(mask_encoding));
     parse.require(void_count >= 1 && mask_size >= 1, "run-coded mask without voids");
-    parse.require_region(mask_offset, mask_size, sb_size, "mask");
+    committed.require_region(mask_offset, mask_size, sb_size, "mask");
     parse.require_crc(base + mask_offset, mask_size, mask_crc, "mask");
     const std::string problem =
         mask_runs::check(base + mask_offset, size_t(mask_size), info.width * info.height, void_count);
     parse.require(problem.empty(), problem);
     regions.push_back({mask_offset, mask_size, "mask"});
+    c.mask_offset_ = mask_offset;
+    c.mask_crc_ = mask_crc;
     c.mask_runs_ = base + mask_offset;
     c.mask_runs_size_ = size_t(mask_size);
   }
   info.void_count = void_count;
 
   // No two regions may share bytes (a corrupted offset pointing into the index, say).
+  if (edited) regions.push_back({recorded_size - sb::kSizeV1, sb::kSizeV1, "tail superblock"});
   std::erase_if(regions, [](const Region& r) { return r.size == 0; });
   std::sort(regions.begin(), regions.end(),
             [](const Region& a, const Region& b) { return a.offset < b.offset; });
   // Regions were checked to lie inside the file, so offset + size cannot wrap. The bytes between
   // regions are alignment padding, covered by no checksum: requiring zeros there means a flipped
-  // byte anywhere outside the blobs is caught by open(), and inside a blob by verify().
+  // byte anywhere outside the blobs is caught by open(), and inside a blob by verify(). An edited
+  // file (2.2) has dead bytes between its regions (earlier generations' blobs and indices, which the
+  // current band maps may still point into), so only the overlap check applies to it.
   uint64_t covered_to = 0;
   for (size_t i = 0; i < regions.size(); ++i) {
     if (covered_to > regions[i].offset) {
       parse.fail(Code::CorruptData, regions[i - 1].what + " overlaps " + regions[i].what);
     }
-    // Between regions there is alignment padding only: anything longer is bytes no field accounts for.
-    if (regions[i].offset - covered_to >= kAlignment) {
-      parse.fail(Code::CorruptData, std::to_string(regions[i].offset - covered_to) +
-                                        " unaccounted bytes before " + regions[i].what);
-    }
-    if (!Parser::all_zero(base + covered_to, size_t(regions[i].offset - covered_to))) {
-      parse.fail(Code::CorruptData, "padding before " + regions[i].what + " is not zero");
+    if (!edited) {
+      // Between regions there is alignment padding only: anything longer is bytes no field accounts for.
+      if (regions[i].offset - covered_to >= kAlignment) {
+        parse.fail(Code::CorruptData, std::to_string(regions[i].offset - covered_to) +
+                                          " unaccounted bytes before " + regions[i].what);
+      }
+      if (!Parser::all_zero(base + covered_to, size_t(regions[i].offset - covered_to))) {
+        parse.fail(Code::CorruptData, "padding before " + regions[i].what + " is not zero");
+      }
     }
     covered_to = regions[i].offset + regions[i].size;
   }
-  parse.require(size - covered_to < kAlignment,
-                std::to_string(size - covered_to) + " unaccounted bytes after " + regions.back().what);
-  parse.require(Parser::all_zero(base + covered_to, size_t(size - covered_to)),
-                "padding at the end is not zero");
+  if (!edited) {
+    parse.require(
+        recorded_size - covered_to < kAlignment,
+        std::to_string(recorded_size - covered_to) + " unaccounted bytes after " + regions.back().what);
+    parse.require(Parser::all_zero(base + covered_to, size_t(recorded_size - covered_to)),
+                  "padding at the end is not zero");
+  }
   return c;
 }
+
+const uint8_t* Container::file_bytes(uint64_t offset, uint64_t size) const {
+  if (offset > committed_size_ || size > committed_size_ - offset) return nullptr;
+  return file_->data() + offset;
+}
+
+uint64_t Container::offset_of(const uint8_t* p) const { return uint64_t(p - file_->data()); }
 
 LevelView Container::level(uint32_t level) const {
   if (level >= info_.levels.size()) {

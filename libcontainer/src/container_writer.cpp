@@ -205,85 +205,30 @@ void ContainerWriter::finish() {
   write_bytes(metadata_json_.data(), metadata_json_.size());
   pad_to_alignment();
 
-  const size_t filter_count = info.filter.size();
-  const size_t filter_end = info::kSizeV2_1 + level_count * level::kSizeV1_1 + filter_count * 8;
-  const std::string crs_text = info.georeference ? info.georeference->crs_text : std::string();
-  const size_t index_size = size_t(align_up(filter_end + crs_text.size()));
-  std::vector<uint8_t> index(index_size, 0);
-  uint8_t* p = index.data();
-  put_u32(p + info::kInfoSize, info::kSizeV2_1);
-  put_u32(p + info::kLevelCount, uint32_t(level_count));
-  put_u32(p + info::kLevelRecordSize, level::kSizeV1_1);
-  put_u32(p + info::kFilterSize, info.filter_size);
-  put_u64(p + info::kWidth, info.width);
-  put_u64(p + info::kHeight, info.height);
-  put_f64(p + info::kSpacingX, info.spacing_x);
-  put_f64(p + info::kSpacingY, info.spacing_y);
-  put_string(p + info::kHorizontalUnits, info.horizontal_units, info::kUnitsField);
-  put_string(p + info::kVerticalUnits, info.vertical_units, info::kUnitsField);
-  put_f64(p + info::kVerticalScale, info.vertical_scale);
-  put_f64(p + info::kVerticalOffset, info.vertical_offset);
-  put_u32(p + info::kHasGeoreference, info.georeference ? 1 : 0);
-  put_u32(p + info::kFilterProvenance, uint32_t(info.filter_provenance));
-  if (info.georeference) {
-    const Georeference& g = *info.georeference;
-    put_f64(p + info::kOriginX, g.origin_x());
-    put_f64(p + info::kOriginY, g.origin_y());
-    put_string(p + info::kGeoreferenceUnits, g.units, info::kUnitsField);
-    for (size_t i = 0; i < 6; ++i) put_f64(p + info::kGeotransform + 8 * i, g.geotransform[i]);
-    put_u32(p + info::kCrsEpsg, g.crs_epsg);
-    put_u32(p + info::kCrsTextSize, uint32_t(crs_text.size()));
-    std::memcpy(p + filter_end, crs_text.data(), crs_text.size());
-  }
-  put_f64(p + info::kStepUnits, info.quantisation.step_units);
-  put_f64(p + info::kStepMetres, info.quantisation.step_metres);
-  put_u32(p + info::kErrorMode, uint32_t(info.quantisation.mode));
-  put_u32(p + info::kMaskEncoding, has_mask ? kMaskRunsLeb128 : kMaskNone);
-  put_f64(p + info::kTarget, info.quantisation.target);
-  put_u64(p + info::kMaskOffset, has_mask ? mask_offset : 0);
-  put_u64(p + info::kMaskSize, mask_size);
-  put_u64(p + info::kVoidCount, mask_voids_);
-  put_u32(p + info::kMaskCrc, mask_crc);
-  put_u32(p + info::kMetadataCrc, crc32c(metadata_json_.data(), metadata_json_.size()));
-  put_u64(p + info::kMetadataOffset, metadata_offset);
-  put_u64(p + info::kMetadataSize, metadata_json_.size());
-  for (size_t l = 0; l < level_count; ++l) {
-    uint8_t* r = p + info::kSizeV2_1 + l * level::kSizeV1_1;
-    const LevelInfo& li = info.levels[l];
-    put_u64(r + level::kWidth, li.width);
-    put_u64(r + level::kHeight, li.height);
-    put_u64(r + level::kBlobOffset, records_[l].offset);
-    put_u64(r + level::kBlobSize, records_[l].size);
-    put_u32(r + level::kBlobCrc, records_[l].crc);
-    put_u32(r + level::kFlags,
-            (records_[l].has_crc ? level::kFlagHasCrc : 0) | (li.error ? level::kFlagHasError : 0));
-    put_f64(r + level::kMean, li.stats.mean);
-    put_f64(r + level::kVariance, li.stats.variance);
-    put_f64(r + level::kRms, li.stats.rms);
-    put_f64(r + level::kMin, li.stats.min);
-    put_f64(r + level::kMax, li.stats.max);
-    if (li.error) {
-      put_f64(r + level::kErrorRms, li.error->rms);
-      put_f64(r + level::kErrorMax, li.error->max_abs);
-    }
-  }
-  uint8_t* f = p + info::kSizeV2_1 + level_count * level::kSizeV1_1;
-  for (size_t i = 0; i < filter_count; ++i) put_f64(f + 8 * i, info.filter[i]);
+  IndexPlacement placement;
+  for (size_t l = 0; l < level_count; ++l)
+    placement.levels.push_back({records_[l].offset, records_[l].size, records_[l].crc, records_[l].has_crc});
+  placement.has_mask = has_mask;
+  placement.mask_offset = has_mask ? mask_offset : 0;
+  placement.mask_size = mask_size;
+  placement.mask_crc = mask_crc;
+  placement.void_count = mask_voids_;
+  placement.metadata_offset = metadata_offset;
+  placement.metadata_size = metadata_json_.size();
+  placement.metadata_crc = crc32c(metadata_json_.data(), metadata_json_.size());
+  const std::vector<uint8_t> index = encode_index(info, placement);
   const uint64_t index_offset = position_;
   write_bytes(index.data(), index.size());
 
-  uint8_t super[sb::kSizeV1] = {};
-  std::memcpy(super, kMagic, sizeof kMagic);
-  put_u16(super + sb::kMajor, kFormatMajor);
-  put_u16(super + sb::kMinor, kFormatMinor);
-  put_u32(super + sb::kSize, sb::kSizeV1);
-  put_u64(super + sb::kFileSize, position_);
-  put_u64(super + sb::kIndexOffset, index_offset);
-  put_u64(super + sb::kIndexSize, index.size());
-  put_u32(super + sb::kIndexCrc, crc32c(index.data(), index.size()));
-  put_u32(super + sb::kCrc, crc32c(super, sb::kCrc));
-  for (size_t done = 0; done < sizeof super;) {
-    const ssize_t n = ::pwrite(fd_, super + done, sizeof super - done, off_t(done));
+  SuperblockFields fields;
+  fields.file_size = position_;
+  fields.index_offset = index_offset;
+  fields.index_size = index.size();
+  fields.index_crc = crc32c(index.data(), index.size());
+  const std::array<uint8_t, sb::kSizeV1> super_bytes = encode_superblock(fields);
+  const uint8_t* super = super_bytes.data();
+  for (size_t done = 0; done < sb::kSizeV1;) {
+    const ssize_t n = ::pwrite(fd_, super + done, sb::kSizeV1 - done, off_t(done));
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) fail("cannot write superblock");
     done += size_t(n);

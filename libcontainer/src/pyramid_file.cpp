@@ -8,6 +8,7 @@
 // The table sits at the end because bands arrive one by one while the blob is being streamed.
 #include "container/pyramid_file.h"
 
+#include <algorithm>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -18,11 +19,29 @@
 namespace terrain::container {
 namespace {
 
-constexpr uint32_t kBandMagic = 0x32444e42;  // "BND2"
-constexpr size_t kFooterSize = 12;
-
 using bytes::get_u32;
 using bytes::put_u32;
+
+constexpr uint32_t kBandMagic = kBandTableMagic;
+constexpr size_t kFooterSize = 12;
+
+// Table records then the footer (u32 table size, u32 magic, u32 CRC-32C of the table). A record is
+// varint rows, varint code: size << 1 for one band with a stream (a band map follows it with the
+// varint file offset), (k - 1) << 1 | 1 for k consecutive all-zero bands of `rows` rows each.
+std::vector<uint8_t> encode_table(const std::vector<BandMapRecord>& records, bool with_offsets) {
+  std::vector<uint8_t> table;
+  for (const BandMapRecord& r : records) {
+    bytes::put_varint(table, r.rows);
+    bytes::put_varint(table, r.size ? r.size << 1 : ((r.run - 1) << 1) | 1);
+    if (r.size && with_offsets) bytes::put_varint(table, r.offset);
+  }
+  const size_t table_bytes = table.size();
+  table.resize(table_bytes + kFooterSize);
+  put_u32(table.data() + table_bytes, uint32_t(table_bytes));
+  put_u32(table.data() + table_bytes + 4, with_offsets ? kBandMapMagic : kBandMagic);
+  put_u32(table.data() + table_bytes + 8, crc32c(table.data(), table_bytes));
+  return table;
+}
 
 }  // namespace
 
@@ -37,28 +56,26 @@ void PyramidFileWriter::begin(const PyramidHeader& header) {
 
 void PyramidFileWriter::close_level(int level) {
   LevelBands& lb = levels_[size_t(level)];
-  std::vector<uint8_t> table;
-  for (size_t i = 0; i < lb.bands.size();) {
-    const BandRecord& b = lb.bands[i];
-    size_t next = i + 1;
-    uint64_t code = b.size << 1;
-    if (b.size == 0) {  // a run of all-zero bands of the same height
-      while (next < lb.bands.size() && lb.bands[next].size == 0 && lb.bands[next].rows == b.rows) ++next;
-      code = (uint64_t(next - i - 1) << 1) | 1;
-    }
-    bytes::put_varint(table, b.rows);
-    bytes::put_varint(table, code);
-    i = next;
+  std::vector<BandMapRecord> records;
+  for (const BandRecord& b : lb.bands) {
+    // A run of all-zero bands of the same height is one record.
+    if (b.size == 0 && !records.empty() && records.back().size == 0 && records.back().rows == b.rows)
+      ++records.back().run;
+    else
+      records.push_back({b.rows, 1, 0, b.size});
   }
-  const size_t table_bytes = table.size();
-  table.resize(table_bytes + kFooterSize);
-  put_u32(table.data() + table_bytes, uint32_t(table_bytes));
-  put_u32(table.data() + table_bytes + 4, kBandMagic);
-  put_u32(table.data() + table_bytes + 8, crc32c(table.data(), table_bytes));
+  const std::vector<uint8_t> table = encode_table(records, false);
   writer_.append_level(uint32_t(level), table.data(), table.size());
   writer_.end_level(uint32_t(level));
   bytes_ += table.size();
   std::vector<BandRecord>().swap(lb.bands);
+}
+
+std::vector<uint8_t> encode_band_map(const std::vector<BandMapRecord>& records) {
+  return encode_table(records, true);
+}
+std::vector<uint8_t> encode_band_table(const std::vector<BandMapRecord>& records) {
+  return encode_table(records, false);
 }
 
 void PyramidFileWriter::band(int level, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) {
@@ -116,12 +133,18 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
   writer_.finish();
 }
 
-std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
-                                       const std::string& what) {
+namespace {
+
+// Both table kinds. A band map (file non-null) reads each stream's file offset from its record and
+// finds the bytes through the container; a BND2 table's streams fill the blob before the table.
+std::vector<BandView> parse_table(const uint8_t* blob, size_t size, int64_t level_height,
+                                  const std::string& what, const Container* file) {
   auto corrupt = [&](const std::string& why) { return Error(ErrorCode::CorruptData, what + ": " + why); };
   if (size < kFooterSize) throw corrupt("level blob too small for its band table");
   const uint8_t* footer = blob + size - kFooterSize;
-  if (get_u32(footer + 4) != kBandMagic) throw corrupt("band table magic missing");
+  const uint32_t magic = get_u32(footer + 4);
+  if (magic != kBandMagic && !(file && magic == kBandMapMagic)) throw corrupt("band table magic missing");
+  const bool map = magic == kBandMapMagic;
   const uint32_t table_bytes = get_u32(footer);
   if (table_bytes > size - kFooterSize)
     throw corrupt("band table size " + std::to_string(table_bytes) + " too large");
@@ -135,23 +158,42 @@ std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t
   std::vector<BandView> out;
   uint64_t next_row = 0, offset = 0;
   for (size_t i = 0; p != footer; ++i) {
-    uint64_t rows = 0, code = 0;
-    if (!bytes::get_varint(p, footer, &rows) || !bytes::get_varint(p, footer, &code))
+    uint64_t rows = 0, code = 0, at = 0;
+    if (!bytes::get_varint(p, footer, &rows) || !bytes::get_varint(p, footer, &code) ||
+        (map && !(code & 1) && !bytes::get_varint(p, footer, &at)))
       throw corrupt("band table ends inside record " + std::to_string(i));
     const uint64_t left = uint64_t(level_height) - next_row;
     const uint64_t run = code & 1 ? (code >> 1) + 1 : 1, sz = code & 1 ? 0 : code >> 1;
     if (rows == 0 || rows > left || run > left / rows)
       throw corrupt("band record " + std::to_string(i) + " rows do not tile the level");
-    if (!(code & 1) && (sz == 0 || sz > data_end - offset))
-      throw corrupt("band record " + std::to_string(i) + " lies outside the blob");
-    out.push_back(BandView{int64_t(next_row), int64_t(rows * run), sz ? blob + offset : nullptr, size_t(sz)});
+    const uint8_t* data = nullptr;
+    if (!(code & 1) && map) {
+      data = sz == 0 ? nullptr : file->file_bytes(at, sz);
+      if (!data || at < 64) throw corrupt("band record " + std::to_string(i) + " lies outside the file");
+      // Streams of one level never share bytes (each is one band's, written once).
+      if (!out.empty() && out.back().data && data < out.back().data + out.back().size &&
+          data + sz > out.back().data)
+        throw corrupt("band record " + std::to_string(i) + " overlaps the band before it");
+    } else if (!(code & 1)) {
+      if (sz == 0 || sz > data_end - offset)
+        throw corrupt("band record " + std::to_string(i) + " lies outside the blob");
+      data = blob + offset;
+      offset += sz;
+    }
+    out.push_back(BandView{int64_t(next_row), int64_t(rows * run), data, size_t(sz)});
     next_row += rows * run;
-    offset += sz;
   }
   if (out.empty()) throw corrupt("band table is empty");
-  if (offset != data_end) throw corrupt("band streams do not fill the blob");
+  if (!map && offset != data_end) throw corrupt("band streams do not fill the blob");
   if (next_row != uint64_t(level_height)) throw corrupt("bands do not cover the level");
   return out;
+}
+
+}  // namespace
+
+std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,
+                                       const std::string& what) {
+  return parse_table(blob, size, level_height, what, nullptr);
 }
 
 std::shared_ptr<const PyramidFile> PyramidFile::open(const std::string& path) {
@@ -161,8 +203,10 @@ std::shared_ptr<const PyramidFile> PyramidFile::open(const std::string& path) {
   for (int l = 0; l < n; ++l) {
     const LevelView v = f->container_.level(uint32_t(l));
     f->bands_[size_t(l)] =
-        parse_band_table(v.data, v.size, int64_t(v.height), path + ": level " + std::to_string(l));
+        parse_table(v.data, v.size, int64_t(v.height), path + ": level " + std::to_string(l),
+                    f->container_.edited() ? &f->container_ : nullptr);
   }
+  f->live_bytes_ = f->count_live_bytes();
   return f;
 }
 
@@ -171,13 +215,11 @@ void PyramidFile::verify() const {
   codec::Scratch scratch;
   std::vector<int32_t> row;
   for (int l = 0; l < level_count(); ++l) {
-    const LevelView blob = container_.level(uint32_t(l));
-    const uint64_t blob_offset = info().levels[size_t(l)].blob_offset;
     const auto& views = bands(l);
     for (size_t b = 0; b < views.size(); ++b) {
       const BandView& v = views[b];
       if (v.empty()) continue;
-      const uint64_t offset = blob_offset + uint64_t(v.data - blob.data);
+      const uint64_t offset = container_.offset_of(v.data);
       const std::string what = path() + ": level " + std::to_string(l) + ", band record " +
                                std::to_string(b) + " (rows " + std::to_string(v.y0) + ".." +
                                std::to_string(v.y0 + v.rows - 1) + ", stream of " + std::to_string(v.size) +
@@ -210,6 +252,35 @@ void PyramidFile::verify() const {
       }
     }
   }
+}
+
+uint64_t PyramidFile::count_live_bytes() const {
+  // Union of the live ranges: band maps may point into earlier generations' blobs.
+  const ContainerInfo& i = info();
+  std::vector<std::pair<uint64_t, uint64_t>> ranges;  // [begin, end)
+  const uint64_t committed = container_.committed_size();
+  ranges.push_back({0, 64});
+  if (container_.edited()) ranges.push_back({committed - 64, committed});
+  for (int l = 0; l < level_count(); ++l) {
+    const LevelInfo& li = i.levels[size_t(l)];
+    ranges.push_back({li.blob_offset, li.blob_offset + li.blob_size});
+    for (const BandView& v : bands(l))
+      if (v.data) ranges.push_back({container_.offset_of(v.data), container_.offset_of(v.data) + v.size});
+  }
+  ranges.push_back(
+      {container_.metadata_offset(), container_.metadata_offset() + container_.metadata_json().size()});
+  if (const auto m = container_.mask_bytes(); m > 0)
+    ranges.push_back({container_.mask_offset(), container_.mask_offset() + m});
+  ranges.push_back({container_.index_offset(), container_.index_offset() + container_.index_size()});
+  std::sort(ranges.begin(), ranges.end());
+  uint64_t live = 0, end = 0;
+  for (const auto& [b, e] : ranges) {
+    if (e <= end) continue;
+    live += e - std::max(b, end);
+    end = e;
+  }
+  if (!container_.edited()) return committed;  // padding between regions counts as live: nothing to drop
+  return live;
 }
 
 GridSize PyramidFile::level_size(int level) const {

@@ -139,8 +139,7 @@ void RegionDecoder::damaged(int level, size_t b, const Band* bd, int64_t tx, int
   d.level = level;
   d.band = b;
   d.code = s == codec::Status::ChecksumMismatch ? ErrorCode::ChecksumMismatch : ErrorCode::CorruptData;
-  const uint64_t stream_offset = file_->info().levels[size_t(level)].blob_offset +
-                                 uint64_t(view.data - file_->container().level(uint32_t(level)).data);
+  const uint64_t stream_offset = file_->container().offset_of(view.data);
   std::string where;
   if (ty < 0 || !bd) {
     d.area = Rect{0, view.y0, width, view.rows};

@@ -157,6 +157,18 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header);
 Status read_tile_index(const uint8_t* data, size_t size, const HeaderInfo& header,
                        std::vector<TileEntry>* entries, std::vector<RowChecksum>* rows);
 
+// Builds one stream from two streams of the same image and coding parameters (width, height, tile
+// size, max-error flag and E, step, fraction bits): tile i's payload is copied byte for byte from
+// `fresh` where take_fresh[i] is non-zero, else from `old`. Tiles are coded independently, so the
+// result decodes every tile exactly as its source stream did. Either stream may be absent (null data,
+// size 0: every tile of it is empty); then the other supplies the header. *out gets the stream, or
+// stays empty when every tile of the result is empty (like an all-empty band). Returns Ok;
+// InvalidArgument when both are absent, take_fresh does not have one flag per tile or the parameters
+// differ; a read_header / read_tile_index status for a stream that does not open (checked fully,
+// payload row CRCs included, so a damaged payload is never copied). Untrusted input: safe.
+Status splice_tiles(const uint8_t* old_data, size_t old_size, const uint8_t* fresh_data, size_t fresh_size,
+                    const std::vector<uint8_t>& take_fresh, std::vector<uint8_t>* out);
+
 // A parsed stream: header and index are validated once, then any number of regions decode from it.
 // The stream bytes must outlive the Decoder. After open, the const members may be called from any
 // number of threads at once (each with its own Scratch).

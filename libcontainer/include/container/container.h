@@ -41,9 +41,11 @@ using codec::crc32c_portable;
 // version (minor versions only append fields) and rejects other majors. 2.0: level blobs with
 // compact band tables and all-zero bands without a stream, libcodec format 4 streams; its level
 // records are those of 1.1 (with the error figures). 1.x files must be rebuilt. 2.1 adds the
-// georeference's full geotransform and its CRS (EPSG code, CRS text); 2.0 files still open.
+// georeference's full geotransform and its CRS (EPSG code, CRS text); 2.0 files still open. 2.2
+// adds copy-on-write editing (an edited flag and generation in the superblock, a tail copy of it,
+// dead bytes between regions, band-map level blobs: docs/format.md "Editing (2.2)").
 inline constexpr uint16_t kFormatMajor = 2;
-inline constexpr uint16_t kFormatMinor = 1;
+inline constexpr uint16_t kFormatMinor = 2;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
@@ -263,6 +265,27 @@ class Container {
   bool level_checksum_ok(uint32_t level) const;
   const std::string& path() const { return path_; }
   uint16_t minor_version() const { return minor_version_; }
+  // 2.2 editing: whether the file has been edited, its edit generation (0 unedited), the bytes the
+  // current version spans (file_size in its superblock) and those past it (an interrupted edit's
+  // uncommitted tail), and whether the superblock at offset 0 failed and its tail copy was used.
+  bool edited() const { return edited_; }
+  uint64_t generation() const { return generation_; }
+  uint64_t committed_size() const { return committed_size_; }
+  uint64_t uncommitted_bytes() const { return file_bytes_ - committed_size_; }
+  bool from_tail_superblock() const { return from_tail_superblock_; }
+  // Bytes [offset, offset + size) of the committed file (band maps point at streams anywhere in it);
+  // nullptr when the range is not inside it.
+  const uint8_t* file_bytes(uint64_t offset, uint64_t size) const;
+  // The file offset of a pointer into the mapping (a band view's data).
+  uint64_t offset_of(const uint8_t* p) const;
+  // The metadata and mask regions as the index places them (the editor carries them over).
+  uint64_t metadata_offset() const { return metadata_offset_; }
+  uint32_t metadata_crc() const { return metadata_crc_; }
+  uint64_t mask_offset() const { return mask_offset_; }
+  uint64_t mask_bytes() const { return mask_runs_size_; }
+  uint64_t index_offset() const { return index_offset_; }
+  uint64_t index_size() const { return index_size_; }
+  uint32_t mask_crc() const { return mask_crc_; }
 
  private:
   Container() = default;
@@ -273,6 +296,58 @@ class Container {
   const uint8_t* mask_runs_ = nullptr;
   size_t mask_runs_size_ = 0;
   uint16_t minor_version_ = 0;
+  bool edited_ = false, from_tail_superblock_ = false;
+  uint64_t generation_ = 0, committed_size_ = 0, file_bytes_ = 0;
+  uint64_t metadata_offset_ = 0, mask_offset_ = 0, index_offset_ = 0, index_size_ = 0;
+  uint32_t metadata_crc_ = 0, mask_crc_ = 0;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Copy-on-write update (2.2 editing; docs/format.md "Editing (2.2)")
+
+// Where commit() stops, as if the process died there (crash-safety tests).
+enum class CommitStop { None, AfterBlobs, AfterIndex, TornSuperblock };
+
+// Appends a new version to a committed container in place: new bytes go after the committed end
+// (an interrupted edit's uncommitted tail is cut off first), unchanged regions stay where they are.
+// commit() writes the new index and a tail copy of the new superblock, fsyncs, then rewrites the
+// superblock at offset 0 and fsyncs again, so a crash at any point leaves either the old or the new
+// version readable. The first bytes past the end are a pending-edit record, synced before the rest:
+// readers accept bytes past file_size only behind it (or a torn copy of it).
+// Not thread-safe; the Container must stay open (its mapping serves the old bytes) until commit.
+class ContainerUpdater {
+ public:
+  // Throws Error(WriteFailed) naming the file when it cannot be opened for writing.
+  explicit ContainerUpdater(const Container& current);
+  ~ContainerUpdater();
+  ContainerUpdater(const ContainerUpdater&) = delete;
+  ContainerUpdater& operator=(const ContainerUpdater&) = delete;
+
+  // Writes `size` bytes at the next 8-aligned offset past the end and returns that offset.
+  // Throws Error(WriteFailed).
+  uint64_t append(const uint8_t* data, size_t size);
+  // Points level `level`'s record at an appended blob with CRC-32C `crc`. Throws std::out_of_range.
+  void set_level(uint32_t level, uint64_t offset, uint64_t size, uint32_t crc);
+  uint64_t bytes_appended() const { return end_ - start_; }
+  // Where the next append() will place its bytes.
+  uint64_t next_offset() const { return (end_ + 7) & ~uint64_t(7); }
+  // Commits (see above) and returns the new committed file size; the new generation is the old + 1.
+  // Throws Error(WriteFailed); a failure before the superblock write leaves the old version.
+  uint64_t commit(CommitStop stop = CommitStop::None);
+
+ private:
+  void write_at(uint64_t offset, const uint8_t* data, size_t size);
+  void sync();
+  std::string path_;
+  int fd_ = -1;
+  ContainerInfo info_;
+  std::vector<uint64_t> offsets_, sizes_;
+  std::vector<uint32_t> crcs_;
+  std::vector<bool> has_crc_;
+  uint64_t start_ = 0, end_ = 0, generation_ = 0;
+  uint64_t metadata_offset_ = 0, metadata_size_ = 0, mask_offset_ = 0, mask_size_ = 0;
+  uint32_t metadata_crc_ = 0, mask_crc_ = 0;
+  bool committed_ = false;
 };
 
 }  // namespace terrain::container

@@ -92,12 +92,33 @@ class PyramidFile {
   // ChecksumMismatch for a CRC) naming the file, level, band record and the field or libcodec status.
   // Memory: one tile row of one band.
   void verify() const;
+  // 2.2 editing: bytes of the committed file that the current version uses (superblock and its tail
+  // copy, level blobs, the band streams their band maps point at, mask, metadata, index) and the
+  // rest (earlier generations' streams, band maps and indices), which compaction drops.
+  uint64_t live_bytes() const { return live_bytes_; }
+  uint64_t dead_bytes() const { return container_.committed_size() - live_bytes_; }
 
  private:
   explicit PyramidFile(Container&& c) : container_(std::move(c)) {}
+  uint64_t count_live_bytes() const;
   Container container_;
   std::vector<std::vector<BandView>> bands_;
+  uint64_t live_bytes_ = 0;
 };
+
+// Band-map blobs (2.2, written by an edit): the band table's stream records carry the stream's file
+// offset, so a level can keep most of its streams where an earlier generation wrote them.
+inline constexpr uint32_t kBandMapMagic = 0x33444e42;    // "BND3"
+inline constexpr uint32_t kBandTableMagic = 0x32444e42;  // "BND2"
+// One band of a band map: rows, and the stream's file offset and size (size 0: a run of all-zero
+// bands of `rows` rows each, `run` of them).
+struct BandMapRecord {
+  uint64_t rows = 0, run = 1, offset = 0, size = 0;
+};
+// The blob of a band map: table records, then the 12-byte footer (table size, "BND3", CRC-32C).
+std::vector<uint8_t> encode_band_map(const std::vector<BandMapRecord>& records);
+// A BND2 band table blob's table and footer for streams laid out back to back before it (compaction).
+std::vector<uint8_t> encode_band_table(const std::vector<BandMapRecord>& records);
 
 // Parses a level blob's band table (exposed for tests); throws Error(Corrupt) naming `what`.
 std::vector<BandView> parse_band_table(const uint8_t* blob, size_t size, int64_t level_height,

@@ -2,12 +2,15 @@
 // little-endian field helpers shared by the writer and the reader.
 #pragma once
 
+#include <array>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <string>
+#include <vector>
 
+#include "container/container.h"
 #include "core/bytes.h"
 
 namespace terrain::container::layout {
@@ -21,6 +24,10 @@ namespace sb {
 inline constexpr size_t kMajor = 8, kMinor = 10, kSize = 12, kFileSize = 16, kIndexOffset = 24,
                         kIndexSize = 32, kIndexCrc = 40, kFlags = 44, kReserved = 48, kCrc = 60;
 inline constexpr uint32_t kSizeV1 = 64;
+// 2.2: flag bit 0 = edited (copy-on-write generations: dead bytes allowed between regions, a tail copy
+// of the superblock ends the file); the u64 edit generation sits at kGeneration (0 in unedited files).
+inline constexpr uint32_t kFlagEdited = 1;
+inline constexpr size_t kGeneration = 48;
 }  // namespace sb
 
 // Index "info" block at the start of the index.
@@ -70,5 +77,37 @@ using bytes::get_u32;
 using bytes::get_u64;
 
 inline uint64_t align_up(uint64_t v) { return (v + kAlignment - 1) & ~(kAlignment - 1); }
+
+// Where the index says each region is (the writer's and the editor's placement of the blobs).
+struct BlobPlacement {
+  uint64_t offset = 0, size = 0;
+  uint32_t crc = 0;
+  bool has_crc = false;
+};
+struct IndexPlacement {
+  std::vector<BlobPlacement> levels;  // one per info.levels entry
+  bool has_mask = false;
+  uint64_t mask_offset = 0, mask_size = 0, void_count = 0;
+  uint32_t mask_crc = 0;
+  uint64_t metadata_offset = 0, metadata_size = 0;
+  uint32_t metadata_crc = 0;
+};
+// The index bytes (info block, level records, filter, CRS text; 8-aligned size) of the current version.
+std::vector<uint8_t> encode_index(const ContainerInfo& info, const IndexPlacement& placement);
+
+struct SuperblockFields {
+  uint64_t file_size = 0, index_offset = 0, index_size = 0;
+  uint32_t index_crc = 0;
+  uint32_t flags = 0;       // sb::kFlagEdited
+  uint64_t generation = 0;  // with kFlagEdited only
+};
+std::array<uint8_t, sb::kSizeV1> encode_superblock(const SuperblockFields& fields);
+
+// 2.2: the record an edit writes (and syncs) at align_up(file_size) before any other byte past the
+// committed end, so that what a crash leaves there is recognisable: 8-byte magic, u64 the committed
+// file_size it follows, u64 the generation being written, zeros, u32 CRC-32C of bytes 0..59. It is
+// a function of those two numbers alone, so a reader can tell a torn copy of it from garbage.
+inline constexpr uint8_t kPendingMagic[8] = {0x89, 'T', 'P', 'E', 'D', 'I', 'T', 0x1A};
+std::array<uint8_t, sb::kSizeV1> encode_pending(uint64_t committed_size, uint64_t generation);
 
 }  // namespace terrain::container::layout

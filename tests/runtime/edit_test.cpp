@@ -1,0 +1,266 @@
+// Editing a .pyr in place (libedit): error bounds against the edited input at every level, untouched
+// bands and tiles byte-identical, crashes at every commit step leave a readable version, compaction.
+#include <algorithm>
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <filesystem>
+
+#include "build/pyramid_build.h"
+#include "container/pyramid_file.h"
+#include "edit/pyramid_edit.h"
+#include "io/io_test_util.h"
+#include "readers/terrain_generator.h"
+#include "runtime/height_source.h"
+#include "runtime/region_decoder.h"
+
+using namespace terrain;
+using namespace terrain::container;
+
+namespace {
+
+constexpr int64_t kW = 300, kH = 260;
+constexpr int kLevels = 4;
+
+// The brush's change in metres at (x, y), restated from the header's contract (smooth profile).
+double smooth_brush(const edit::Brush& b, int64_t x, int64_t y) {
+  const double r = std::hypot(double(x) - b.x, double(y) - b.y) / b.radius;
+  return r <= 1 ? b.height * (1 - r * r) * (1 - r * r) : 0.0;
+}
+
+// Synthetic terrain (int16 metres) at <dir>/t.raw and the same with the brush applied (rounded to
+// the metre, as the editor rounds to the level unit) at <dir>/edited.raw.
+void write_inputs(const iotest::TempDir& dir, const edit::Brush& brush) {
+  SynthOptions so;
+  so.width = kW;
+  so.height = kH;
+  so.seed = 21;
+  Heightmap map = synthesize_terrain(so);
+  write_raw(dir.file("t.raw"), map);
+  for (int64_t y = 0; y < kH; ++y)
+    for (int64_t x = 0; x < kW; ++x)
+      map.values[size_t(y * kW + x)] =
+          std::round(map.values[size_t(y * kW + x)] + smooth_brush(brush, x, y) / map.info.vertical_scale);
+  write_raw(dir.file("edited.raw"), map);
+}
+
+void build_file(const iotest::TempDir& dir, const std::string& out, ErrorMode mode, double target) {
+  build::BuildFileOptions bo;
+  bo.levels = kLevels;
+  bo.threads = 1;
+  bo.mode = mode;
+  bo.target_metres = target;
+  build::build_pyramid_file(dir.file("t.raw"), ReadOptions{}, out, bo);
+}
+
+std::vector<std::vector<int32_t>> decode_all(const std::string& path) {
+  const auto f = PyramidFile::open(path);
+  runtime::RegionDecoder d(f, 0);
+  std::vector<std::vector<int32_t>> out;
+  for (int l = 0; l < f->level_count(); ++l) {
+    const GridSize s = f->level_size(l);
+    out.emplace_back(size_t(s.width * s.height));
+    d.decode_units(l, Rect{0, 0, s.width, s.height}, out.back().data(), s.width);
+  }
+  return out;
+}
+
+// Largest |decoded - T_l(edited input)| per level, in level units (the reference uses the file's D).
+std::vector<double> max_error_against(const std::string& pyr, const std::string& input) {
+  const auto f = PyramidFile::open(pyr);
+  const auto decoded = decode_all(pyr);
+  const runtime::GridHeightSource ref = runtime::original_source(
+      input, ReadOptions{}, f->level_size(f->level_count() - 1), f->level_count(), f->info().filter, 30.0);
+  std::vector<double> out;
+  const double scale = f->info().vertical_scale, offset = f->info().vertical_offset;
+  for (int l = 0; l < f->level_count(); ++l) {
+    double worst = 0;
+    for (size_t i = 0; i < decoded[size_t(l)].size(); ++i)
+      worst =
+          std::max(worst, std::abs(decoded[size_t(l)][i] * scale + offset - double(ref.level(l)[i])) / scale);
+    out.push_back(worst);
+  }
+  return out;
+}
+
+// File offset and size of every band stream, per level.
+std::vector<std::vector<std::pair<uint64_t, size_t>>> stream_places(const std::string& path) {
+  const auto f = PyramidFile::open(path);
+  std::vector<std::vector<std::pair<uint64_t, size_t>>> out(static_cast<size_t>(f->level_count()));
+  for (int l = 0; l < f->level_count(); ++l)
+    for (const BandView& v : f->bands(l))
+      if (!v.empty()) out[size_t(l)].push_back({f->container().offset_of(v.data), v.size});
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("edit: a brush with the source meets the max error against the edited input at every level",
+          "[runtime][edit]") {
+  iotest::TempDir dir;
+  const edit::Brush brush{150.5, 70.25, 18, 35.0, edit::BrushShape::Smooth};
+  write_inputs(dir, brush);
+  const std::string pyr = dir.file("t.pyr");
+  build_file(dir, pyr, ErrorMode::MaxError, 2.0);
+  const auto before = decode_all(pyr);
+  const auto places_before = stream_places(pyr);
+  const uint64_t size_before = std::filesystem::file_size(pyr);
+  const double e_units = 2.0 / PyramidFile::open(pyr)->info().vertical_scale;
+  std::filesystem::copy_file(pyr, dir.file("unedited.pyr"));
+
+  auto editor = edit::PyramidEditor::open(pyr);
+  editor->set_source(dir.file("t.raw"));
+  editor->apply(brush);
+  const edit::EditStats st = editor->commit();
+  REQUIRE(st.changed);
+  CHECK(st.generation == 1);
+  CHECK(st.bytes_appended > 0);
+  CHECK(st.bytes_appended < size_before / 2);
+  CHECK(st.dead_bytes > 0);
+  PyramidFile::open(pyr)->verify();
+
+  // (a) every level within E = 2 m of the edited input's T_l (what a rebuild codes).
+  const std::vector<double> err = max_error_against(pyr, dir.file("edited.raw"));
+  for (int l = 0; l < kLevels; ++l) {
+    INFO("level " << l << " max error " << err[size_t(l)] << " units");
+    CHECK(err[size_t(l)] <= e_units + 1e-9);
+  }
+  // The unedited file is far off the edited input near the brush: the edit did something.
+  CHECK(max_error_against(dir.file("unedited.pyr"), dir.file("edited.raw"))[kLevels - 1] > 10 * e_units);
+
+  // (b) samples away from the brush are unchanged, and so are the streams of bands it does not reach.
+  const auto after = decode_all(pyr);
+  const auto places_after = stream_places(pyr);
+  const auto f = PyramidFile::open(pyr);
+  // The reach of the edit, as a radius in each level's samples: D (radius 5 fine samples, so 2.5
+  // coarse ones, plus rounding) going coarse-wards, U (a four-point support) going back fine-wards;
+  // a re-coded tile changes anywhere in it, so one tile (32) more.
+  std::vector<double> reach(kLevels);
+  reach[kLevels - 1] = brush.radius + 1;
+  for (int l = kLevels - 1; l > 0; --l) reach[size_t(l - 1)] = reach[size_t(l)] / 2 + 3.5;
+  for (int l = 1; l < kLevels; ++l)
+    reach[size_t(l)] = std::max(reach[size_t(l)], 2 * reach[size_t(l - 1)] + 4);
+  int64_t kept_total = 0;
+  for (int l = 0; l < kLevels; ++l) {
+    const GridSize s = f->level_size(l);
+    const int shift = kLevels - 1 - l;
+    const double cx = brush.x / (1 << shift), cy = brush.y / (1 << shift), r = reach[size_t(l)] + 32;
+    int64_t changed_far = 0;
+    for (int64_t y = 0; y < s.height; ++y)
+      for (int64_t x = 0; x < s.width; ++x)
+        if ((std::abs(double(x) - cx) > r || std::abs(double(y) - cy) > r) &&
+            before[size_t(l)][size_t(y * s.width + x)] != after[size_t(l)][size_t(y * s.width + x)])
+          ++changed_far;
+    INFO("level " << l);
+    CHECK(changed_far == 0);
+    for (const auto& p : places_before[size_t(l)])
+      kept_total += std::count(places_after[size_t(l)].begin(), places_after[size_t(l)].end(), p);
+  }
+  CHECK(kept_total > 0);
+  CHECK(st.levels[kLevels - 1].tiles_kept > 0);     // clean tiles of re-coded bands were copied
+  CHECK(st.levels[kLevels - 1].bands_recoded < 3);  // of the finest level's 3 bands of 128 rows
+}
+
+TEST_CASE("edit: without a source the edit is carried down through D, untouched bytes stay",
+          "[runtime][edit]") {
+  iotest::TempDir dir;
+  const edit::Brush brush{40, 200, 12, -20.0, edit::BrushShape::Smooth};
+  write_inputs(dir, brush);
+  const std::string pyr = dir.file("t.pyr");
+  build_file(dir, pyr, ErrorMode::Step, 2.0);
+  const auto f0 = PyramidFile::open(pyr);
+  const auto before = decode_all(pyr);
+  auto editor = edit::PyramidEditor::open(pyr);
+  editor->apply(brush);
+  const edit::EditStats st = editor->commit();
+  REQUIRE(st.changed);
+  PyramidFile::open(pyr)->verify();
+  const auto after = decode_all(pyr);
+  // The finest level near the brush centre moved by about the brush height (-20 m; 1 m units).
+  REQUIRE(f0->info().vertical_scale == 1.0);
+  const size_t centre = size_t(200 * kW + 40);
+  CHECK(after[kLevels - 1][centre] - before[kLevels - 1][centre] < -15);
+  CHECK(after[kLevels - 1][centre] - before[kLevels - 1][centre] > -25);
+  // Against the edited input the error stays within twice the unedited file's at every level (the
+  // target is T^ + Delta: the stored error plus the re-coding's).
+  const std::vector<double> err_edit = max_error_against(pyr, dir.file("edited.raw"));
+  build_file(dir, dir.file("fresh.pyr"), ErrorMode::Step, 2.0);
+  const std::vector<double> err_orig = max_error_against(dir.file("fresh.pyr"), dir.file("t.raw"));
+  for (int l = 0; l < kLevels; ++l) {
+    INFO("level " << l << ": " << err_edit[size_t(l)] << " vs " << err_orig[size_t(l)]);
+    CHECK(err_edit[size_t(l)] <= 2 * err_orig[size_t(l)] + 2);
+  }
+}
+
+TEST_CASE("edit: a crash at any commit step leaves a readable version; compaction drops dead bytes",
+          "[runtime][edit]") {
+  iotest::TempDir dir;
+  const edit::Brush brush{220, 130, 10, 15.0, edit::BrushShape::Cone};
+  write_inputs(dir, brush);
+  const std::string base = dir.file("base.pyr");
+  build_file(dir, base, ErrorMode::Step, 2.0);
+  const auto original = decode_all(base);
+  const auto original_bytes = iotest::read_file(base);
+
+  // The clean commit, for comparison.
+  const std::string clean = dir.file("clean.pyr");
+  std::filesystem::copy_file(base, clean);
+  {
+    auto e = edit::PyramidEditor::open(clean);
+    e->apply(brush);
+    REQUIRE(e->commit().changed);
+  }
+  const auto edited = decode_all(clean);
+  REQUIRE(edited != original);
+
+  for (const edit::CrashPoint cp : {edit::CrashPoint::AfterBlobs, edit::CrashPoint::AfterIndex}) {
+    const std::string p = dir.file("crash.pyr");
+    std::filesystem::remove(p);
+    std::filesystem::copy_file(base, p);
+    {
+      auto e = edit::PyramidEditor::open(p);
+      e->apply(brush);
+      e->commit(cp);
+    }
+    INFO("crash point " << int(cp));
+    const auto f = PyramidFile::open(p);
+    f->verify();
+    CHECK(f->container().uncommitted_bytes() > 0);
+    CHECK(decode_all(p) == original);
+    // The bytes of the previous version are untouched.
+    const auto now = iotest::read_file(p);
+    REQUIRE(now.size() > original_bytes.size());
+    CHECK(std::equal(original_bytes.begin(), original_bytes.end(), now.begin()));
+    // The next edit cuts the uncommitted tail off and commits normally.
+    auto e = edit::PyramidEditor::open(p);
+    e->apply(brush);
+    REQUIRE(e->commit().changed);
+    CHECK(PyramidFile::open(p)->container().uncommitted_bytes() == 0);
+    CHECK(decode_all(p) == edited);
+  }
+  {
+    // A torn superblock write: the reader falls back to the tail copy, the new version.
+    const std::string p = dir.file("torn.pyr");
+    std::filesystem::copy_file(base, p);
+    {
+      auto e = edit::PyramidEditor::open(p);
+      e->apply(brush);
+      e->commit(edit::CrashPoint::TornSuperblock);
+    }
+    const auto f = PyramidFile::open(p);
+    CHECK(f->container().from_tail_superblock());
+    f->verify();
+    CHECK(decode_all(p) == edited);
+  }
+
+  // Compaction: no dead bytes, the same decode, a plain (unedited) layout.
+  const auto f = PyramidFile::open(clean);
+  const uint64_t dead = f->dead_bytes();
+  CHECK(dead > 0);
+  const edit::CompactStats cs = edit::compact(clean);
+  CHECK(cs.bytes_after + dead <= cs.bytes_before);
+  const auto g = PyramidFile::open(clean);
+  CHECK(!g->container().edited());
+  CHECK(g->dead_bytes() == 0);
+  g->verify();
+  CHECK(decode_all(clean) == edited);
+}
