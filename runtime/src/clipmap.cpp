@@ -569,7 +569,8 @@ void Clipmap::run_piece(int level, const Piece& p, ClipmapUpdateStats& stats) {
   }
 }
 
-void Clipmap::invalidate(const Rect& finest) {
+void Clipmap::invalidate(const Rect& finest, int64_t align) {
+  if (align < 1) align = 1;
   if (finest.width <= 0 || finest.height <= 0) return;
   const int levels = level_count();
   // Inclusive bounds per level: down from the finest by D's reach (coarse i reads fine 2i - 5 ..
@@ -583,11 +584,17 @@ void Clipmap::invalidate(const Rect& finest) {
     const auto& f = b[size_t(l) + 1];
     b[size_t(l)] = {down_lo(f[0]), down_lo(f[1]), down_hi(f[2]), down_hi(f[3])};
   }
-  for (int l = 1; l < levels; ++l) {
-    const auto& c = b[size_t(l) - 1];
+  // Upwards, each level grown outwards to whole `align` tiles first (a re-coded tile changes all of
+  // its samples), which U then carries to the finer level.
+  for (int l = 0; l < levels; ++l) {
     auto& m = b[size_t(l)];
-    m = {std::min(m[0], 2 * c[0] - 4), std::min(m[1], 2 * c[1] - 4), std::max(m[2], 2 * c[2] + 4),
-         std::max(m[3], 2 * c[3] + 4)};
+    if (l > 0) {
+      const auto& c = b[size_t(l) - 1];
+      m = {std::min(m[0], 2 * c[0] - 4), std::min(m[1], 2 * c[1] - 4), std::max(m[2], 2 * c[2] + 4),
+           std::max(m[3], 2 * c[3] + 4)};
+    }
+    m = {floor_div(m[0], align) * align, floor_div(m[1], align) * align,
+         (floor_div(m[2], align) + 1) * align - 1, (floor_div(m[3], align) + 1) * align - 1};
   }
   for (int l = 0; l < levels; ++l) {
     Level& L = levels_[size_t(l)];

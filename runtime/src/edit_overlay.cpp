@@ -32,6 +32,30 @@ double segment_distance(double x, double y, const TerrainEdit& e) {
 
 }  // namespace
 
+Rect edit_bounds(const TerrainEdit& e) {
+  const int64_t x0 = int64_t(std::floor(std::min(e.x0, e.x1) - e.radius)),
+                x1 = int64_t(std::ceil(std::max(e.x0, e.x1) + e.radius));
+  const int64_t y0 = int64_t(std::floor(std::min(e.y0, e.y1) - e.radius)),
+                y1 = int64_t(std::ceil(std::max(e.y0, e.y1) + e.radius));
+  return Rect{x0, y0, x1 - x0 + 1, y1 - y0 + 1};
+}
+
+double edit_delta(const TerrainEdit& e, double x, double y) {
+  return e.height * profile(e.shape, segment_distance(x, y, e) / e.radius);
+}
+
+const char* edit_shape_name(EditShape shape) {
+  switch (shape) {
+    case EditShape::Cone:
+      return "cone";
+    case EditShape::Flat:
+      return "flat";
+    case EditShape::Smooth:
+      break;
+  }
+  return "smooth";
+}
+
 bool parse_edit_shape(const std::string& name, EditShape* out) {
   if (name == "cone") return *out = EditShape::Cone, true;
   if (name == "smooth") return *out = EditShape::Smooth, true;
@@ -45,11 +69,7 @@ Rect EditOverlaySource::add(const TerrainEdit& e) {
   if (!(e.radius > 0) || e.radius > 1e9)
     throw std::invalid_argument("terrain edit: radius must be in (0, 1e9] samples");
   edits_.push_back(e);
-  const int64_t x0 = int64_t(std::floor(std::min(e.x0, e.x1) - e.radius)),
-                x1 = int64_t(std::ceil(std::max(e.x0, e.x1) + e.radius));
-  const int64_t y0 = int64_t(std::floor(std::min(e.y0, e.y1) - e.radius)),
-                y1 = int64_t(std::ceil(std::max(e.y0, e.y1) + e.radius));
-  return Rect{x0, y0, x1 - x0 + 1, y1 - y0 + 1};
+  return edit_bounds(e);
 }
 
 void EditOverlaySource::fill(int level, const Rect& rect, float* out, int64_t out_stride) {
@@ -82,7 +102,7 @@ void EditOverlaySource::add_edits(int level, const Rect& rect, float* out, int64
       for (int64_t x = 0; x < rect.width; ++x) {
         const int64_t sx = std::clamp<int64_t>(rect.x0 + x, 0, size.width - 1);
         if (sx < ex0 || sx > ex1) continue;
-        o[x] += float(e.height * profile(e.shape, segment_distance(double(sx) * k, double(sy) * k, e) / r));
+        o[x] += float(edit_delta(e, double(sx) * k, double(sy) * k));
       }
     }
   }

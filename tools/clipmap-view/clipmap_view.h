@@ -63,6 +63,10 @@ struct ViewOptions {
   // --mirror: the virtual mirrored terrain's side (0: none).
   std::string plot_times, edit_script;
   int64_t mirror = 0;
+  // --edit-pyramid: write the edits into the pyramid file (libedit) instead of an overlay in memory;
+  // --edit-source: the heightmap it was built from (the editor then re-codes against its rebuild).
+  bool edit_pyramid = false;
+  std::string edit_source;
 };
 
 // The renderer's options from the command line.

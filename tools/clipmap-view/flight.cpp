@@ -15,7 +15,9 @@
 
 #include "cli.h"
 #include "clipmap_view.h"
+#include "codec/codec.h"
 #include "core/file.h"
+#include "edit/pyramid_edit.h"
 #include "json_writer.h"
 #include "plot.h"
 #include "readers/heightmap.h"
@@ -376,6 +378,7 @@ void write_times_plot(const std::string& path, const FlightLog& log, double budg
   axes.title = title;
   axes.x_label = "frame";
   axes.y_label = "milliseconds";
+  axes.log_y = true;  // update (sub-millisecond) and render (tens of ms on llvmpipe) on one plot
   try {
     cli::line_plot(series, axes).write_png(path);
   } catch (const Error& e) {
@@ -393,19 +396,92 @@ std::vector<Key> mirror_path(HeightSource& source, double spacing, int frames) {
           {double(std::max(frames - 1, 1)), cx + d * 0.866, cy + d * 0.5, 300, 30, -12}};
 }
 
+// What the clipmap shows when --edit-pyramid rewrites the file: the source of the file's latest
+// version, switched after each commit (the clipmap keeps its reference to this).
+class SwitchableSource final : public HeightSource {
+ public:
+  explicit SwitchableSource(HeightSource& s) : s_(&s) {}
+  void set(HeightSource& s) { s_ = &s; }
+  int level_count() const override { return s_->level_count(); }
+  GridSize level_size(int level) const override { return s_->level_size(level); }
+  double spacing_m() const override { return s_->spacing_m(); }
+  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override {
+    s_->fill(level, rect, out, out_stride);
+  }
+  bool refines_units() const override { return s_->refines_units(); }
+  void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
+                  int64_t out_stride, FillSplit* split) override {
+    s_->fill_units(level, rect, coarser, out, units_out, out_stride, split);
+  }
+
+ private:
+  HeightSource* s_;
+};
+
+// The codec tile side of a pyramid's levels (the largest any band's header gives): what an edit
+// re-codes as a whole.
+int64_t codec_tile_size(const container::PyramidFile& file) {
+  int64_t t = 1;
+  for (int l = 0; l < file.level_count(); ++l)
+    for (const container::BandView& v : file.bands(l)) {
+      codec::HeaderInfo h;
+      if (!v.empty() && codec::read_header(v.data, v.size, &h) == codec::Status::Ok)
+        t = std::max<int64_t>(t, int64_t(h.tile_size));
+    }
+  return t;
+}
+
+// One edit written into the file through libedit: a brush as it is, a channel as a patch of the
+// current finest level plus the channel's profile (NaN where it adds nothing).
+edit::EditStats commit_edit(edit::PyramidEditor& editor, const TerrainEdit& e, HeightSource& current) {
+  if (e.x0 == e.x1 && e.y0 == e.y1) {
+    edit::Brush b{e.x0, e.y0, e.radius, e.height, edit::BrushShape::Smooth};
+    edit::parse_brush_shape(edit_shape_name(e.shape), &b.shape);
+    editor.apply(b);
+  } else {
+    const Rect r = edit_bounds(e);
+    if (r.width * r.height > (int64_t(1) << 26))
+      throw Error(ErrorCode::Oversized, "edit script: a channel over more than 2^26 samples");
+    edit::Patch p;
+    p.x = r.x0, p.y = r.y0, p.width = r.width, p.height = r.height;
+    p.heights.resize(size_t(r.width * r.height));
+    current.fill(current.level_count() - 1, r, p.heights.data(), r.width);
+    for (int64_t y = 0; y < r.height; ++y)
+      for (int64_t x = 0; x < r.width; ++x) {
+        const double d = edit_delta(e, double(r.x0 + x), double(r.y0 + y));
+        float& h = p.heights[size_t(y * r.width + x)];
+        h = d != 0 ? float(h + d) : std::nanf("");
+      }
+    editor.apply(p);
+  }
+  return editor.commit();
+}
+
 }  // namespace
 
 int run_flight(const Flight& flight) {
   const ViewOptions& o = flight.options;
   const ClipmapOptions& copt = flight.clipmap;
   const double spacing = flight.spacing;
-  HeightSource& source = flight.ground ? *flight.ground : static_cast<HeightSource&>(flight.source);
-  // --edit-script: the edits go into an overlay over what the clipmap shows, which then refills the
-  // samples each one reaches (Clipmap::invalidate) within its budget.
+  HeightSource* ground = flight.ground ? flight.ground : &flight.source;
+  // --edit-script: the edits go into an overlay over what the clipmap shows (or, --edit-pyramid,
+  // into the file, whose new version the clipmap then reads), and the clipmap refills the samples
+  // each one reaches (Clipmap::invalidate) within its budget.
   const std::vector<EditEvent> edits =
       o.edit_script.empty() ? std::vector<EditEvent>{} : read_edit_script(o.edit_script);
   EditOverlaySource overlay(flight.heights);
-  Clipmap clipmap(edits.empty() ? flight.heights : overlay, copt);
+  SwitchableSource live(flight.heights);
+  std::unique_ptr<edit::PyramidEditor> editor;
+  std::shared_ptr<const RegionDecoder> decoder = flight.decoder;
+  std::unique_ptr<RegionDecoderSource> edited_source;
+  int64_t tile_size = 1;
+  if (o.edit_pyramid) {
+    editor = edit::PyramidEditor::open(o.pyramid);
+    if (!o.edit_source.empty()) editor->set_source(o.edit_source);
+    tile_size = codec_tile_size(*flight.file);
+  }
+  HeightSource& shown = edits.empty() ? flight.heights : editor ? static_cast<HeightSource&>(live) : overlay;
+  Clipmap clipmap(shown, copt);
   size_t next_edit = 0;
   DamageLog damage;
 
@@ -416,8 +492,8 @@ int run_flight(const Flight& flight) {
   if (reference.source) ref_clipmap = std::make_unique<Clipmap>(*reference.source, copt);
 
   const std::vector<Key> keys = !o.path_file.empty() ? read_path(o.path_file)
-                                : o.mirror > 0       ? mirror_path(source, spacing, o.frames)
-                                                     : default_path(source, spacing, o.frames);
+                                : o.mirror > 0       ? mirror_path(*ground, spacing, o.frames)
+                                                     : default_path(*ground, spacing, o.frames);
 
   std::error_code ec;
   std::filesystem::create_directories(o.out_dir, ec);
@@ -429,7 +505,7 @@ int run_flight(const Flight& flight) {
          "render_ms,frame_ms,"
          "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
          "samples_reconstructed,residual_samples_decoded,samples_uploaded,psnr_db,pieces,out_of_time,edits,"
-         "rss_mib\n";
+         "edit_ms,rss_mib\n";
 
   // Screen-space geometric error of the levels this clipmap renders (L&H 2004 Table 2).
   const double s_px = triangle_size_px(o.width, o.height, o.fov, copt.n);
@@ -461,11 +537,30 @@ int run_flight(const Flight& flight) {
   for (int f = 0; f < o.frames; ++f) {
     const Key k = interpolate(keys, double(f));
     // Ground under the camera from the finest level (one sample, decoded through the tile cache).
-    const Camera cam = camera_at(source, k, o.fov);
-    const RegionStats before = flight.decoder->stats();
     int edits_now = 0;
-    for (; next_edit < edits.size() && edits[next_edit].frame <= f; ++next_edit, ++edits_now)
-      clipmap.invalidate(overlay.add(edits[next_edit].edit));
+    double edit_ms = 0;
+    for (; next_edit < edits.size() && edits[next_edit].frame <= f; ++next_edit, ++edits_now) {
+      const TerrainEdit& e = edits[next_edit].edit;
+      if (!editor) {
+        clipmap.invalidate(overlay.add(e));
+        continue;
+      }
+      // Write through: commit, reopen the file's new version, show it, refill what changed.
+      const auto te = Clock::now();
+      const edit::EditStats es = commit_edit(*editor, e, *ground);
+      decoder = std::make_shared<const RegionDecoder>(container::PyramidFile::open(o.pyramid),
+                                                      size_t(256) << 20, DamagePolicy::Degrade);
+      edited_source = std::make_unique<RegionDecoderSource>(decoder, spacing);
+      live.set(*edited_source);
+      ground = edited_source.get();
+      clipmap.invalidate(edit_bounds(e), tile_size);
+      edit_ms += since(te) * 1e3;
+      if (!o.quiet)
+        std::cerr << "clipmap-view: frame " << f << ": edit committed (generation " << es.generation << ", "
+                  << es.bytes_appended << " bytes appended, " << since(te) * 1e3 << " ms)\n";
+    }
+    const Camera cam = camera_at(*ground, k, o.fov);
+    const RegionStats before = decoder->stats();
     const auto t0 = Clock::now();
     const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
     const double upd = since(t0);
@@ -476,8 +571,8 @@ int run_flight(const Flight& flight) {
       rs = renderer.render(clipmap, cam, ropt);
     }
     const double total = since(t0);
-    const RegionStats after = flight.decoder->stats();
-    damage.poll(*flight.decoder);
+    const RegionStats after = decoder->stats();
+    damage.poll(*decoder);
     double frame_psnr = std::nan("");
     if (ref_clipmap) {
       ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
@@ -524,7 +619,7 @@ int run_flight(const Flight& flight) {
         << ',';
     if (!std::isnan(frame_psnr)) csv << frame_psnr;
     log.rss_mib.push_back(rss_mib());
-    csv << ',' << us.pieces << ',' << (us.out_of_time ? 1 : 0) << ',' << edits_now << ','
+    csv << ',' << us.pieces << ',' << (us.out_of_time ? 1 : 0) << ',' << edits_now << ',' << edit_ms << ','
         << log.rss_mib.back() << '\n';
   }
   // CPU per frame covers everything in the loop (reference renders and PNG writing included).
@@ -532,7 +627,7 @@ int run_flight(const Flight& flight) {
   log.peak_rss_mib = peak_rss_mib();
   csv_file.finish();
 
-  damage.poll(*flight.decoder);
+  damage.poll(*decoder);
   write_stats_json(json_path, flight, clipmap, gl.renderer_name(), log, sse, s_px, damage.parts());
   if (!o.plot_times.empty())
     write_times_plot(

@@ -124,6 +124,14 @@ int run(int argc, char** argv) {
       "'SECONDS channel X0 Y0 X1 Y1 RADIUS DEPTH' (finest-level samples, metres; frame = 30 SECONDS),\n"
       "applied in memory over the pyramid's heights; the clipmap refills what each reaches",
       &o.edit_script);
+  p.flag("--edit-pyramid",
+         "--edit-script writes each edit into PYRAMID itself (libedit: re-coded tiles, atomic copy-on-write\n"
+         "commit) and the flight shows the file's new version; without it the edits stay in memory",
+         &o.edit_pyramid);
+  p.option("--edit-source", "HEIGHTMAP",
+           "--edit-pyramid: the heightmap PYRAMID was built from; the edited file then decodes like a\n"
+           "rebuild from the edited heightmap (within the file's step)",
+           &o.edit_source);
   p.option("--mirror", "SIZE",
            "fly over a virtual SIZE x SIZE terrain (up to 2^30) repeating the pyramid by mirror reflection,\n"
            "not materialised (coarser levels than the file's computed by its D); default path: straight, low",
@@ -275,6 +283,12 @@ int run(int argc, char** argv) {
   copt.budget_ms = budget_ms;
   if (o.window && (budget_ms > 0 || !o.plot_times.empty() || !o.edit_script.empty()))
     throw cli::UsageError("--budget-ms, --plot-times and --edit-script are for the headless flight");
+  if ((o.edit_pyramid || !o.edit_source.empty()) && o.edit_script.empty())
+    throw cli::UsageError("--edit-pyramid and --edit-source need --edit-script");
+  if (!o.edit_source.empty() && !o.edit_pyramid) throw cli::UsageError("--edit-source needs --edit-pyramid");
+  if (o.edit_pyramid && (synth || mirror || !o.reference.empty() || !o.original.empty()))
+    throw cli::UsageError(
+        "--edit-pyramid cannot be combined with --synth-levels, --mirror, --reference or --original");
   if (o.max_screen_error) {
     if (n_given) throw cli::UsageError("give --n or --max-screen-error, not both");
     if (synth) throw cli::UsageError("--max-screen-error cannot be combined with --synth-levels");

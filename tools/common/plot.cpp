@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
 
@@ -16,6 +17,12 @@ double round_step(double span, int count) {
   for (double m : {1.0, 2.0, 5.0})
     if (m * p >= raw) return m * p;
   return 10 * p;
+}
+
+// Integral values as integers ("1200", not "1.2e+03"), others as tick_label does.
+std::string axis_label(double v) {
+  if (v == std::round(v) && std::abs(v) < 1e7) return std::to_string(int64_t(v));
+  return tick_label(v);
 }
 
 }  // namespace
@@ -50,7 +57,7 @@ Canvas line_plot(const std::vector<PlotSeries>& series, const PlotAxes& axes) {
   };
   auto y_tick = [&](double v) {
     c.line(left, py(v), W - right, py(v), grid);
-    const std::string label = tick_label(v);
+    const std::string label = axes.log_y ? tick_label(v) : axis_label(v);
     c.text(left - 6 - Canvas::text_width(label, 2), int(py(v)) - 7, label, ink, 2);
   };
   if (axes.log_y) {
@@ -67,7 +74,7 @@ Canvas line_plot(const std::vector<PlotSeries>& series, const PlotAxes& axes) {
   if (ticks.empty()) {
     const double step = round_step(x1 - x0, 8);
     for (double v = std::ceil(x0 / step) * step; v <= x1 + 1e-9 * step; v += step)
-      ticks.emplace_back(v, tick_label(v));
+      ticks.emplace_back(v, axis_label(v));
   }
   for (const auto& [v, label] : ticks) {
     c.line(px(v), top + ph, px(v), top + ph + 5, ink);

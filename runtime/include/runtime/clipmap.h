@@ -146,8 +146,10 @@ class Clipmap {
   // from a changed coarser level; the clip region's part of each is refilled by later updates
   // (coarse to fine, under the budgets) with zc, normals and tile ranges recomputed. Levels being
   // filled afresh start again. An empty rect does nothing. The caller changes the source first (the
-  // clipmap re-reads it; a source with a cache must drop what it cached of the region).
-  void invalidate(const Rect& finest);
+  // clipmap re-reads it; a source with a cache must drop what it cached of the region). align > 1:
+  // every level's rectangle is first grown outwards to whole align x align tiles of the level grid
+  // (an edited compressed pyramid re-codes whole codec tiles, changing all of their samples).
+  void invalidate(const Rect& finest, int64_t align = 1);
   // Samples (level grid) invalidated and not yet refilled.
   int64_t invalid_samples(int level) const;
 

@@ -30,6 +30,13 @@ struct TerrainEdit {
   EditShape shape = EditShape::Smooth;
 };
 
+// The finest-level samples `edit` changes (a rectangle covering the segment grown by the radius).
+Rect edit_bounds(const TerrainEdit& edit);
+// Metres the edit adds at finest-level position (x, y) (0 beyond the radius).
+double edit_delta(const TerrainEdit& edit, double x, double y);
+// "cone", "smooth" or "flat".
+const char* edit_shape_name(EditShape shape);
+
 class EditOverlaySource final : public HeightSource {
  public:
   explicit EditOverlaySource(HeightSource& base) : base_(base) {}  // base must outlive this
