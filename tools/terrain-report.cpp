@@ -10,6 +10,7 @@
 
 #include "cli.h"
 #include "json_writer.h"
+#include "plot.h"
 #include "pyramid/error_stats.h"
 #include "pyramid/reference.h"
 #include "raster.h"
@@ -89,60 +90,27 @@ void write_heatmap(const std::string& path, const std::vector<float>& abs_err, i
 
 // Per-level error plot: rms, 99.9th percentile and max |error| (metres, log axis) against the level.
 void write_plot(const std::string& path, const std::vector<ErrorStats>& per_level, const std::string& title) {
-  const int W = 760, H = 480, left = 78, right = 110, top = 36, bottom = 58;
-  cli::Canvas c(W, H);
-  const cli::Rgba ink{0, 0, 0, 255}, grid{215, 215, 215, 255};
-  const int levels = int(per_level.size());
-  double lo = INFINITY, hi = 0;
-  for (const ErrorStats& e : per_level)
-    for (double v : {e.rms, e.p999_abs, e.max_abs})
-      if (v > 0) lo = std::min(lo, v), hi = std::max(hi, v);
-  if (!(hi > 0)) lo = 0.01, hi = 1;  // lossless: every figure 0, drawn on the floor of the axis
-  const double d0 = std::floor(std::log10(lo)), d1 = std::max(std::ceil(std::log10(hi)), d0 + 1);
-  const double pw = W - left - right, ph = H - top - bottom;
-  auto px = [&](double level) { return left + (levels > 1 ? level / (levels - 1) : 0.5) * pw; };
-  auto py = [&](double v) {
-    const double lv = v > 0 ? std::log10(v) : d0;
-    return top + ph * (1 - (std::clamp(lv, d0, d1) - d0) / (d1 - d0));
-  };
-  for (double d = d0; d <= d1; ++d) {  // decades: grid line and label; 2 and 5 as lighter lines
-    c.line(left, py(std::pow(10, d)), W - right, py(std::pow(10, d)), grid);
-    const std::string label = cli::tick_label(std::pow(10, d));
-    c.text(left - 6 - cli::Canvas::text_width(label, 2), int(py(std::pow(10, d))) - 7, label, ink, 2);
-    if (d < d1)
-      for (double m : {2.0, 5.0})
-        c.line(left, py(m * std::pow(10, d)), W - right, py(m * std::pow(10, d)), {235, 235, 235, 255});
-  }
-  for (int l = 0; l < levels; ++l) {
-    c.line(px(l), top + ph, px(l), top + ph + 5, ink);
-    const std::string label = std::to_string(l);
-    c.text(int(px(l)) - cli::Canvas::text_width(label, 2) / 2, top + int(ph) + 9, label, ink, 2);
-  }
-  c.line(left, top, left, top + ph, ink);
-  c.line(left, top + ph, W - right, top + ph, ink);
-  const std::string xlabel = "pyramid level (0 = coarsest)", ylabel = "|error|, metres";
-  c.text(left + int(pw) / 2 - cli::Canvas::text_width(xlabel, 2) / 2, H - 22, xlabel, ink, 2);
-  c.text(10, top + int(ph) / 2 + cli::Canvas::text_width(ylabel, 2) / 2, ylabel, ink, 2, true);
-  c.text(left, 10, title, ink, 2);
+  cli::PlotAxes axes;
+  axes.title = title;
+  axes.x_label = "pyramid level (0 = coarsest)";
+  axes.y_label = "|error|, metres";
+  axes.log_y = true;
+  for (size_t l = 0; l < per_level.size(); ++l) axes.x_ticks.emplace_back(double(l), std::to_string(l));
   const struct {
     const char* name;
     cli::Rgba colour;
     double ErrorStats::*field;
-  } series[3] = {{"max", {200, 40, 40, 255}, &ErrorStats::max_abs},
+  } fields[3] = {{"max", {200, 40, 40, 255}, &ErrorStats::max_abs},
                  {"p99.9", {230, 140, 20, 255}, &ErrorStats::p999_abs},
                  {"rms", {30, 80, 200, 255}, &ErrorStats::rms}};
-  int legend_y = top + 8;
-  for (const auto& s : series) {
-    for (int l = 0; l < levels; ++l) {
-      const double v = per_level[size_t(l)].*s.field;
-      if (l > 0) c.line(px(l - 1), py(per_level[size_t(l - 1)].*s.field), px(l), py(v), s.colour, 2);
-      c.fill_rect(int(px(l)) - 3, int(py(v)) - 3, 7, 7, s.colour);
-    }
-    c.fill_rect(W - right + 12, legend_y + 5, 20, 3, s.colour);  // the legend, right of the plot
-    c.text(W - right + 38, legend_y, s.name, ink, 2);
-    legend_y += 20;
+  std::vector<cli::PlotSeries> series;
+  for (const auto& f : fields) {
+    cli::PlotSeries s{f.name, f.colour, {}, {}};
+    for (size_t l = 0; l < per_level.size(); ++l)
+      s.x.push_back(double(l)), s.y.push_back(per_level[l].*f.field);
+    series.push_back(std::move(s));
   }
-  write_picture(c, path, "plot");
+  write_picture(cli::line_plot(series, axes), path, "plot");
 }
 
 int run(int argc, char** argv) {

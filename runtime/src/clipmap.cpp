@@ -8,6 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "pyramid/downsample.h"
 #include "runtime/internal/toroidal_rows.h"
 
 namespace terrain::runtime {
@@ -110,7 +111,8 @@ Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(
   if (!(source.spacing_m() > 0))
     throw std::invalid_argument("clipmap: the height source's spacing must be positive");
   first_source_level_ = source_levels - levels;
-  budget_ = options.budget > 0 ? options.budget : int64_t(n_) * n_;
+  budget_ms_ = options.budget_ms > 0 && std::isfinite(options.budget_ms) ? options.budget_ms : 0;
+  set_budget(options.budget);
   tiles_ = (n_ - 1) / kTile + 2;
   levels_.resize(size_t(levels));
   refines_units_ = source.refines_units();
@@ -126,6 +128,18 @@ Clipmap::Clipmap(HeightSource& source, const ClipmapOptions& options) : source_(
   if (refines_units_) unit_scratch_.resize(nn);
   // The most any of compute_coarse, compute_normals and compute_tiles takes for an n-wide rectangle.
   rows_.resize(size_t(16) * size_t(n_ + 16));
+}
+
+void Clipmap::set_budget(int64_t samples) {
+  budget_request_ = samples;
+  budget_ = samples > 0      ? samples
+            : budget_ms_ > 0 ? std::numeric_limits<int64_t>::max() / 4
+                             : int64_t(n_) * n_;
+}
+
+void Clipmap::set_budget_ms(double ms) {
+  budget_ms_ = ms > 0 && std::isfinite(ms) ? ms : 0;
+  set_budget(budget_request_);
 }
 
 double Clipmap::spacing(int level) const {
@@ -325,9 +339,16 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
   L.clip_x0 = x0;
   L.clip_y0 = y0;
   L.has_data = true;
+  L.filling = false;
+  // Invalidated samples that left the clip region need no refill any more; new ones come fresh.
+  const Rect new_clip{x0, y0, n_, n_};
+  std::vector<Rect> still;
+  for (const Rect& r : L.invalid)
+    if (const Rect in = intersect(r, new_clip); in.width > 0 && in.height > 0) still.push_back(in);
+  L.invalid = std::move(still);
+  if (full) L.invalid.clear();
   // The newly exposed L-shape as two rectangles: whole-height columns, then rows over the rest.
-  std::vector<Rect>& rects = L.dirty;
-  rects.clear();
+  std::vector<Rect> rects;
   if (full) {
     rects.push_back(Rect{x0, y0, n_, n_});
   } else {
@@ -344,18 +365,12 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
     fill_rect(level, r, split);
     stats.samples_filled += r.width * r.height;
   }
-  ClipmapUpdateStats::Level& mine = stats.per_level[size_t(level)];
-  mine.seconds_fill = since(t0);
-  mine.seconds_upsample = split.upsample;
-  mine.seconds_residual = split.residual;
-  stats.seconds_fill += mine.seconds_fill;
-  stats.seconds_upsample += split.upsample;
-  stats.seconds_residual += split.residual;
-  for (const Rect& r : rects) mine.samples_filled += r.width * r.height;
+  const double seconds_fill = since(t0);
+  int64_t samples = 0;
+  for (const Rect& r : rects) samples += r.width * r.height;
   t0 = Clock::now();
   for (const Rect& r : rects) compute_coarse(level, r);
-  mine.seconds_coarse = since(t0);
-  stats.seconds_coarse += mine.seconds_coarse;
+  const double seconds_coarse = since(t0);
   t0 = Clock::now();
   // A sample's texels depend on the samples within 2 of it (U's support), clamped to the clip
   // region: recompute a 2-sample ring around the new samples, and the 2-sample band along the clip
@@ -370,8 +385,7 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
   for (size_t i = 0; i < new_rects; ++i) compute_normals(level, rings[i]);
   if (!full)
     for (const Rect& b : bands) compute_normals(level, b);
-  mine.seconds_normals = since(t0);
-  stats.seconds_normals += mine.seconds_normals;
+  const double seconds_normals = since(t0);
   t0 = Clock::now();
   for (const Rect& r : rects) compute_tiles(level, r);
   // Tiles straddling the clip border lost or gained samples where the region moved away: refresh
@@ -384,14 +398,222 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
       compute_tiles(level, b);
     }
   }
-  mine.seconds_bounds = since(t0);
-  stats.seconds_bounds += mine.seconds_bounds;
+  add_times(level, seconds_fill, split, seconds_coarse, seconds_normals, since(t0), 0, stats);
   // Normals changed on the ring and on the clip border too: report them for upload.
   if (!full) {
     for (size_t i = 0; i < new_rects; ++i) rects[i] = rings[i];
     for (const Rect& b : bands)
       if (b.width > 0 && b.height > 0) rects.push_back(b);
   }
+  L.dirty.insert(L.dirty.end(), rects.begin(), rects.end());
+}
+
+void Clipmap::add_times(int level, double fill, const FillSplit& split, double coarse, double normals,
+                        double bounds, int64_t samples, ClipmapUpdateStats& stats) {
+  ClipmapUpdateStats::Level& mine = stats.per_level[size_t(level)];
+  mine.seconds_fill += fill;
+  mine.seconds_upsample += split.upsample;
+  mine.seconds_residual += split.residual;
+  mine.seconds_coarse += coarse;
+  mine.seconds_normals += normals;
+  mine.seconds_bounds += bounds;
+  mine.samples_filled += samples;
+  stats.seconds_fill += fill;
+  stats.seconds_upsample += split.upsample;
+  stats.seconds_residual += split.residual;
+  stats.seconds_coarse += coarse;
+  stats.seconds_normals += normals;
+  stats.seconds_bounds += bounds;
+}
+
+bool Clipmap::coarser_covers(int level, int64_t x0, int64_t y0, int64_t x1, int64_t y1) const {
+  if (level == 0) return true;
+  const Level& C = levels_[size_t(level) - 1];
+  if (!C.has_data || C.filling) return false;
+  // U reads coarse samples floor(x/2) - 1 .. floor(x/2) + 2, zc floor(x/2) .. floor(x/2) + 1.
+  return (x0 >> 1) - 1 >= C.clip_x0 && (x1 >> 1) + 2 <= C.clip_x0 + n_ - 1 && (y0 >> 1) - 1 >= C.clip_y0 &&
+         (y1 >> 1) + 2 <= C.clip_y0 + n_ - 1;
+}
+
+void Clipmap::fill_strip(int level, int64_t rows, ClipmapUpdateStats& stats) {
+  Level& L = levels_[size_t(level)];
+  const int64_t r0 = L.rows_done, r1 = std::min<int64_t>(n_, r0 + rows);
+  const Rect strip{L.clip_x0, L.clip_y0 + r0, n_, r1 - r0};
+  auto t0 = Clock::now();
+  FillSplit split;
+  fill_rect(level, strip, split);
+  stats.samples_filled += strip.width * strip.height;
+  const double seconds_fill = since(t0);
+  t0 = Clock::now();
+  compute_coarse(level, strip);
+  const double seconds_coarse = since(t0);
+  // A sample's texels need the samples within 2 rows: rows up to r1 - 3 are final now, the last
+  // strip finishes the rest (compute_normals clamps to the clip region, as a whole fill does).
+  t0 = Clock::now();
+  const int64_t a = std::max<int64_t>(r0 - 2, 0), b = r1 == n_ ? n_ : r1 - 2;
+  compute_normals(level, Rect{L.clip_x0, L.clip_y0 + a, n_, b - a});
+  const double seconds_normals = since(t0);
+  t0 = Clock::now();
+  L.rows_done = r1;
+  if (r1 == n_) {
+    compute_tiles(level, Rect{L.clip_x0, L.clip_y0, n_, n_});
+    L.filling = false;
+    L.has_data = true;
+    L.dirty.assign(1, Rect{L.clip_x0, L.clip_y0, n_, n_});
+  }
+  add_times(level, seconds_fill, split, seconds_coarse, seconds_normals, since(t0),
+            strip.width * strip.height, stats);
+}
+
+void Clipmap::refill_invalid(int level, const Rect& r, ClipmapUpdateStats& stats) {
+  Level& L = levels_[size_t(level)];
+  const Rect clip{L.clip_x0, L.clip_y0, n_, n_};
+  auto t0 = Clock::now();
+  FillSplit split;
+  fill_rect(level, r, split);
+  stats.samples_filled += r.width * r.height;
+  const double seconds_fill = since(t0);
+  t0 = Clock::now();
+  compute_coarse(level, r);
+  const double seconds_coarse = since(t0);
+  t0 = Clock::now();
+  const Rect ring = intersect(dilate(r, 2), clip);  // texels within U's reach of the new samples
+  compute_normals(level, ring);
+  const double seconds_normals = since(t0);
+  t0 = Clock::now();
+  compute_tiles(level, r);
+  L.dirty.push_back(ring);
+  add_times(level, seconds_fill, split, seconds_coarse, seconds_normals, since(t0), r.width * r.height,
+            stats);
+}
+
+Clipmap::Piece Clipmap::plan_piece(int level, int64_t lines) const {
+  const Level& L = levels_[size_t(level)];
+  Piece p;
+  auto fresh = [&] {
+    p.kind = Piece::StartFill;
+    p.x0 = L.desired.x0;
+    p.y0 = L.desired.y0;
+    p.rows = std::min<int64_t>(lines, n_);
+    p.samples = int64_t(n_) * p.rows;
+    return p;
+  };
+  if (L.filling) {
+    // Carry on with the fresh fill unless the viewer has gone far from it or the coarser level no
+    // longer covers it (its zc and U would read clamped coarse samples).
+    const bool far =
+        std::abs(L.desired.x0 - L.clip_x0) >= n_ / 2 || std::abs(L.desired.y0 - L.clip_y0) >= n_ / 2;
+    if (far || !coarser_covers(level, L.clip_x0, L.clip_y0, L.clip_x0 + n_ - 1, L.clip_y0 + n_ - 1))
+      return fresh();
+    p.kind = Piece::Strip;
+    p.rows = std::min<int64_t>(lines, n_ - L.rows_done);
+    p.samples = int64_t(n_) * p.rows;
+    return p;
+  }
+  if (!at_desired(L)) {
+    const int64_t dx = L.desired.x0 - L.clip_x0, dy = L.desired.y0 - L.clip_y0;
+    if (!L.has_data || std::abs(dx) >= n_ || std::abs(dy) >= n_) return fresh();
+    // Every intermediate clip region lies in the box of the old and the new one.
+    const int64_t bx0 = std::min(L.clip_x0, L.desired.x0), by0 = std::min(L.clip_y0, L.desired.y0);
+    if (!coarser_covers(level, bx0, by0, bx0 + n_ - 1 + std::abs(dx), by0 + n_ - 1 + std::abs(dy)))
+      return fresh();
+    p.kind = Piece::Move;
+    // Both axes in one piece (one L-shape, one pass over the clip border), lines even.
+    const int64_t step = std::max<int64_t>(2, lines & ~int64_t(1));
+    const int64_t sx = std::clamp<int64_t>(dx, -step, step), sy = std::clamp<int64_t>(dy, -step, step);
+    p.x0 = L.clip_x0 + sx;
+    p.y0 = L.clip_y0 + sy;
+    p.samples = std::abs(sx) * n_ + std::abs(sy) * (n_ - std::abs(sx));
+    return p;
+  }
+  if (!L.invalid.empty()) {
+    const Rect& r = L.invalid.front();
+    p.kind = Piece::Invalid;
+    p.rect =
+        Rect{r.x0, r.y0, r.width,
+             std::min<int64_t>(r.height, std::max<int64_t>(1, lines * n_ / std::max<int64_t>(r.width, 1)))};
+    p.samples = p.rect.width * p.rect.height;
+  }
+  return p;
+}
+
+void Clipmap::run_piece(int level, const Piece& p, ClipmapUpdateStats& stats) {
+  Level& L = levels_[size_t(level)];
+  switch (p.kind) {
+    case Piece::StartFill:
+      L.filling = true;
+      L.has_data = false;
+      L.clip_x0 = p.x0;
+      L.clip_y0 = p.y0;
+      L.rows_done = 0;
+      L.invalid.clear();
+      L.dirty.clear();
+      fill_strip(level, p.rows, stats);
+      break;
+    case Piece::Strip:
+      fill_strip(level, p.rows, stats);
+      break;
+    case Piece::Move:
+      refill(level, p.x0, p.y0, stats);
+      break;
+    case Piece::Invalid: {
+      refill_invalid(level, p.rect, stats);
+      Rect& r = L.invalid.front();
+      r.y0 += p.rect.height;
+      r.height -= p.rect.height;
+      if (r.height <= 0) L.invalid.erase(L.invalid.begin());
+      break;
+    }
+    case Piece::None:
+      break;
+  }
+}
+
+void Clipmap::invalidate(const Rect& finest, int64_t align) {
+  if (align < 1) align = 1;
+  if (finest.width <= 0 || finest.height <= 0) return;
+  const int levels = level_count();
+  // Inclusive bounds per level: down from the finest by D's reach (coarse i reads fine 2i - 5 ..
+  // 2i + 5), then up again by U's (fine x reads coarse floor(x/2) - 1 .. floor(x/2) + 2) and zc's.
+  std::vector<std::array<int64_t, 4>> b(static_cast<size_t>(levels));
+  b[size_t(levels) - 1] = {finest.x0, finest.y0, finest.x0 + finest.width - 1, finest.y0 + finest.height - 1};
+  const int64_t r = terrain::DownsampleFilter::kRadius;
+  auto down_lo = [&](int64_t v) { return -floor_div(-(v - r), 2); };  // ceil((v - r) / 2)
+  auto down_hi = [&](int64_t v) { return floor_div(v + r, 2); };
+  for (int l = levels - 2; l >= 0; --l) {
+    const auto& f = b[size_t(l) + 1];
+    b[size_t(l)] = {down_lo(f[0]), down_lo(f[1]), down_hi(f[2]), down_hi(f[3])};
+  }
+  // Upwards, each level grown outwards to whole `align` tiles first (a re-coded tile changes all of
+  // its samples), which U then carries to the finer level.
+  for (int l = 0; l < levels; ++l) {
+    auto& m = b[size_t(l)];
+    if (l > 0) {
+      const auto& c = b[size_t(l) - 1];
+      m = {std::min(m[0], 2 * c[0] - 4), std::min(m[1], 2 * c[1] - 4), std::max(m[2], 2 * c[2] + 4),
+           std::max(m[3], 2 * c[3] + 4)};
+    }
+    m = {floor_div(m[0], align) * align, floor_div(m[1], align) * align,
+         (floor_div(m[2], align) + 1) * align - 1, (floor_div(m[3], align) + 1) * align - 1};
+  }
+  for (int l = 0; l < levels; ++l) {
+    Level& L = levels_[size_t(l)];
+    const auto& m = b[size_t(l)];
+    if (L.filling) {
+      L.rows_done = 0;  // the strips done so far may hold old samples: start again
+      continue;
+    }
+    if (!L.has_data) continue;
+    const Rect in =
+        intersect(Rect{m[0], m[1], m[2] - m[0] + 1, m[3] - m[1] + 1}, Rect{L.clip_x0, L.clip_y0, n_, n_});
+    if (in.width > 0 && in.height > 0) L.invalid.push_back(in);
+  }
+}
+
+int64_t Clipmap::invalid_samples(int level) const {
+  int64_t s = 0;
+  for (const Rect& r : lv(level).invalid) s += r.width * r.height;
+  return s;
 }
 
 float Clipmap::level_height_at(int level, double gx, double gy) const {
@@ -468,6 +690,7 @@ void Clipmap::crop_active_regions() {
 
 ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
   ClipmapUpdateStats stats;
+  const auto t_start = Clock::now();
   viewer_[0] = x_m;
   viewer_[1] = y_m;
   viewer_[2] = z_m;
@@ -489,34 +712,112 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
     L.enabled = on;
     if (!on) continue;
     ++stats.enabled_levels;
-    const bool current = L.has_data && L.clip_x0 == L.desired.x0 && L.clip_y0 == L.desired.y0;
-    if (!current && !blocked) {
-      const bool coarser_current =
-          l == 0 || (levels_[size_t(l) - 1].has_data &&
-                     levels_[size_t(l) - 1].clip_x0 == levels_[size_t(l) - 1].desired.x0 &&
-                     levels_[size_t(l) - 1].clip_y0 == levels_[size_t(l) - 1].desired.y0);
-      const int64_t cost = exposed_samples(L, L.desired.x0, L.desired.y0);
-      // The first refill of an update always goes ahead (at most n^2), so the clipmap makes progress
-      // even with a budget below n^2; after that the budget is a hard limit.
-      if (!coarser_current || (spent > 0 && spent + cost > budget_)) {
-        blocked = true;
-      } else {
-        try {
-          refill(l, L.desired.x0, L.desired.y0, stats);
-        } catch (...) {
-          // refill records the new clip region before filling it, and the toroidal storage now holds
-          // parts of the old and the new one: the level has no usable data. Its next update refills
-          // it whole; the finer levels wait for it (their own data stays valid).
-          L.has_data = false;
-          L.dirty.clear();
-          crop_active_regions();
-          throw;
+    // Coarse to fine: a level refines the coarser one as this clipmap holds it, so it waits until
+    // that one is complete (at its desired region, nothing invalidated pending).
+    if (!blocked && l > 0 && !ready(levels_[size_t(l) - 1])) blocked = true;
+    try {
+      if (!blocked && budget_ms_ > 0) {
+        // Pieces until the level is ready or the next piece would pass the time (or sample) budget;
+        // the update's first piece always goes ahead, so the clipmap makes progress.
+        const Rect start_clip{L.clip_x0, L.clip_y0, n_, n_};
+        const bool start_data = L.has_data;
+        int moves = 0;
+        bool fresh = false;
+        size_t move_rects = 0;
+        for (Piece p = plan_piece(l, kPiece); p.kind != Piece::None; p = plan_piece(l, kPiece)) {
+          // A move also redoes the clip border's normals and tiles: about 8 n samples' worth.
+          const double overhead = p.kind == Piece::Move ? 8.0 * n_ : 0.0;
+          // A kind of piece not timed yet takes the dearest estimate there is.
+          const double per = seconds_per_sample_[p.kind] > 0
+                                 ? seconds_per_sample_[p.kind]
+                                 : *std::max_element(seconds_per_sample_.begin(), seconds_per_sample_.end());
+          if (stats.pieces > 0) {
+            // Thinner pieces when the time left is short; stop when not even the thinnest fits.
+            if (per > 0) {
+              const double left = budget_ms_ * 1e-3 - since(t_start);
+              const int64_t lines = std::clamp<int64_t>(int64_t((left / per - overhead) / n_), 1, kPiece);
+              if (lines < kPiece) p = plan_piece(l, lines);
+            }
+            const double predicted = since(t_start) + (double(p.samples) + overhead) * per;
+            if (predicted > budget_ms_ * 1e-3 || spent + p.samples > budget_) {
+              stats.out_of_time = predicted > budget_ms_ * 1e-3;
+              blocked = true;
+              break;
+            }
+          }
+          const auto t0 = Clock::now();
+          run_piece(l, p, stats);
+          const double dt = since(t0);
+          // Seconds per sample, smoothed over the recent pieces (the prediction of the next one).
+          const double sps = dt / (double(p.samples) + overhead);
+          double& e = seconds_per_sample_[p.kind];
+          e = e > 0 ? 0.75 * e + 0.25 * sps : sps;
+          spent += p.samples;
+          ++stats.pieces;
+          if (p.kind == Piece::Move) ++moves, move_rects = L.dirty.size();
+          if (p.kind == Piece::StartFill) fresh = true;
         }
-        spent += cost;
-        ++stats.levels_updated;
+        if (moves > 0) ++stats.levels_updated;
+        if (moves >= 2 && start_data && !fresh) {
+          // Several moves: report the samples gained since the update began, as one move would
+          // (the renderer checks the dirty rectangles against the region it last uploaded).
+          const Rect now{L.clip_x0, L.clip_y0, n_, n_};
+          const int64_t dx = now.x0 - start_clip.x0, dy = now.y0 - start_clip.y0;
+          std::vector<Rect> rects;
+          if (dx != 0)
+            rects.push_back(intersect(
+                dilate(Rect{dx > 0 ? start_clip.x0 + n_ : now.x0, now.y0, std::abs(dx), n_}, 2), now));
+          if (dy != 0)
+            rects.push_back(
+                intersect(dilate(Rect{std::max(now.x0, start_clip.x0), dy > 0 ? start_clip.y0 + n_ : now.y0,
+                                      n_ - std::abs(dx), std::abs(dy)},
+                                 2),
+                          now));
+          for (const Rect& b : {Rect{now.x0, now.y0, n_, 2}, Rect{now.x0, now.y0 + n_ - 2, n_, 2},
+                                Rect{now.x0, now.y0, 2, n_}, Rect{now.x0 + n_ - 2, now.y0, 2, n_}})
+            rects.push_back(b);
+          rects.insert(rects.end(), L.dirty.begin() + std::ptrdiff_t(move_rects), L.dirty.end());
+          L.dirty = std::move(rects);
+        }
+        if (!ready(L)) blocked = true;
+      } else if (!blocked) {
+        if (!at_desired(L)) {
+          const int64_t cost = exposed_samples(L, L.desired.x0, L.desired.y0);
+          // The first refill of an update always goes ahead (at most n^2), so the clipmap makes
+          // progress even with a budget below n^2; after that the budget is a hard limit.
+          if (spent > 0 && spent + cost > budget_) {
+            blocked = true;
+          } else {
+            refill(l, L.desired.x0, L.desired.y0, stats);
+            spent += cost;
+            ++stats.levels_updated;
+            ++stats.pieces;
+          }
+        }
+        while (!blocked && at_desired(L) && !L.invalid.empty()) {
+          const Rect r = L.invalid.front();
+          if (spent > 0 && spent + r.width * r.height > budget_) {
+            blocked = true;
+          } else {
+            refill_invalid(l, r, stats);
+            L.invalid.erase(L.invalid.begin());
+            spent += r.width * r.height;
+            ++stats.pieces;
+          }
+        }
       }
+    } catch (...) {
+      // refill records the new clip region before filling it, and the toroidal storage now holds
+      // parts of the old and the new one: the level has no usable data. Its next update refills
+      // it whole; the finer levels wait for it (their own data stays valid).
+      L.has_data = false;
+      L.filling = false;
+      L.invalid.clear();
+      L.dirty.clear();
+      crop_active_regions();
+      throw;
     }
-    if (!(L.has_data && L.clip_x0 == L.desired.x0 && L.clip_y0 == L.desired.y0)) ++stats.levels_behind;
+    if (!ready(L)) ++stats.levels_behind;
   }
   crop_active_regions();
   for (const Level& L : levels_) stats.active_levels += L.active.empty() ? 0 : 1;

@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -381,4 +382,119 @@ TEST_CASE("clipmap: the normal map has twice the geometry's resolution (slopes o
       ++checked;
     }
   CHECK(checked > 200);
+}
+
+namespace {
+
+// Every level with data holds the source's samples on its whole clip region (a time-budgeted
+// update leaves no half-moved level).
+bool holds_source(const Clipmap& cm, const std::function<float(int, int64_t, int64_t)>& f, std::string& why) {
+  for (int l = 0; l < cm.level_count(); ++l) {
+    if (!cm.has_data(l)) continue;
+    const Rect c = cm.clip_region(l);
+    for (int64_t y = c.y0; y < c.y0 + c.height; ++y)
+      for (int64_t x = c.x0; x < c.x0 + c.width; ++x)
+        if (cm.heights(l)[cm.index(x, y)] != f(cm.source_level(l), x, y))
+          return why =
+                     "level " + std::to_string(l) + " sample " + std::to_string(x) + "," + std::to_string(y),
+                 false;
+  }
+  return true;
+}
+
+// Updates at (x, y) until no level is behind (at most `limit` updates); returns the count.
+int settle(Clipmap& cm, double x, double y, int limit) {
+  for (int i = 1; i <= limit; ++i)
+    if (cm.update(x, y, 1.0).levels_behind == 0) return i;
+  return limit + 1;
+}
+
+}  // namespace
+
+TEST_CASE("clipmap: a time budget refills in pieces, every level stays whole, and it converges",
+          "[clipmap]") {
+  auto src = hashed_source();
+  ClipmapOptions o = whole_updates(63);
+  o.budget = 0;        // no sample limit beside the time budget
+  o.budget_ms = 1e-6;  // far below one piece: every update does exactly its first piece
+  Clipmap cm(src, o);
+  CHECK(cm.budget_ms() == 1e-6);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> step(-30.0, 30.0);
+  double x = 100, y = -50;
+  bool saw_fill_strips = false, saw_behind = false;
+  for (int frame = 0; frame < 120; ++frame) {
+    if (frame > 40) x += step(rng), y += step(rng);
+    const ClipmapUpdateStats s = cm.update(x, y, 1.0);
+    CHECK(s.pieces <= 1);                                          // none once caught up
+    CHECK(s.samples_filled <= 2 * int64_t(Clipmap::kPiece) * 63);  // one L-shaped piece at most
+    if (s.levels_behind > 0) saw_behind = true;
+    for (int l = 0; l < cm.level_count(); ++l)
+      if (!cm.has_data(l) && l == 0 && frame > 0) saw_fill_strips = true;
+    std::string why;
+    const bool ok = holds_source(cm, hashed_height, why);
+    INFO(why);
+    REQUIRE(ok);
+  }
+  CHECK(saw_fill_strips);
+  CHECK(saw_behind);
+  // Standing still it catches up and equals a clipmap filled from scratch there.
+  REQUIRE(settle(cm, x, y, 2000) <= 2000);
+  auto src2 = hashed_source();
+  Clipmap fresh(src2, whole_updates(63));
+  fresh.update(x, y, 1.0);
+  for (int l = 0; l < cm.level_count(); ++l) {
+    std::string why;
+    const bool same = same_level(cm, fresh, l, why);
+    INFO("level " << l << ": " << why);
+    CHECK(same);
+  }
+  // A generous time budget does a whole flight step in one update.
+  cm.set_budget_ms(1e4);
+  const ClipmapUpdateStats s = cm.update(x + 40, y, 1.0);
+  CHECK(s.levels_behind == 0);
+  CHECK(!s.out_of_time);
+}
+
+TEST_CASE("clipmap: invalidate then update equals a fresh clipmap over the edited source", "[clipmap]") {
+  // The hashed terrain plus an edit: a bump on the finest level's rect and on each coarser level's
+  // samples under it (the region D spreads it to lies inside what invalidate marks).
+  Rect edit{0, 0, 0, 0};
+  float bump = 0;
+  auto edited = [&](int level, int64_t x, int64_t y) {
+    const int k = kLevels - 1 - level;
+    const bool in = x >= (edit.x0 >> k) && x <= ((edit.x0 + edit.width - 1) >> k) && y >= (edit.y0 >> k) &&
+                    y <= ((edit.y0 + edit.height - 1) >> k);
+    return hashed_height(level, x, y) + (in ? bump : 0.0f);
+  };
+  for (const bool timed : {false, true}) {
+    DYNAMIC_SECTION((timed ? "time budget" : "sample budget")) {
+      FunctionHeightSource src(kLevels, GridSize{1 << 12, 1 << 12}, 1.0, edited, true);
+      ClipmapOptions o = whole_updates(63);
+      if (timed) o.budget = 0, o.budget_ms = 1e-6;
+      Clipmap cm(src, o);
+      double x = 300, y = 200;
+      REQUIRE(settle(cm, x, y, 2000) <= 2000);
+      for (int round = 0; round < 3; ++round) {
+        edit = Rect{int64_t(x) - 20 + 13 * round, int64_t(y) - 7, 25, 18};
+        bump += 100.0f;
+        cm.invalidate(edit);
+        int64_t pending = 0;
+        for (int l = 0; l < cm.level_count(); ++l) pending += cm.invalid_samples(l);
+        CHECK(pending > 0);
+        REQUIRE(settle(cm, x, y, 2000) <= 2000);
+        for (int l = 0; l < cm.level_count(); ++l) CHECK(cm.invalid_samples(l) == 0);
+        FunctionHeightSource src2(kLevels, GridSize{1 << 12, 1 << 12}, 1.0, edited, true);
+        Clipmap fresh(src2, whole_updates(63));
+        fresh.update(x, y, 1.0);
+        for (int l = 0; l < cm.level_count(); ++l) {
+          std::string why;
+          const bool same = same_level(cm, fresh, l, why);
+          INFO("round " << round << " level " << l << ": " << why);
+          CHECK(same);
+        }
+        x += 9, y -= 5;  // the next edit comes after a move, with invalidated samples moving out
+      }
+    }
+  }
 }

@@ -17,6 +17,7 @@
 #include "render/leak_check.h"
 #include "render/renderer.h"
 #include "runtime/clipmap.h"
+#include "runtime/edit_overlay.h"
 #include "runtime/region_decoder.h"
 #include "runtime/screen_error.h"
 
@@ -59,6 +60,14 @@ struct ViewOptions {
   std::string script, screenshot, screenshot_window, record_path;
   std::string drape;  // --drape: an 8-bit RGB(A) image over the terrain's extent
   terrain::render::Mesh mesh = terrain::render::Mesh::Footprints;  // --mesh
+  // --plot-times: a PNG of update and render time per frame; --edit-script: timed terrain edits;
+  // --mirror: the virtual mirrored terrain's side (0: none).
+  std::string plot_times, edit_script;
+  int64_t mirror = 0;
+  // --edit-pyramid: write the edits into the pyramid file (libedit) instead of an overlay in memory;
+  // --edit-source: the heightmap it was built from (the editor then re-codes against its rebuild).
+  bool edit_pyramid = false;
+  std::string edit_source;
 };
 
 // The renderer's options from the command line.
@@ -79,10 +88,17 @@ std::vector<Key> default_path(terrain::runtime::HeightSource& source, double spa
 // The keyframes interpolated linearly at `frame` (clamped to the first and last).
 Key interpolate(const std::vector<Key>& keys, double frame);
 // The finest level's height (metres) at the sample nearest (x, y), clamped into the terrain.
-float ground_height(terrain::runtime::RegionDecoderSource& source, double x, double y);
+float ground_height(terrain::runtime::HeightSource& source, double x, double y);
 // The flight's camera at a keyframe: `above` metres over ground_height.
-terrain::render::Camera camera_at(terrain::runtime::RegionDecoderSource& source, const Key& k,
-                                  double fov_deg);
+terrain::render::Camera camera_at(terrain::runtime::HeightSource& source, const Key& k, double fov_deg);
+
+// --edit-script: lines 'SECONDS brush X Y RADIUS HEIGHT [cone|smooth|flat]' and 'SECONDS channel X0
+// Y0 X1 Y1 RADIUS DEPTH' (finest-level samples, metres; # comments), at frame round(30 SECONDS).
+struct EditEvent {
+  int frame = 0;
+  terrain::runtime::TerrainEdit edit;
+};
+std::vector<EditEvent> read_edit_script(const std::string& path);
 
 // What a flight flies over.
 struct Flight {
@@ -93,6 +109,8 @@ struct Flight {
   terrain::runtime::HeightSource& heights;        // what the clipmap shows: source or its synthesis
   terrain::runtime::ClipmapOptions clipmap;
   double spacing;  // metres between finest samples
+  // Under the camera (ground height, the default path): `source`, or --mirror's virtual terrain.
+  terrain::runtime::HeightSource* ground = nullptr;
 };
 
 // The screen-space error of levels first_level.. for triangles of s_px pixels, estimated from the

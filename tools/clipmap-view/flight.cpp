@@ -15,8 +15,11 @@
 
 #include "cli.h"
 #include "clipmap_view.h"
+#include "codec/codec.h"
 #include "core/file.h"
+#include "edit/pyramid_edit.h"
 #include "json_writer.h"
+#include "plot.h"
 #include "readers/heightmap.h"
 #include "render/renderer.h"
 #include "report_file.h"
@@ -151,7 +154,7 @@ Key interpolate(const std::vector<Key>& keys, double frame) {
              mix(a.pitch_deg, b.pitch_deg)};
 }
 
-float ground_height(RegionDecoderSource& source, double x, double y) {
+float ground_height(HeightSource& source, double x, double y) {
   const int finest_level = source.level_count() - 1;
   const double spacing = source.spacing_m();
   const GridSize fs = source.level_size(finest_level);
@@ -162,7 +165,7 @@ float ground_height(RegionDecoderSource& source, double x, double y) {
   return ground;
 }
 
-Camera camera_at(RegionDecoderSource& source, const Key& k, double fov_deg) {
+Camera camera_at(HeightSource& source, const Key& k, double fov_deg) {
   Camera cam;
   cam.position[0] = k.x;
   cam.position[1] = k.y;
@@ -173,7 +176,67 @@ Camera camera_at(RegionDecoderSource& source, const Key& k, double fov_deg) {
   return cam;
 }
 
+std::vector<EditEvent> read_edit_script(const std::string& path) {
+  std::vector<EditEvent> events;
+  for (const auto& [number, line] : read_small_text(path, "edit script")) {
+    std::istringstream s(line);
+    double seconds = 0;
+    std::string kind;
+    if (!(s >> seconds)) continue;  // blank or comment line
+    const std::string where = path + ":" + std::to_string(number) + ": ";
+    EditEvent e;
+    bool ok = bool(s >> kind);
+    if (ok && kind == "brush") {
+      ok = bool(s >> e.edit.x0 >> e.edit.y0 >> e.edit.radius >> e.edit.height);
+      e.edit.x1 = e.edit.x0, e.edit.y1 = e.edit.y0;
+      std::string shape;
+      if (ok && s >> shape && !parse_edit_shape(shape, &e.edit.shape))
+        throw Error(ErrorCode::MissingField,
+                    where + "brush shape must be cone, smooth or flat, got " + shape);
+    } else if (ok && kind == "channel") {
+      double depth = 0;
+      ok = bool(s >> e.edit.x0 >> e.edit.y0 >> e.edit.x1 >> e.edit.y1 >> e.edit.radius >> depth);
+      e.edit.height = -depth;
+    } else {
+      throw Error(ErrorCode::MissingField, where +
+                                               "expected 'SECONDS brush X Y RADIUS HEIGHT [SHAPE]' or "
+                                               "'SECONDS channel X0 Y0 X1 Y1 RADIUS DEPTH'");
+    }
+    const TerrainEdit& t = e.edit;
+    if (!ok || !std::isfinite(seconds + t.x0 + t.y0 + t.x1 + t.y1 + t.radius + t.height) || seconds < 0 ||
+        seconds > 1e6 || !(t.radius > 0) || t.radius > 1e9)
+      throw Error(ErrorCode::MissingField,
+                  where + "bad " + kind + " (seconds 0..1e6, finite numbers, radius in (0, 1e9] samples)");
+    e.frame = int(std::lround(seconds * 30));
+    events.push_back(e);
+  }
+  std::stable_sort(events.begin(), events.end(),
+                   [](const EditEvent& a, const EditEvent& b) { return a.frame < b.frame; });
+  return events;
+}
+
 namespace {
+
+// Resident memory now, MiB (/proc/self/statm), and the peak so far (getrusage).
+double rss_mib() {
+  std::ifstream statm("/proc/self/statm");
+  long pages = 0, resident = 0;
+  if (!(statm >> pages >> resident)) return 0;
+  return double(resident) * double(sysconf(_SC_PAGESIZE)) / double(1 << 20);
+}
+double peak_rss_mib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;
+}
+
+// CPU seconds of the calling thread: the update's own work, without the time a loaded machine
+// does not run it (wall time includes that).
+double thread_cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
 
 // CPU seconds of the whole process (all threads, llvmpipe's included): on a shared machine a steadier
 // measure of the work per frame than wall time.
@@ -186,7 +249,8 @@ double cpu_seconds() {
 
 // Per-frame times (ms) and counts of a flight, for the summaries.
 struct FlightLog {
-  std::vector<double> frame_ms, update_ms, render_ms, upload_ms, psnr;
+  std::vector<double> frame_ms, update_ms, update_cpu_ms, render_ms, upload_ms, psnr, rss_mib;
+  double peak_rss_mib = 0;  // at the end of the flight (before the plot and the summary are written)
   // The update's parts per frame, ms: decode (all of the fill), U, residual, zc, normals, bounds.
   std::array<std::vector<double>, 6> part_ms;
   int64_t triangles_total = 0;
@@ -211,6 +275,17 @@ void write_stats_json(const std::string& json_path, const Flight& flight, const 
   if (o.max_screen_error) j.field("max_screen_error_px", *o.max_screen_error);
   j.field("width", o.width).field("height", o.height).field("fov_y_deg", o.fov).field("frames", o.frames);
   j.field("budget", clipmap.budget()).field("transitions", !o.no_transitions).field("culling", !o.no_culling);
+  j.field("budget_ms", clipmap.budget_ms());
+  if (o.mirror > 0) j.field("mirror", o.mirror);
+  j.field("update_ms_p95", percentile(log.update_ms, 0.95))
+      .field("update_ms_max", percentile(log.update_ms, 1.0))
+      .field("update_cpu_ms_median", percentile(log.update_cpu_ms, 0.5))
+      .field("update_cpu_ms_p95", percentile(log.update_cpu_ms, 0.95));
+  // Memory: the peak, and the resident size a tenth into the flight and at its end (a flight whose
+  // memory is bounded has the two about equal, however long it is).
+  j.field("peak_rss_mib", log.peak_rss_mib)
+      .field("rss_mib_at_10_percent", log.rss_mib.empty() ? 0.0 : log.rss_mib[log.rss_mib.size() / 10])
+      .field("rss_mib_at_end", log.rss_mib.empty() ? 0.0 : log.rss_mib.back());
   j.field("frame_ms_median", med).field("frame_ms_p99", p99);
   j.field("fps_median", med > 0 ? 1e3 / med : 0.0).field("cpu_ms_per_frame", log.cpu_ms_per_frame);
   j.field("update_ms_median", percentile(log.update_ms, 0.5))
@@ -282,10 +357,116 @@ void print_summary(const Flight& flight, const FlightLog& log) {
       "update parts, median ms: decode %.3f (U %.3f, residual %.3f), zc %.3f, normals %.3f, bounds %.3f\n",
       percentile(log.part_ms[0], 0.5), percentile(log.part_ms[1], 0.5), percentile(log.part_ms[2], 0.5),
       percentile(log.part_ms[3], 0.5), percentile(log.part_ms[4], 0.5), percentile(log.part_ms[5], 0.5));
+  std::printf("update ms: median %.3f, p95 %.3f, max %.3f%s; peak RSS %.1f MiB\n",
+              percentile(log.update_ms, 0.5), percentile(log.update_ms, 0.95), percentile(log.update_ms, 1.0),
+              flight.clipmap.budget_ms > 0
+                  ? (" (budget " + cli::tick_label(flight.clipmap.budget_ms) + " ms)").c_str()
+                  : "",
+              log.peak_rss_mib);
   if (!log.psnr.empty())
     std::printf("image PSNR against %s: median %.2f dB, min %.2f dB (99 = identical)\n",
                 (flight.ref_file ? o.reference : o.original).c_str(), percentile(log.psnr, 0.5),
                 *std::min_element(log.psnr.begin(), log.psnr.end()));
+}
+
+// --plot-times: update and render (upload + draw) time per frame, the time budget as a line.
+void write_times_plot(const std::string& path, const FlightLog& log, double budget_ms,
+                      const std::string& title) {
+  cli::PlotSeries update{"update", {200, 40, 40, 255}, {}, {}, false, 1};
+  cli::PlotSeries render{"render", {30, 80, 200, 255}, {}, {}, false, 1};
+  for (size_t f = 0; f < log.update_ms.size(); ++f) {
+    update.x.push_back(double(f)), update.y.push_back(log.update_ms[f]);
+    render.x.push_back(double(f)), render.y.push_back(log.render_ms[f] + log.upload_ms[f]);
+  }
+  std::vector<cli::PlotSeries> series{update, render};
+  if (budget_ms > 0 && !log.update_ms.empty())
+    series.push_back(cli::PlotSeries{"budget",
+                                     {20, 150, 60, 255},
+                                     {0, double(log.update_ms.size() - 1)},
+                                     {budget_ms, budget_ms},
+                                     false,
+                                     1});
+  cli::PlotAxes axes;
+  axes.title = title;
+  axes.x_label = "frame";
+  axes.y_label = "milliseconds";
+  axes.log_y = true;  // update (sub-millisecond) and render (tens of ms on llvmpipe) on one plot
+  try {
+    cli::line_plot(series, axes).write_png(path);
+  } catch (const Error& e) {
+    throw Error(ErrorCode::WriteFailed, std::string("cannot write the times plot: ") + e.what());
+  }
+}
+
+// --mirror without --path: a straight low flight from the middle of the virtual terrain, 4 finest
+// samples a frame (fast for the finest level, which then refills every frame).
+std::vector<Key> mirror_path(HeightSource& source, double spacing, int frames) {
+  const GridSize fs = source.level_size(source.level_count() - 1);
+  const double cx = 0.5 * double(fs.width) * spacing, cy = 0.5 * double(fs.height) * spacing;
+  const double d = 4.0 * spacing * std::max(frames - 1, 1);
+  return {{0, cx, cy, 300, 30, -12},
+          {double(std::max(frames - 1, 1)), cx + d * 0.866, cy + d * 0.5, 300, 30, -12}};
+}
+
+// What the clipmap shows when --edit-pyramid rewrites the file: the source of the file's latest
+// version, switched after each commit (the clipmap keeps its reference to this).
+class SwitchableSource final : public HeightSource {
+ public:
+  explicit SwitchableSource(HeightSource& s) : s_(&s) {}
+  void set(HeightSource& s) { s_ = &s; }
+  int level_count() const override { return s_->level_count(); }
+  GridSize level_size(int level) const override { return s_->level_size(level); }
+  double spacing_m() const override { return s_->spacing_m(); }
+  void fill(int level, const Rect& rect, float* out, int64_t out_stride) override {
+    s_->fill(level, rect, out, out_stride);
+  }
+  bool refines_units() const override { return s_->refines_units(); }
+  void fill_units(int level, const Rect& rect, const HeldUnits* coarser, float* out, int32_t* units_out,
+                  int64_t out_stride, FillSplit* split) override {
+    s_->fill_units(level, rect, coarser, out, units_out, out_stride, split);
+  }
+
+ private:
+  HeightSource* s_;
+};
+
+// The codec tile side of a pyramid's levels (the largest any band's header gives): what an edit
+// re-codes as a whole.
+int64_t codec_tile_size(const container::PyramidFile& file) {
+  int64_t t = 1;
+  for (int l = 0; l < file.level_count(); ++l)
+    for (const container::BandView& v : file.bands(l)) {
+      codec::HeaderInfo h;
+      if (!v.empty() && codec::read_header(v.data, v.size, &h) == codec::Status::Ok)
+        t = std::max<int64_t>(t, int64_t(h.tile_size));
+    }
+  return t;
+}
+
+// One edit written into the file through libedit: a brush as it is, a channel as a patch of the
+// current finest level plus the channel's profile (NaN where it adds nothing).
+edit::EditStats commit_edit(edit::PyramidEditor& editor, const TerrainEdit& e, HeightSource& current) {
+  if (e.x0 == e.x1 && e.y0 == e.y1) {
+    edit::Brush b{e.x0, e.y0, e.radius, e.height, edit::BrushShape::Smooth};
+    edit::parse_brush_shape(edit_shape_name(e.shape), &b.shape);
+    editor.apply(b);
+  } else {
+    const Rect r = edit_bounds(e);
+    if (r.width * r.height > (int64_t(1) << 26))
+      throw Error(ErrorCode::Oversized, "edit script: a channel over more than 2^26 samples");
+    edit::Patch p;
+    p.x = r.x0, p.y = r.y0, p.width = r.width, p.height = r.height;
+    p.heights.resize(size_t(r.width * r.height));
+    current.fill(current.level_count() - 1, r, p.heights.data(), r.width);
+    for (int64_t y = 0; y < r.height; ++y)
+      for (int64_t x = 0; x < r.width; ++x) {
+        const double d = edit_delta(e, double(r.x0 + x), double(r.y0 + y));
+        float& h = p.heights[size_t(y * r.width + x)];
+        h = d != 0 ? float(h + d) : std::nanf("");
+      }
+    editor.apply(p);
+  }
+  return editor.commit();
 }
 
 }  // namespace
@@ -294,8 +475,26 @@ int run_flight(const Flight& flight) {
   const ViewOptions& o = flight.options;
   const ClipmapOptions& copt = flight.clipmap;
   const double spacing = flight.spacing;
-  RegionDecoderSource& source = flight.source;
-  Clipmap clipmap(flight.heights, copt);
+  HeightSource* ground = flight.ground ? flight.ground : &flight.source;
+  // --edit-script: the edits go into an overlay over what the clipmap shows (or, --edit-pyramid,
+  // into the file, whose new version the clipmap then reads), and the clipmap refills the samples
+  // each one reaches (Clipmap::invalidate) within its budget.
+  const std::vector<EditEvent> edits =
+      o.edit_script.empty() ? std::vector<EditEvent>{} : read_edit_script(o.edit_script);
+  EditOverlaySource overlay(flight.heights);
+  SwitchableSource live(flight.heights);
+  std::unique_ptr<edit::PyramidEditor> editor;
+  std::shared_ptr<const RegionDecoder> decoder = flight.decoder;
+  std::unique_ptr<RegionDecoderSource> edited_source;
+  int64_t tile_size = 1;
+  if (o.edit_pyramid) {
+    editor = edit::PyramidEditor::open(o.pyramid);
+    if (!o.edit_source.empty()) editor->set_source(o.edit_source);
+    tile_size = codec_tile_size(*flight.file);
+  }
+  HeightSource& shown = edits.empty() ? flight.heights : editor ? static_cast<HeightSource&>(live) : overlay;
+  Clipmap clipmap(shown, copt);
+  size_t next_edit = 0;
   DamageLog damage;
 
   // The reference flight: same clipmap options over another pyramid or the original input.
@@ -304,8 +503,9 @@ int run_flight(const Flight& flight) {
   std::unique_ptr<Clipmap> ref_clipmap;
   if (reference.source) ref_clipmap = std::make_unique<Clipmap>(*reference.source, copt);
 
-  const std::vector<Key> keys =
-      o.path_file.empty() ? default_path(source, spacing, o.frames) : read_path(o.path_file);
+  const std::vector<Key> keys = !o.path_file.empty() ? read_path(o.path_file)
+                                : o.mirror > 0       ? mirror_path(*ground, spacing, o.frames)
+                                                     : default_path(*ground, spacing, o.frames);
 
   std::error_code ec;
   std::filesystem::create_directories(o.out_dir, ec);
@@ -316,7 +516,8 @@ int run_flight(const Flight& flight) {
   csv << "frame,x_m,y_m,z_m,update_ms,decode_ms,upsample_ms,residual_ms,zc_ms,normals_ms,bounds_ms,upload_ms,"
          "render_ms,frame_ms,"
          "triangles,blocks_drawn,blocks_culled,draw_calls,active_levels,levels_behind,samples_decoded,"
-         "samples_reconstructed,residual_samples_decoded,samples_uploaded,psnr_db\n";
+         "samples_reconstructed,residual_samples_decoded,samples_uploaded,psnr_db,pieces,out_of_time,edits,"
+         "edit_ms,rss_mib,update_cpu_ms\n";
 
   // Screen-space geometric error of the levels this clipmap renders (L&H 2004 Table 2).
   const double s_px = triangle_size_px(o.width, o.height, o.fov, copt.n);
@@ -348,11 +549,35 @@ int run_flight(const Flight& flight) {
   for (int f = 0; f < o.frames; ++f) {
     const Key k = interpolate(keys, double(f));
     // Ground under the camera from the finest level (one sample, decoded through the tile cache).
-    const Camera cam = camera_at(source, k, o.fov);
-    const RegionStats before = flight.decoder->stats();
+    int edits_now = 0;
+    double edit_ms = 0;
+    for (; next_edit < edits.size() && edits[next_edit].frame <= f; ++next_edit, ++edits_now) {
+      const TerrainEdit& e = edits[next_edit].edit;
+      if (!editor) {
+        clipmap.invalidate(overlay.add(e));
+        continue;
+      }
+      // Write through: commit, reopen the file's new version, show it, refill what changed.
+      const auto te = Clock::now();
+      const edit::EditStats es = commit_edit(*editor, e, *ground);
+      decoder = std::make_shared<const RegionDecoder>(container::PyramidFile::open(o.pyramid),
+                                                      size_t(256) << 20, DamagePolicy::Degrade);
+      edited_source = std::make_unique<RegionDecoderSource>(decoder, spacing);
+      live.set(*edited_source);
+      ground = edited_source.get();
+      clipmap.invalidate(edit_bounds(e), tile_size);
+      edit_ms += since(te) * 1e3;
+      if (!o.quiet)
+        std::cerr << "clipmap-view: frame " << f << ": edit committed (generation " << es.generation << ", "
+                  << es.bytes_appended << " bytes appended, " << since(te) * 1e3 << " ms)\n";
+    }
+    const Camera cam = camera_at(*ground, k, o.fov);
+    const RegionStats before = decoder->stats();
+    const double cpu_before = thread_cpu_seconds();
     const auto t0 = Clock::now();
     const ClipmapUpdateStats us = clipmap.update(cam.position[0], cam.position[1], cam.position[2]);
     const double upd = since(t0);
+    log.update_cpu_ms.push_back((thread_cpu_seconds() - cpu_before) * 1e3);
     RenderStats rs;
     {
       const GlLeakCheckPause gl_pause;
@@ -360,8 +585,8 @@ int run_flight(const Flight& flight) {
       rs = renderer.render(clipmap, cam, ropt);
     }
     const double total = since(t0);
-    const RegionStats after = flight.decoder->stats();
-    damage.poll(*flight.decoder);
+    const RegionStats after = decoder->stats();
+    damage.poll(*decoder);
     double frame_psnr = std::nan("");
     if (ref_clipmap) {
       ref_clipmap->update(cam.position[0], cam.position[1], cam.position[2]);
@@ -406,17 +631,23 @@ int run_flight(const Flight& flight) {
         << us.samples_filled << ',' << after.samples_reconstructed - before.samples_reconstructed << ','
         << after.residual_samples_decoded - before.residual_samples_decoded << ',' << rs.samples_uploaded
         << ',';
-    if (std::isnan(frame_psnr))
-      csv << '\n';
-    else
-      csv << frame_psnr << '\n';
+    if (!std::isnan(frame_psnr)) csv << frame_psnr;
+    log.rss_mib.push_back(rss_mib());
+    csv << ',' << us.pieces << ',' << (us.out_of_time ? 1 : 0) << ',' << edits_now << ',' << edit_ms << ','
+        << log.rss_mib.back() << ',' << log.update_cpu_ms.back() << '\n';
   }
   // CPU per frame covers everything in the loop (reference renders and PNG writing included).
   log.cpu_ms_per_frame = (cpu_seconds() - cpu0) * 1e3 / o.frames;
+  log.peak_rss_mib = peak_rss_mib();
   csv_file.finish();
 
-  damage.poll(*flight.decoder);
+  damage.poll(*decoder);
   write_stats_json(json_path, flight, clipmap, gl.renderer_name(), log, sse, s_px, damage.parts());
+  if (!o.plot_times.empty())
+    write_times_plot(
+        o.plot_times, log, clipmap.budget_ms(),
+        std::filesystem::path(o.pyramid).filename().string() +
+            (clipmap.budget_ms() > 0 ? ", --budget-ms " + cli::tick_label(clipmap.budget_ms()) : ""));
   print_summary(flight, log);
   if (!written.empty() && !o.quiet)
     std::cerr << "clipmap-view: " << written.size() << " PNG frames in " << o.out_dir << "\n";

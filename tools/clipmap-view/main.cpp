@@ -8,6 +8,7 @@
 #include "cli.h"
 #include "clipmap_view.h"
 #include "container/container.h"
+#include "runtime/mirrored_source.h"
 #include "runtime/synthesis.h"
 
 using namespace terrain;
@@ -68,6 +69,7 @@ int run(int argc, char** argv) {
   double synth_detail = 1.0;
   int n = 255, levels = 0;
   int64_t budget = 0;
+  double budget_ms = 0;
   bool n_given = false;
   cli::CommonFlags common;
   cli::ArgParser p(
@@ -105,6 +107,35 @@ int run(int argc, char** argv) {
            [&](const std::string& v) { levels = int(cli::parse_int("--levels", v, 1, 30)); });
   p.option("--budget", "SAMPLES", "samples refilled per frame (default n*n)",
            [&](const std::string& v) { budget = cli::parse_int("--budget", v, 1, int64_t(1) << 40); });
+  p.option(
+      "--budget-ms", "MS",
+      "milliseconds of clipmap refill per frame (the paper's steady frame rate): the update refills in\n"
+      "strips and stops before one that would pass MS; levels left behind are cropped as with --budget.\n"
+      "Not deterministic (what fits depends on the machine); --budget is the deterministic limit",
+      [&](const std::string& v) {
+        budget_ms = cli::parse_double("--budget-ms", v);
+        if (!(budget_ms > 0 && budget_ms <= 1e5)) throw cli::UsageError("--budget-ms must be in (0, 1e5]");
+      });
+  p.option("--plot-times", "FILE.png", "write a plot of update and render time per frame (headless flight)",
+           &o.plot_times);
+  p.option(
+      "--edit-script", "FILE",
+      "timed terrain edits during the flight: lines 'SECONDS brush X Y RADIUS HEIGHT [cone|smooth|flat]',\n"
+      "'SECONDS channel X0 Y0 X1 Y1 RADIUS DEPTH' (finest-level samples, metres; frame = 30 SECONDS),\n"
+      "applied in memory over the pyramid's heights; the clipmap refills what each reaches",
+      &o.edit_script);
+  p.flag("--edit-pyramid",
+         "--edit-script writes each edit into PYRAMID itself (libedit: re-coded tiles, atomic copy-on-write\n"
+         "commit) and the flight shows the file's new version; without it the edits stay in memory",
+         &o.edit_pyramid);
+  p.option("--edit-source", "HEIGHTMAP",
+           "--edit-pyramid: the heightmap PYRAMID was built from; the edited file then decodes like a\n"
+           "rebuild from the edited heightmap (within the file's step)",
+           &o.edit_source);
+  p.option("--mirror", "SIZE",
+           "fly over a virtual SIZE x SIZE terrain (up to 2^30) repeating the pyramid by mirror reflection,\n"
+           "not materialised (coarser levels than the file's computed by its D); default path: straight, low",
+           [&](const std::string& v) { o.mirror = cli::parse_int("--mirror", v, 1, int64_t(1) << 30); });
   p.option("--fov", "DEG", "vertical field of view (default 60)", [&](const std::string& v) {
     o.fov = cli::parse_double("--fov", v);
     if (!(o.fov > 1 && o.fov < 179)) throw cli::UsageError("--fov must be in (1, 179) degrees");
@@ -241,13 +272,40 @@ int run(int argc, char** argv) {
       std::cerr << " m\n";
     }
   }
-  HeightSource& heights = synth ? static_cast<HeightSource&>(*synth) : source;
+  HeightSource& stored = synth ? static_cast<HeightSource&>(*synth) : source;
+  std::unique_ptr<MirroredSource> mirror;
+  if (o.mirror > 0) {
+    if (o.window || !o.reference.empty() || !o.original.empty() || bench > 0)
+      throw cli::UsageError("--mirror cannot be combined with --window, --reference, --original or --bench");
+    const GridSize fs = stored.level_size(stored.level_count() - 1);
+    if (o.mirror < std::max(fs.width, fs.height))
+      throw cli::UsageError("--mirror must be at least the pyramid's finest side (" +
+                            std::to_string(std::max(fs.width, fs.height)) + ")");
+    DownsampleFilter d = DownsampleFilter::default_filter();
+    if (info.filter_size == uint32_t(DownsampleFilter::kSize) && info.filter.size() == d.taps.size())
+      std::copy(info.filter.begin(), info.filter.end(), d.taps.begin());
+    mirror = std::make_unique<MirroredSource>(stored, GridSize{o.mirror, o.mirror}, d);
+    if (!o.quiet)
+      std::cerr << "clipmap-view: --mirror " << o.mirror << ": " << mirror->level_count() << " levels ("
+                << mirror->level_count() - mirror->base_level(mirror->level_count() - 1) - 1
+                << " beyond the file's own), " << mirror->memory_bytes() / 1024 << " KiB held\n";
+  }
+  HeightSource& heights = mirror ? static_cast<HeightSource&>(*mirror) : stored;
   if (levels > heights.level_count())
     throw cli::UsageError("--levels " + std::to_string(levels) + " exceeds the source's " +
                           std::to_string(heights.level_count()));
   ClipmapOptions copt;
   copt.levels = levels;
   copt.budget = budget;
+  copt.budget_ms = budget_ms;
+  if (o.window && (budget_ms > 0 || !o.plot_times.empty() || !o.edit_script.empty()))
+    throw cli::UsageError("--budget-ms, --plot-times and --edit-script are for the headless flight");
+  if ((o.edit_pyramid || !o.edit_source.empty()) && o.edit_script.empty())
+    throw cli::UsageError("--edit-pyramid and --edit-source need --edit-script");
+  if (!o.edit_source.empty() && !o.edit_pyramid) throw cli::UsageError("--edit-source needs --edit-pyramid");
+  if (o.edit_pyramid && (synth || mirror || !o.reference.empty() || !o.original.empty()))
+    throw cli::UsageError(
+        "--edit-pyramid cannot be combined with --synth-levels, --mirror, --reference or --original");
   if (o.max_screen_error) {
     if (n_given) throw cli::UsageError("give --n or --max-screen-error, not both");
     if (synth) throw cli::UsageError("--max-screen-error cannot be combined with --synth-levels");
@@ -259,10 +317,12 @@ int run(int argc, char** argv) {
     if (o.window || bench > 0 || !o.reference.empty() || !o.original.empty())
       throw cli::UsageError(
           "--bench-render cannot be combined with --window, --bench, --reference or --original");
-    return run_bench_render(Flight{o, file, ref_file, decoder, source, heights, copt, spacing}, bench_render);
+    return run_bench_render(Flight{o, file, ref_file, decoder, source, heights, copt, spacing, mirror.get()},
+                            bench_render);
   }
-  if (o.window) return run_window(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
-  return run_flight(Flight{o, file, ref_file, decoder, source, heights, copt, spacing});
+  if (o.window)
+    return run_window(Flight{o, file, ref_file, decoder, source, heights, copt, spacing, nullptr});
+  return run_flight(Flight{o, file, ref_file, decoder, source, heights, copt, spacing, mirror.get()});
 }
 
 }  // namespace

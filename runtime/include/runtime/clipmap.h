@@ -21,6 +21,17 @@
 // Levels whose grid spacing is too fine for the viewer's height above the terrain are switched off
 // (paper §4: active region empty when height > 0.4 n g_l).
 //
+// A time budget (budget_ms, the paper's steady frame rate) refills in pieces instead: a level's clip
+// region moves towards the desired one by L-shaped strips of at most kPiece columns and rows (each
+// piece leaves a whole, valid n x n clip region), a level that must be filled afresh is filled by row strips
+// over several updates (without data until the last strip), and the update stops before a piece whose
+// predicted time (seconds per sample of the pieces so far) would pass the budget. What a frame gets
+// done then depends on the machine's speed: a time budget is not deterministic, the sample budget is.
+//
+// Edits (invalidate): the samples of every level that an edit of the source's finest level can
+// reach (D's reach downwards, U's and zc's upwards) are refilled by later updates, coarse to fine,
+// under the same budgets; a level with such samples pending counts as behind.
+//
 // Each level also keeps, per sample: zc, the coarser level's surface at that vertex (for the
 // transition morph), a normal map at twice the geometry's resolution (paper §3: one normal per
 // vertex is too blurry) holding the slopes dz/dx, dz/dy of the level upsampled by the pyramid's
@@ -55,7 +66,8 @@ struct ZRange {
 struct ClipmapOptions {
   int n = 255;                       // samples per level side, 2^k - 1, 15..1023
   int levels = 0;                    // 0: as many as the source has
-  int64_t budget = 0;                // samples refilled per update; 0: n * n
+  int64_t budget = 0;                // samples refilled per update; 0: n * n (no limit with budget_ms)
+  double budget_ms = 0;              // milliseconds of refill per update (not deterministic); 0: none
   bool deactivate_by_height = true;  // switch off levels too fine for the viewer's height (paper §4)
   double height_factor = 0.4;        // level l off when viewer height above terrain > factor * n * spacing(l)
 };
@@ -81,6 +93,9 @@ struct ClipmapUpdateStats {
   int64_t samples_filled = 0;  // samples taken from the source this update
   int levels_updated = 0;      // levels whose clip region moved
   int levels_behind = 0;       // enabled levels whose clip region still differs from the desired one
+                               // (or that are being filled afresh, or have invalidated samples pending)
+  int pieces = 0;              // refill pieces done (one per level refilled without budget_ms)
+  bool out_of_time = false;    // budget_ms stopped the update with work left
   int enabled_levels = 0;      // levels not switched off by height (0 .. L)
   int active_levels = 0;       // levels with a non-empty active region
   double viewer_height = 0;    // viewer height above the terrain used for switching levels, metres
@@ -119,7 +134,24 @@ class Clipmap {
   int source_level(int level) const { return first_source_level_ + level; }
   double spacing(int level) const;            // metres between samples of `level`
   int64_t budget() const { return budget_; }  // samples refilled per update
-  void set_budget(int64_t samples) { budget_ = samples > 0 ? samples : int64_t(n_) * n_; }  // <= 0: n * n
+  // <= 0: n * n, or no limit while a time budget is set.
+  void set_budget(int64_t samples);
+  double budget_ms() const { return budget_ms_; }
+  void set_budget_ms(double ms);     // <= 0 (or not finite): no time budget
+  static constexpr int kPiece = 16;  // columns or rows per refill piece under a time budget
+
+  // Marks the samples that a change of the source's finest level inside `finest` (level grid of the
+  // finest clipmap level) can have changed on every level: the rect, then per coarser level the
+  // samples D reaches (radius 5 on the finer level), and on every level the samples U and zc reach
+  // from a changed coarser level; the clip region's part of each is refilled by later updates
+  // (coarse to fine, under the budgets) with zc, normals and tile ranges recomputed. Levels being
+  // filled afresh start again. An empty rect does nothing. The caller changes the source first (the
+  // clipmap re-reads it; a source with a cache must drop what it cached of the region). align > 1:
+  // every level's rectangle is first grown outwards to whole align x align tiles of the level grid
+  // (an edited compressed pyramid re-codes whole codec tiles, changing all of their samples).
+  void invalidate(const Rect& finest, int64_t align = 1);
+  // Samples (level grid) invalidated and not yet refilled.
+  int64_t invalid_samples(int level) const;
 
   bool has_data(int level) const { return lv(level).has_data; }  // filled by some update
   bool enabled(int level) const { return lv(level).enabled; }    // not switched off by height
@@ -166,11 +198,36 @@ class Clipmap {
     // Toroidal tile table: tile (tx, ty) at wrap_tile(ty) * tiles + wrap_tile(tx).
     std::vector<ZRange> tile_range;
     std::vector<Rect> dirty;
+    std::vector<Rect> invalid;  // invalidated rectangles inside the clip region, not yet refilled
+    bool filling = false;       // filled afresh by row strips (budget_ms): has_data false meanwhile
+    int64_t rows_done = 0;      // rows of the clip region filled so far while `filling`
   };
   const Level& lv(int level) const { return levels_.at(size_t(level)); }
   LevelRegion desired_for(int level, double x_m, double y_m) const;
   int64_t exposed_samples(const Level& L, int64_t x0, int64_t y0) const;
   void refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stats);
+  bool at_desired(const Level& L) const {
+    return L.has_data && !L.filling && L.clip_x0 == L.desired.x0 && L.clip_y0 == L.desired.y0;
+  }
+  bool ready(const Level& L) const { return at_desired(L) && L.invalid.empty(); }
+  bool coarser_covers(int level, int64_t x0, int64_t y0, int64_t x1, int64_t y1) const;
+  // One piece of the time-budgeted work of a level: start a fresh fill (and do its first strip), the
+  // next strip of a fresh fill, a move of the clip region by a strip, or a strip of an invalidated
+  // rectangle; None when the level is ready.
+  struct Piece {
+    enum Kind { None, StartFill, Strip, Move, Invalid } kind = None;
+    int64_t x0 = 0, y0 = 0;  // StartFill, Move: the clip region's new corner
+    Rect rect;               // Invalid: the strip
+    int64_t rows = 0;        // StartFill, Strip: rows of the fresh fill
+    int64_t samples = 0;
+  };
+  // The level's next piece, at most `lines` (1..kPiece) columns or rows thick.
+  Piece plan_piece(int level, int64_t lines) const;
+  void run_piece(int level, const Piece& piece, ClipmapUpdateStats& stats);
+  void refill_invalid(int level, const Rect& r, ClipmapUpdateStats& stats);
+  void fill_strip(int level, int64_t rows, ClipmapUpdateStats& stats);
+  void add_times(int level, double fill, const FillSplit& split, double coarse, double normals, double bounds,
+                 int64_t samples, ClipmapUpdateStats& stats);
   void fill_rect(int level, const Rect& r, FillSplit& split);
   void compute_coarse(int level, const Rect& r);
   void compute_normals(int level, const Rect& r);
@@ -182,6 +239,11 @@ class Clipmap {
   int n_;
   int first_source_level_;
   int64_t budget_;
+  int64_t budget_request_;  // set_budget's argument (<= 0: the default)
+  double budget_ms_ = 0;
+  // Seconds per sample of the refill pieces so far, per kind of piece (budget_ms's prediction: a move
+  // by a thin strip also recomputes the clip border's normals and tiles, a fresh fill's strip not).
+  std::array<double, 5> seconds_per_sample_{};
   ClipmapOptions options_;
   double viewer_[3] = {0, 0, 0};
   int tiles_;  // tile table side
