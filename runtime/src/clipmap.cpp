@@ -731,13 +731,15 @@ ClipmapUpdateStats Clipmap::update(double x_m, double y_m, double z_m) {
           const double per = seconds_per_sample_[p.kind] > 0
                                  ? seconds_per_sample_[p.kind]
                                  : *std::max_element(seconds_per_sample_.begin(), seconds_per_sample_.end());
+          // Thinner pieces when the time left is short, the update's first one too (at a budget of
+          // half a millisecond one full piece of n = 511 is the whole budget); stop when not even the
+          // thinnest fits, except for the first piece, which always runs, so the clipmap progresses.
+          if (per > 0) {
+            const double left = budget_ms_ * 1e-3 - since(t_start);
+            const int64_t lines = std::clamp<int64_t>(int64_t((left / per - overhead) / n_), 1, kPiece);
+            if (lines < kPiece) p = plan_piece(l, lines);
+          }
           if (stats.pieces > 0) {
-            // Thinner pieces when the time left is short; stop when not even the thinnest fits.
-            if (per > 0) {
-              const double left = budget_ms_ * 1e-3 - since(t_start);
-              const int64_t lines = std::clamp<int64_t>(int64_t((left / per - overhead) / n_), 1, kPiece);
-              if (lines < kPiece) p = plan_piece(l, lines);
-            }
             const double predicted = since(t_start) + (double(p.samples) + overhead) * per;
             if (predicted > budget_ms_ * 1e-3 || spent + p.samples > budget_) {
               stats.out_of_time = predicted > budget_ms_ * 1e-3;
