@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <limits>
 
@@ -13,6 +14,7 @@
 #include "readers/terrain_generator.h"
 #include "runtime/height_source.h"
 #include "runtime/region_decoder.h"
+#include "shared_data.h"
 
 using namespace terrain;
 using namespace terrain::container;
@@ -397,4 +399,47 @@ TEST_CASE("edit: a patch blended in meets the file's max error against its heigh
   CHECK_THROWS_AS(editor->apply(edit::Patch{5000, 0, 1, 1, {1.0f}, 1.0}), std::invalid_argument);
   CHECK_THROWS_AS(editor->apply(edit::Patch{0, 0, 2, 1, {1.0f}, 1.0}), std::invalid_argument);
   CHECK_THROWS_AS(editor->apply(edit::Patch{0, 0, 1, 1, {1.0f}, 1.5}), std::invalid_argument);
+}
+
+namespace {
+// Every "max_m" figure of a terrain-report --json document, in order (the levels, coarsest first, and
+// the overall one).
+std::vector<double> report_max_m(const std::string& json) {
+  std::vector<double> out;
+  const std::string key = "\"max_m\":";
+  for (size_t p = json.find(key); p != std::string::npos; p = json.find(key, p + key.size()))
+    out.push_back(std::strtod(json.c_str() + p + key.size(), nullptr));
+  return out;
+}
+}  // namespace
+
+TEST_CASE("terrain-edit on a 1201^2 DEM meets the file's max error against the edited input (terrain-report)",
+          "[runtime][edit]") {
+  const std::string dem = testdata::require("srtm3_N46W122_rainier_adams_cascades.hgt");
+  if (dem.empty()) return;  // skipped with a warning (a failure in CI)
+  iotest::TempDir dir;
+  const std::string pyr = dir.file("r.pyr"), edited = dir.file("edited.raw");
+  REQUIRE(iotest::run_tool(dir, {"pyramid-build", {dem, "-o", pyr, "--max-error", "2", "-q"}}).status == 0);
+  const std::string before = dir.file("before.pyr");
+  std::filesystem::copy_file(pyr, before);
+  // A 120 m smooth mound of radius 40 samples, written through with the original as the source.
+  REQUIRE(iotest::run_tool(
+              dir, {"terrain-edit",
+                    {pyr, "--source", dem, "--source-out", edited, "--brush", "600,600,40,120,smooth", "-q"}})
+              .status == 0);
+  REQUIRE(iotest::run_tool(dir, {"terrain-info", {pyr, "--verify", "-q"}}).status == 0);
+  const auto report = iotest::run_tool(dir, {"terrain-report", {edited, pyr, "--json", "-", "-q"}});
+  REQUIRE(report.status == 0);
+  const std::vector<double> max_m = report_max_m(report.out);
+  REQUIRE(max_m.size() == 5);  // four levels and the overall figure
+  for (size_t l = 0; l < max_m.size(); ++l) {
+    INFO("figure " << l);
+    CHECK(max_m[l] <= 2.0 + 1e-9);
+  }
+  // The edit is real: the file before it is far from the edited input near the mound.
+  const auto old = iotest::run_tool(dir, {"terrain-report", {edited, before, "--json", "-", "-q"}});
+  REQUIRE(old.status == 0);
+  const std::vector<double> old_max = report_max_m(old.out);
+  REQUIRE(old_max.size() == 5);
+  CHECK(old_max[3] > 100.0);
 }
