@@ -31,7 +31,7 @@ Brush parse_brush(const std::string& text) {
   b.y = cli::parse_double("--brush y", parts[1]);
   b.radius = cli::parse_double("--brush radius", parts[2], 1e-9);
   b.height = cli::parse_double("--brush height", parts[3], -1e7, 1e7);
-  if (parts.size() == 5 && !terrain::edit::parse_brush_shape(parts[4], &b.shape))
+  if (parts.size() == 5 && !terrain::runtime::parse_edit_shape(parts[4], &b.shape))
     throw cli::UsageError("--brush: unknown shape '" + parts[4] + "' (cone, smooth or flat)");
   return b;
 }

@@ -111,18 +111,6 @@ Window downsample_delta(const DownsampleFilter& d, const Window& fine, GridSize 
 
 using Edit = std::variant<Brush, Patch>;
 
-double brush_profile(BrushShape shape, double r) {
-  switch (shape) {
-    case BrushShape::Cone:
-      return 1 - r;
-    case BrushShape::Smooth:
-      return (1 - r * r) * (1 - r * r);
-    case BrushShape::Flat:
-      return 1;
-  }
-  return 0;
-}
-
 Box edit_box(const Edit& e, GridSize finest) {
   Box b;
   if (const Brush* br = std::get_if<Brush>(&e))
@@ -211,7 +199,7 @@ void apply_edits(const std::vector<Edit>& edits, GridSize finest, const Box& box
         double& c = cur[size_t((y - box.y0) * box.width() + (x - box.x0))];
         if (const Brush* br = std::get_if<Brush>(&e)) {
           const double r = std::hypot(double(x) - br->x, double(y) - br->y) / br->radius;
-          if (r <= 1) c += br->height * brush_profile(br->shape, r);
+          if (r <= 1) c += br->height * runtime::edit_profile(br->shape, r);
         } else {
           const Patch& p = std::get<Patch>(e);
           const float h = p.heights[size_t((y - p.y) * p.width + (x - p.x))];

@@ -8,10 +8,7 @@
 
 namespace terrain::runtime {
 
-namespace {
-
-double profile(EditShape shape, double r) {
-  if (r >= 1) return 0;
+double edit_profile(EditShape shape, double r) {
   switch (shape) {
     case EditShape::Cone:
       return 1 - r;
@@ -22,6 +19,8 @@ double profile(EditShape shape, double r) {
   }
   return (1 - r * r) * (1 - r * r);
 }
+
+namespace {
 
 // Distance from (x, y) to the segment a - b.
 double segment_distance(double x, double y, const TerrainEdit& e) {
@@ -41,7 +40,8 @@ Rect edit_bounds(const TerrainEdit& e) {
 }
 
 double edit_delta(const TerrainEdit& e, double x, double y) {
-  return e.height * profile(e.shape, segment_distance(x, y, e) / e.radius);
+  const double r = segment_distance(x, y, e) / e.radius;
+  return r < 1 ? e.height * edit_profile(e.shape, r) : 0.0;
 }
 
 const char* edit_shape_name(EditShape shape) {

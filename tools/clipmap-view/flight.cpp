@@ -447,8 +447,7 @@ int64_t codec_tile_size(const container::PyramidFile& file) {
 // current finest level plus the channel's profile (NaN where it adds nothing).
 edit::EditStats commit_edit(edit::PyramidEditor& editor, const TerrainEdit& e, HeightSource& current) {
   if (e.x0 == e.x1 && e.y0 == e.y1) {
-    edit::Brush b{e.x0, e.y0, e.radius, e.height, edit::BrushShape::Smooth};
-    edit::parse_brush_shape(edit_shape_name(e.shape), &b.shape);
+    const edit::Brush b{e.x0, e.y0, e.radius, e.height, e.shape};
     editor.apply(b);
   } else {
     const Rect r = edit_bounds(e);

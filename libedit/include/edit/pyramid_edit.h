@@ -24,13 +24,13 @@
 
 #include "core/rect.h"
 #include "readers/heightmap.h"
+#include "runtime/edit_overlay.h"
 
 namespace terrain::edit {
 
-enum class BrushShape { Cone, Smooth, Flat };
-// "cone", "smooth", "flat"; parse_brush_shape returns false for any other name.
-const char* brush_shape_name(BrushShape shape);
-bool parse_brush_shape(const std::string& name, BrushShape* out);
+// The viewer's in-memory edits and the file's share one set of shapes (names:
+// runtime::edit_shape_name, runtime::parse_edit_shape; profile: runtime::edit_profile).
+using BrushShape = runtime::EditShape;
 
 // Adds height * profile(r / radius) metres to every finest-level sample within `radius` samples of
 // (x, y) (column, row of the finest level; fractional allowed): cone 1 - r, smooth (1 - r^2)^2, flat 1.

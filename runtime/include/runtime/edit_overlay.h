@@ -18,7 +18,10 @@
 
 namespace terrain::runtime {
 
-enum class EditShape { Cone, Smooth, Flat };  // profile(r) = 1 - r, (1 - r^2)^2, 1 for r < 1
+enum class EditShape { Cone, Smooth, Flat };
+// The shape's profile at r = distance / radius, 0 <= r <= 1: cone 1 - r, smooth (1 - r^2)^2, flat 1.
+// Callers decide whether r = 1 still counts (the overlay stops before it, libedit's brush includes it).
+double edit_profile(EditShape shape, double r);
 // "cone", "smooth", "flat"; false for any other name.
 bool parse_edit_shape(const std::string& name, EditShape* out);
 
