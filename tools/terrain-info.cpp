@@ -67,8 +67,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
   const ContainerInfo& info = c.info();
   const uint64_t file_bytes = uint64_t(std::filesystem::file_size(path));
   const double finest_samples = double(info.width) * double(info.height);
-  const std::string version =
-      std::to_string(terrain::container::kFormatMajor) + "." + std::to_string(c.minor_version());
+  const std::string version = std::to_string(c.major_version()) + "." + std::to_string(c.minor_version());
   const auto& q = info.quantisation;
   if (common.json) {
     cli::JsonWriter j(std::cout);

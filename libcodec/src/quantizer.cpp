@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "codec/internal/lapped_transform.h"
+#include "codec/internal/lifting_transform.h"
 
 namespace codec::detail {
 namespace {
@@ -49,6 +50,16 @@ BandSteps band_steps_for(uint32_t step_q8, int fraction_bits) {
   const double* norms = band_synthesis_norms();
   BandSteps steps{};
   for (int b = 0; b < kBandCount; ++b) {
+    const double s = std::round(std::ldexp(double(step_q8), fraction_bits) / norms[b]);
+    steps.q8[b] = s < kStepOne ? kStepOne : s > kMaxBandStep ? kMaxBandStep : uint32_t(s);
+  }
+  return steps;
+}
+
+BandSteps lifting_band_steps_for(uint32_t step_q8, int fraction_bits) {
+  const double* norms = lifting_synthesis_norms();
+  BandSteps steps = unit_band_steps();
+  for (int b = 0; b < kLiftingBandCount; ++b) {
     const double s = std::round(std::ldexp(double(step_q8), fraction_bits) / norms[b]);
     steps.q8[b] = s < kStepOne ? kStepOne : s > kMaxBandStep ? kMaxBandStep : uint32_t(s);
   }

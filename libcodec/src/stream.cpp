@@ -24,14 +24,16 @@ struct Scratch::Impl {
   // decoding a few hundred samples, and region decoders ask for one small tile at a time.
   uint32_t steps_step_q8 = 0;
   int steps_fraction_bits = -1;
-  detail::BandSteps steps{};
-  const detail::BandSteps& band_steps(uint32_t step_q8, int fraction_bits) {
+  detail::BandSteps steps{}, lifting_steps{};
+  void band_steps(uint32_t step_q8, int fraction_bits, detail::TileParams& params) {
     if (step_q8 != steps_step_q8 || fraction_bits != steps_fraction_bits) {
-      steps = fraction_bits == 0 ? detail::unit_band_steps() : detail::band_steps_for(step_q8, fraction_bits);
+      steps = detail::stream_band_steps(step_q8, fraction_bits, false);
+      lifting_steps = detail::stream_band_steps(step_q8, fraction_bits, true);
       steps_step_q8 = step_q8;
       steps_fraction_bits = fraction_bits;
     }
-    return steps;
+    params.steps = steps;
+    params.lifting_steps = lifting_steps;
   }
 };
 
@@ -48,6 +50,7 @@ constexpr size_t kMaxHeaderSize = kFixedHeader + 6 + 6 + 2 + 1 + 4 + 3 + 10;
 constexpr size_t kMaxRecordSize = 5;  // index record of a non-empty tile: size << 1 (< 2^33)
 constexpr uint32_t kFlagBoundMaxError = 1;
 constexpr uint32_t kFlagWideFraction = 2;  // lossy streams: kWideFractionBits (else kFineFractionBits)
+constexpr uint32_t kFlagResidual = 4;      // format 5: transform-mode tiles use Transform::Residual
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
@@ -107,6 +110,7 @@ struct StreamFields {
   uint32_t tile_size;
   bool bound_max_error, wide_fraction;
   uint32_t step_q8, max_error;
+  bool residual;
 };
 
 // The second half of encoding, shared with splice_tiles: `body` holds the payloads of the non-empty
@@ -144,12 +148,13 @@ Status finish_stream(const StreamFields& f, const StreamLayout& layout, const ui
 
   uint8_t header[kMaxHeaderSize];
   std::memcpy(header, kMagic, 4);
-  put_u16(header + 4, uint16_t(kFormatVersion));
+  put_u16(header + 4, uint16_t(f.residual ? kFormatVersion : kOldestFormatVersion));
   uint8_t* h = header + kFixedHeader;
   h = put_varint(h, uint64_t(f.width));
   h = put_varint(h, uint64_t(f.height));
   h = put_varint(h, f.tile_size / 16);
-  h = put_varint(h, (f.bound_max_error ? kFlagBoundMaxError : 0) | (f.wide_fraction ? kFlagWideFraction : 0));
+  h = put_varint(h, (f.bound_max_error ? kFlagBoundMaxError : 0) | (f.wide_fraction ? kFlagWideFraction : 0) |
+                        (f.residual ? kFlagResidual : 0));
   h = put_varint(h, f.step_q8);
   if (f.bound_max_error) h = put_varint(h, f.max_error);
   h = put_varint(h, payload_end);
@@ -227,7 +232,9 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   const bool lossless = step_q8 <= detail::kStepOne;
   const bool fine = hi <= detail::kFineRange && lo >= -detail::kFineRange;
   params.fraction_bits = lossless ? 0 : fine ? detail::kFineFractionBits : detail::kWideFractionBits;
-  params.steps = lossless ? detail::unit_band_steps() : detail::band_steps_for(step_q8, params.fraction_bits);
+  params.lifting = options.transform == Transform::Residual;
+  scratch.impl().band_steps(step_q8, params.fraction_bits, params);
+  params.lambda = 6.0 / (std::log(2.0) * step * step);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
   // Tiles within +-empty_limit are empty outright: zeros meet the bound (lossless: 0, max-error: E).
@@ -278,7 +285,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
                             options.bound_max_error,
                             params.fraction_bits == detail::kWideFractionBits,
                             step_q8,
-                            params.max_error};
+                            params.max_error,
+                            params.lifting};
   return finish_stream(fields, layout, sizes.data(), body, pos, dst, dst_capacity, bytes_written);
 }
 
@@ -287,7 +295,8 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if (!data) return Status::InvalidArgument;
   if (std::memcmp(data, kMagic, std::min<size_t>(size, 4)) != 0) return Status::Corrupt;
   if (size < kFixedHeader) return Status::Truncated;
-  if (get_u16(data + 4) != kFormatVersion) return Status::UnsupportedVersion;
+  const uint32_t version = get_u16(data + 4);
+  if (version < kOldestFormatVersion || version > kFormatVersion) return Status::UnsupportedVersion;
   const uint8_t* p = data + kFixedHeader;
   const uint8_t* const end = data + size;
   uint64_t w = 0, h = 0, tile16 = 0, flags = 0, step_q8 = 0, max_error = 0, payload = 0;
@@ -306,15 +315,19 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if (crc32c(data + covered, size - 4 - covered, crc32c(data, data_offset)) != get_u32(end - 4))
     return Status::ChecksumMismatch;
   HeaderInfo info;
-  info.version = kFormatVersion;
+  info.version = version;
   if (w > uint64_t(kMaxSide) || h > uint64_t(kMaxSide) || tile16 > kMaxTile / 16) return Status::Corrupt;
   info.width = int64_t(w);
   info.height = int64_t(h);
   info.tile_size = uint32_t(tile16 * 16);
   StreamLayout layout;
   if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
-  if ((flags & ~uint64_t(kFlagBoundMaxError | kFlagWideFraction)) != 0 || step_q8 < detail::kStepOne ||
-      step_q8 > uint64_t(kMaxAbsSample) * 256u || max_error > uint64_t(kMaxAbsSample))
+  // Version 4 knows two flags; version 5 adds the residual transform, and a version-5 stream must use
+  // it (encoders write 4 otherwise), so every stream has exactly one valid version.
+  const uint64_t known = kFlagBoundMaxError | kFlagWideFraction | (version >= 5 ? kFlagResidual : 0);
+  if ((flags & ~known) != 0 || (version >= 5) != ((flags & kFlagResidual) != 0) ||
+      step_q8 < detail::kStepOne || step_q8 > uint64_t(kMaxAbsSample) * 256u ||
+      max_error > uint64_t(kMaxAbsSample))
     return Status::Corrupt;
   // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
   // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
@@ -322,6 +335,7 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if (step_q8 == detail::kStepOne && wide) return Status::Corrupt;
   info.bound_max_error = (flags & kFlagBoundMaxError) != 0;
   info.max_error = uint32_t(max_error);
+  info.transform = (flags & kFlagResidual) ? Transform::Residual : Transform::Lapped;
   info.fraction_bits = step_q8 == detail::kStepOne ? 0
                        : wide                      ? detail::kWideFractionBits
                                                    : detail::kFineFractionBits;
@@ -443,7 +457,8 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
     return Status::InvalidArgument;
   detail::TileParams params;
   params.fraction_bits = header_.fraction_bits;
-  params.steps = scratch.impl().band_steps(uint32_t(std::lround(header_.step * 256.0)), params.fraction_bits);
+  params.lifting = header_.transform == Transform::Residual;
+  scratch.impl().band_steps(uint32_t(std::lround(header_.step * 256.0)), params.fraction_bits, params);
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
   detail::TileWork& work = scratch.impl().work;
@@ -532,7 +547,7 @@ Status open_splice_source(const uint8_t* data, size_t size, SpliceSource* src) {
 bool same_coding(const HeaderInfo& a, const HeaderInfo& b) {
   return a.width == b.width && a.height == b.height && a.tile_size == b.tile_size &&
          a.bound_max_error == b.bound_max_error && a.max_error == b.max_error && a.step == b.step &&
-         a.fraction_bits == b.fraction_bits;
+         a.fraction_bits == b.fraction_bits && a.transform == b.transform;
 }
 
 }  // namespace
@@ -570,7 +585,8 @@ Status splice_tiles(const uint8_t* old_data, size_t old_size, const uint8_t* fre
                             h.bound_max_error,
                             h.fraction_bits == detail::kWideFractionBits,
                             uint32_t(std::lround(h.step * 256.0)),
-                            h.max_error};
+                            h.max_error,
+                            h.transform == Transform::Residual};
   out->resize(kMaxHeaderSize + 4 + pos + size_t(layout.index_bound));
   size_t written = 0;
   if ((s = finish_stream(fields, layout, sizes.data(), body, pos, out->data(), out->size(), &written)) !=

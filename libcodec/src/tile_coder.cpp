@@ -12,6 +12,7 @@
 
 #include "codec/internal/bitio.h"
 #include "codec/internal/lapped_transform.h"
+#include "codec/internal/lifting_transform.h"
 #include "codec/internal/rlgr.h"
 
 namespace codec::detail {
@@ -53,6 +54,9 @@ constexpr RlgrState kDcStart[2] = {{0, 16}, {0, 48}};
 // only: the decoder is unchanged. Measured on six SRTM DEMs (tile 64, rms 0.5-4 m): 2.7% fewer bits at
 // equal rms (geometric mean; smooth tiles gain most, Berlin -5% at 1 m rms; every DEM and rate gains).
 constexpr DeadZone kAcDeadZone{0.42, 0.30, 0.05, 0.05};
+// Start states of the residual transform's bands, one flag bit per band: the default, or long zero
+// runs for bands of near-constant tiles (sea, flats) where most levels are zero.
+constexpr RlgrState kLiftingStart[2] = {{8, 8}, {64, 8}};
 
 inline int32_t saturate(int64_t v) { return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX)); }
 
@@ -291,7 +295,69 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
                            slots + lp_count, steps, tile, hp_nonzero);
 }
 
+// The residual transform's bands (format 5): LL, HL, LH, HH of one lifting level, each in raster order
+// with its own RLGR state from the default start, quantised while coded (kAcDeadZone). Band b covers
+// columns [x0, x1) and rows [y0, y1) of the w x h tile (row stride w).
+struct LiftingRect {
+  int x0, y0, x1, y1;
+};
+LiftingRect lifting_rect(int w, int h, int band) {
+  const LiftingBands b = lifting_bands(w, h);
+  const bool odd_x = band & 1, odd_y = band & 2;
+  return {odd_x ? b.even_w : 0, odd_y ? b.even_h : 0, odd_x ? w : b.even_w, odd_y ? h : b.even_h};
+}
+
+void code_lifting_bands(BitWriter& out, int32_t* tile, int w, int h, const BandSteps& steps, int32_t* seq) {
+  for (int band = 0; band < kLiftingBandCount; ++band) {
+    const LiftingRect r = lifting_rect(w, h, band);
+    size_t n = 0;
+    for (int y = r.y0; y < r.y1; ++y)
+      for (int x = r.x0; x < r.x1; ++x) seq[n++] = tile[size_t(y) * w + x];
+    if (n == 0) continue;
+    const double inverse = double(kStepOne) / double(steps.q8[band]);
+    int32_t* coefficients = seq + n;
+    std::copy(seq, seq + n, coefficients);
+    code_with_best_start(out, kLiftingStart, [&](BitWriter& writer, RlgrState& state) {
+      std::copy(coefficients, coefficients + n, seq);
+      rlgr_encode_quantizing(writer, seq, n, n, &inverse, kAcDeadZone, state);
+    });
+    n = 0;
+    for (int y = r.y0; y < r.y1; ++y)
+      for (int x = r.x0; x < r.x1; ++x) tile[size_t(y) * w + x] = seq[n++];
+  }
+}
+
+// Reads the four bands and writes dequantised coefficients into the w x h tile.
+bool decode_lifting_bands(BitReader& in, int32_t* tile, int w, int h, const BandSteps& steps, int32_t* seq) {
+  for (int band = 0; band < kLiftingBandCount; ++band) {
+    const LiftingRect r = lifting_rect(w, h, band);
+    const size_t n = size_t(r.x1 - r.x0) * size_t(r.y1 - r.y0);
+    if (n == 0) continue;
+    in.refill();
+    RlgrState state = kLiftingStart[in.take(1)];
+    if (!rlgr_decode(in, seq, n, state)) return false;
+    size_t i = 0;
+    for (int y = r.y0; y < r.y1; ++y)
+      for (int x = r.x0; x < r.x1; ++x) {
+        const int64_t value = dequantize(seq[i++], steps.q8[band]);
+        if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
+        tile[size_t(y) * w + x] = int32_t(value);
+      }
+  }
+  return true;
+}
+
+void dequantize_lifting(int32_t* tile, int w, int h, const BandSteps& steps) {
+  for (int band = 0; band < kLiftingBandCount; ++band) {
+    const LiftingRect r = lifting_rect(w, h, band);
+    for (int y = r.y0; y < r.y1; ++y)
+      for (int x = r.x0; x < r.x1; ++x)
+        tile[size_t(y) * w + x] = int32_t(dequantize(tile[size_t(y) * w + x], steps.q8[band]));
+  }
+}
+
 // The encoder picks fraction_bits so that the scaled samples stay within +-2^22 (quantizer.h).
+
 void scale_up(int32_t* v, size_t n, int bits) {
   if (bits == 0) return;
   for (size_t i = 0; i < n; ++i) v[i] = int32_t(uint32_t(v[i]) << bits);
@@ -314,28 +380,46 @@ inline int64_t floor_div(int64_t a, int64_t b) {
   return (a % b != 0 && ((a < 0) != (b < 0))) ? q - 1 : q;
 }
 
-// Transform-mode payload; leaves the decoder's output in work.reconstruction.
+// Transform-mode payload with the residual transform (lifting) or the lapped one; leaves the decoder's
+// output in work.reconstruction.
 size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, const TileParams& params,
-                        TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
+                        TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction,
+                        bool lifting) {
   const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
   if (capacity < head) return 0;
   const int pw = padded_side(w), ph = padded_side(h);
   int32_t* tile = work.coefficients.data();
   if (head) out[0] = uint8_t(TileMode::Transform);
   BitWriter bits(out + head, capacity - head);
-  load_padded(src, stride, w, h, pw, ph, tile);
-  scale_up(tile, size_t(pw) * ph, params.fraction_bits);
-  forward_lapped(tile, pw, ph, params.fraction_bits > 0);
-  code_bands(bits, tile, pw, ph, params.steps, work.sequence.data());
+  if (params.lifting) bits.put_bit(lifting ? 0 : 1);
+  // The residual transform works on the w x h tile itself (no padding to macroblocks).
+  const int tile_stride = lifting ? w : pw;
+  if (lifting) {
+    for (int y = 0; y < h; ++y)
+      std::memcpy(tile + size_t(y) * w, src + y * stride, size_t(w) * sizeof(int32_t));
+    scale_up(tile, size_t(w) * h, params.fraction_bits);
+    forward_lifting(tile, w, h, work.line.data());
+    code_lifting_bands(bits, tile, w, h, params.lifting_steps, work.sequence.data());
+  } else {
+    load_padded(src, stride, w, h, pw, ph, tile);
+    scale_up(tile, size_t(pw) * ph, params.fraction_bits);
+    forward_lapped(tile, pw, ph, params.fraction_bits > 0);
+    code_bands(bits, tile, pw, ph, params.steps, work.sequence.data());
+  }
   if (!want_reconstruction && !params.bound_max_error) {
     const size_t size = bits.finish();
     return bits.overflow() ? 0 : size + head;
   }
-  dequantize_tile(tile, pw, ph, params.steps);
-  inverse_lapped(tile, pw, ph, params.fraction_bits > 0);
+  if (lifting) {
+    dequantize_lifting(tile, w, h, params.lifting_steps);
+    inverse_lifting(tile, w, h, work.line.data());
+  } else {
+    dequantize_tile(tile, pw, ph, params.steps);
+    inverse_lapped(tile, pw, ph, params.fraction_bits > 0);
+  }
   int32_t* recon = work.reconstruction.data();
   for (int y = 0; y < h; ++y)
-    scale_down_row(tile + size_t(y) * pw, recon + size_t(y) * w, w, params.fraction_bits);
+    scale_down_row(tile + size_t(y) * tile_stride, recon + size_t(y) * w, w, params.fraction_bits);
   if (params.bound_max_error) {
     const int64_t e = params.max_error;
     int32_t* corrections = work.sequence.data();
@@ -374,6 +458,43 @@ size_t encode_spatial(const int32_t* src, ptrdiff_t stride, int w, int h, const 
   return bits.overflow() ? 0 : size + 1;
 }
 
+double squared_error(const int32_t* src, ptrdiff_t stride, int w, int h, const int32_t* recon) {
+  double sum = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double e = double(src[y * stride + x]) - double(recon[size_t(y) * w + x]);
+      sum += e * e;
+    }
+  return sum;
+}
+
+// Format 5 transform-mode tiles: both transforms are tried and the tile keeps the lower cost
+// bits + lambda * squared error, lambda = 6 / (ln 2 * S^2) bits per squared sample unit, the slope of
+// an entropy-coded uniform quantiser's rate-distortion curve at step S (lossless: fewer bytes win).
+// The residual transform wins on rough residuals and small steps, the lapped one on smooth residuals
+// at large steps (measured: docs/codec.md "Residual transform").
+size_t encode_either_transform(const int32_t* src, ptrdiff_t stride, int w, int h, const TileParams& params,
+                               TileWork& work, uint8_t* out, size_t capacity) {
+  const size_t samples = size_t(w) * h;
+  const size_t a = encode_transform(src, stride, w, h, params, work, out, capacity, true, true);
+  if (work.candidate.size() < samples) work.candidate.resize(samples);
+  std::copy_n(work.reconstruction.begin(), samples, work.candidate.begin());
+  if (work.second.size() < work.alternative.size()) work.second.resize(work.alternative.size());
+  const size_t b =
+      encode_transform(src, stride, w, h, params, work, work.second.data(), work.second.size(), true, false);
+  const auto cost = [&](size_t bytes, const int32_t* recon) {
+    if (params.fraction_bits == 0 || params.bound_max_error) return double(bytes);
+    return 8.0 * double(bytes) + params.lambda * squared_error(src, stride, w, h, recon);
+  };
+  if (b == 0 || (a > 0 && cost(a, work.candidate.data()) <= cost(b, work.reconstruction.data()))) {
+    std::copy_n(work.candidate.begin(), samples, work.reconstruction.begin());
+    return a;
+  }
+  if (b > capacity) return 0;
+  std::memcpy(out, work.second.data(), b);
+  return b;
+}
+
 }  // namespace
 
 void TileWork::reserve(int pw, int ph, size_t reconstruction_samples, size_t payload_bound) {
@@ -382,6 +503,7 @@ void TileWork::reserve(int pw, int ph, size_t reconstruction_samples, size_t pay
   if (sequence.size() < padded) sequence.resize(padded);  // also the decoder's correction layer (w x h)
   if (reconstruction.size() < reconstruction_samples) reconstruction.resize(reconstruction_samples);
   if (alternative.size() < payload_bound) alternative.resize(payload_bound);
+  if (line.size() < size_t(std::max(pw, ph))) line.resize(size_t(std::max(pw, ph)));
 }
 
 size_t tile_payload_bound(int width, int height) {
@@ -393,15 +515,19 @@ size_t tile_payload_bound(int width, int height) {
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const TileParams& params,
                    TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
   work.reserve(padded_side(w), padded_side(h), size_t(w) * h,
-               params.bound_max_error ? tile_payload_bound(w, h) : 0);
+               params.bound_max_error || params.lifting ? tile_payload_bound(w, h) : 0);
+  if (params.lifting && !params.bound_max_error)
+    return encode_either_transform(src, src_stride, w, h, params, work, out, capacity);
   if (!params.bound_max_error)
-    return encode_transform(src, src_stride, w, h, params, work, out, capacity, want_reconstruction);
+    return encode_transform(src, src_stride, w, h, params, work, out, capacity, want_reconstruction, false);
   // Max-error mode: try spatial quantisation first (into the side buffer), then the transform with
   // corrections (into out, leaving its reconstruction in work); keep the smaller.
   const size_t spatial =
       encode_spatial(src, src_stride, w, h, params, work, work.alternative.data(), work.alternative.size());
   assert(spatial > 0);
-  const size_t transform = encode_transform(src, src_stride, w, h, params, work, out, capacity, true);
+  const size_t transform =
+      params.lifting ? encode_either_transform(src, src_stride, w, h, params, work, out, capacity)
+                     : encode_transform(src, src_stride, w, h, params, work, out, capacity, true, false);
   if (transform > 0 && transform <= spatial) return transform;
   if (spatial > capacity) return 0;
   std::memcpy(out, work.alternative.data(), spatial);
@@ -426,7 +552,13 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   if (mode != uint8_t(TileMode::Transform) && !spatial) return TileResult::Corrupt;
   BitReader bits(payload + head, size - head);
   int32_t* tile = work.coefficients.data();
-  if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work))
+  bool lifting = false;
+  if (params.lifting && !spatial) {
+    bits.refill();
+    lifting = bits.take(1) == 0;
+  }
+  if (lifting ? !decode_lifting_bands(bits, tile, w, h, params.lifting_steps, work.sequence.data())
+              : !decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work))
     return TileResult::Corrupt;
   const bool corrected = !spatial && params.bound_max_error;
   const int32_t* corrections = work.sequence.data();
@@ -435,12 +567,16 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
     if (!rlgr_decode(bits, work.sequence.data(), size_t(w) * h, state)) return TileResult::Corrupt;
   }
   if (bits.overrun()) return TileResult::Corrupt;
-  inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
+  if (lifting)
+    inverse_lifting(tile, w, h, work.line.data());
+  else
+    inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
+  const int tile_stride = lifting ? w : pw;
   // Straight from the padded tile into the caller's window: no intermediate copy.
   const int64_t bin = 2 * int64_t(params.max_error) + 1;
   const int n = window.x1 - window.x0;
   for (int y = window.y0; y < window.y1; ++y) {
-    const int32_t* from = tile + size_t(y) * pw + window.x0;
+    const int32_t* from = tile + size_t(y) * tile_stride + window.x0;
     int32_t* to = window.dst + ptrdiff_t(y - window.y0) * window.stride;
     if (spatial) {
       for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);

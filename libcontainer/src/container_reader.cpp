@@ -118,22 +118,26 @@ Container Container::open(const std::string& path) {
     };
     const uint8_t* tail = base + size - sb::kSizeV1;
     if (!intact(base) && std::memcmp(tail, kMagic, sizeof kMagic) == 0 && intact(tail) &&
-        get_u16(tail + sb::kMajor) == kFormatMajor && get_u16(tail + sb::kMinor) >= 2 &&
+        (get_u16(tail + sb::kMajor) == kFormatMajor ||
+         (get_u16(tail + sb::kMajor) == 2 && get_u16(tail + sb::kMinor) >= 2)) &&
         (get_u32(tail + sb::kFlags) & sb::kFlagEdited) && get_u64(tail + sb::kFileSize) == size) {
       sbp = tail;
       c.from_tail_superblock_ = true;
     }
   }
   const uint16_t major = get_u16(sbp + sb::kMajor), minor = get_u16(sbp + sb::kMinor);
-  if (major != kFormatMajor) {
+  // 3.0 keeps 2.2's layout; its band streams may be libcodec format 5, which 2.x readers cannot decode.
+  if (major != kFormatMajor && major != 2) {
     parse.fail(Code::UnsupportedVersion,
                "format version " + std::to_string(major) + "." + std::to_string(minor) +
-                   " is not supported (this reader reads version " + std::to_string(kFormatMajor) +
+                   " is not supported (this reader reads versions 2.x and " + std::to_string(kFormatMajor) +
                    ".x): rebuild it with pyramid-build");
   }
+  c.major_version_ = major;
   c.minor_version_ = minor;
   // Newer minor versions may grow fixed-size structures; this reader reads the fields it knows.
-  const bool newer = minor > kFormatMinor;
+  const bool newer = major == kFormatMajor ? minor > kFormatMinor : minor > 2;
+  const bool since_2_1 = major > 2 || minor >= 1, since_2_2 = major > 2 || minor >= 2;
   const uint32_t sb_size = get_u32(sbp + sb::kSize);
   parse.require(
       newer ? (sb_size >= sb::kSizeV1 && sb_size % 8 == 0 && sb_size <= 65536) : sb_size == sb::kSizeV1,
@@ -151,7 +155,7 @@ Container Container::open(const std::string& path) {
   if (size > recorded_size) {
     const uint64_t at = align_up(recorded_size);
     const uint64_t gen =
-        minor >= 2 && (get_u32(sbp + sb::kFlags) & sb::kFlagEdited) ? get_u64(sbp + sb::kGeneration) : 0;
+        since_2_2 && (get_u32(sbp + sb::kFlags) & sb::kFlagEdited) ? get_u64(sbp + sb::kGeneration) : 0;
     const std::array<uint8_t, sb::kSizeV1> pending = encode_pending(recorded_size, gen + 1);
     bool ok =
         at <= size && Parser::all_zero(base + recorded_size, size_t(std::min(at, size) - recorded_size));
@@ -166,11 +170,11 @@ Container Container::open(const std::string& path) {
   const Parser committed(path, recorded_size);  // every region lies in the committed bytes
   c.file_bytes_ = size;
   const uint32_t sb_flags = get_u32(sbp + sb::kFlags);
-  const bool edited = minor >= 2 && (sb_flags & sb::kFlagEdited) != 0;
+  const bool edited = since_2_2 && (sb_flags & sb::kFlagEdited) != 0;
   c.edited_ = edited;
   if (edited) c.generation_ = get_u64(sbp + sb::kGeneration);
   if (!newer) {
-    const uint32_t known_flags = minor >= 2 ? sb::kFlagEdited : 0;
+    const uint32_t known_flags = since_2_2 ? sb::kFlagEdited : 0;
     const size_t reserved_from = edited ? sb::kGeneration + 8 : sb::kReserved;
     parse.require(
         (sb_flags & ~known_flags) == 0 && Parser::all_zero(sbp + reserved_from, sb::kCrc - reserved_from),
@@ -192,7 +196,7 @@ Container Container::open(const std::string& path) {
   const uint32_t record_size = get_u32(idx + info::kLevelRecordSize);
   const uint32_t filter_size = get_u32(idx + info::kFilterSize);
   // 2.0 info blocks end at kSizeV1; 2.1 appends the geotransform and the CRS (kSizeV2_1).
-  const bool has_crs_fields = minor >= 1;
+  const bool has_crs_fields = since_2_1;
   const uint32_t known_info_size = has_crs_fields ? info::kSizeV2_1 : info::kSizeV1;
   parse.require(newer ? (info_size >= known_info_size && info_size % 8 == 0) : info_size == known_info_size,
                 "index info size " + std::to_string(info_size) + " is invalid");

@@ -162,6 +162,7 @@ PtcCoderOptions level_coder_options(const PyramidFile& f, int level) {
     o.bound_max_error = h.bound_max_error;
     o.max_error = h.max_error;
     o.tile_size = h.tile_size;
+    o.residual_transform = h.transform;
     return o;
   };
   for (const BandView& v : f.bands(level)) {
@@ -460,7 +461,7 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
         if (any_dirty) {
           std::vector<uint8_t> fresh;
           try {
-            fresh = coder.encode(residual.data(), s.width, band.rows, recon.data(), finest - l);
+            fresh = coder.encode(residual.data(), s.width, band.rows, recon.data(), finest - l, l == 0);
           } catch (const std::runtime_error& e) {  // a residual beyond libcodec's range
             throw Error(ErrorCode::InvalidOption, impl_->path + ": level " + std::to_string(l) +
                                                       ": the edit is too large to code: " + e.what());

@@ -735,7 +735,7 @@ class StreamingBuilder {
     if (with_mask)
       for (int64_t k = 0; k < n; ++k)
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
-    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l);
+    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0);
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;

@@ -518,7 +518,8 @@ TEST_CASE("container version rules", "[runtime][container]") {
       } catch (const Error& e) {
         CHECK(e.code() == ErrorCode::UnsupportedVersion);
         CHECK_THAT(e.what(),
-                   Catch::Contains(path) && Catch::Contains("version 3." + std::to_string(kFormatMinor)));
+                   Catch::Contains(path) && Catch::Contains("version " + std::to_string(kFormatMajor + 1) +
+                                                            "." + std::to_string(kFormatMinor)));
       }
     }
   }
@@ -530,6 +531,7 @@ TEST_CASE("container version rules", "[runtime][container]") {
     v20.insert(v20.end(), b.begin() + std::ptrdiff_t(index + kInfoBlock),
                b.begin() + std::ptrdiff_t(index + kInfoBlock + tail));
     put_le(v20, index + kInfoSize, 264, 4);
+    put_le(v20, kSbMajor, 2, 2);
     put_le(v20, kSbMinor, 0, 2);
     put_le(v20, kSbIndexSize, 264 + tail, 8);
     put_le(v20, kSbFileSize, v20.size(), 8);
@@ -595,7 +597,7 @@ TEST_CASE("container 1.x files are rejected with a message to rebuild them", "[r
   const std::string path = dir.file("v1.pyr");
   std::mt19937_64 rng(5);
   const std::vector<uint8_t> good = write_sample_bytes(path, small_sample(), rng);
-  REQUIRE(kFormatMajor == 2);
+  REQUIRE(kFormatMajor == 3);
   for (int minor : {0, 1})
     for (bool sealed : {false, true}) {
       std::vector<uint8_t> b = good;
@@ -891,8 +893,8 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(get_le(b, index + 224, 8) == 5);
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
-  CHECK(get_le(b, kSbMajor, 2) == 2);
-  CHECK(get_le(b, kSbMinor, 2) == 2);
+  CHECK(get_le(b, kSbMajor, 2) == 3);
+  CHECK(get_le(b, kSbMinor, 2) == 0);
   CHECK(get_le(b, index + 0, 4) == 320);  // info size (2.1)
   CHECK(get_le(b, index + 8, 4) == 96);   // level record size
   const uint64_t level2 = index + kInfoBlock + 2 * 96;

@@ -322,7 +322,9 @@ TEST_CASE("terrain-edit: options, named errors, --json, --compact", "[runtime][e
   REQUIRE(info.status == 0);
   CHECK_THAT(info.out, Catch::Contains("\"edit_generation\": 1"));
   const auto after = decode_all(pyr);
-  CHECK(after[kLevels - 1][size_t(100 * kW + 100)] - before[kLevels - 1][size_t(100 * kW + 100)] == 12);
+  // The 12 m of the flat brush, give or take the step-2 quantisation of both decodes.
+  CHECK(std::abs(after[kLevels - 1][size_t(100 * kW + 100)] - before[kLevels - 1][size_t(100 * kW + 100)] -
+                 12) <= 2);
   REQUIRE(iotest::run_tool(dir, {"terrain-edit", {pyr, "--compact", "-q"}}).status == 0);
   CHECK(decode_all(pyr) == after);
   CHECK_THAT(iotest::run_tool(dir, {"terrain-info", {pyr, "--json"}}).out,

@@ -36,7 +36,7 @@ TEST_CASE("level error schedule: screen grows each level's step with its spacing
   const std::string src = dir.file("synth.raw");
   write_raw(src, map);
 
-  SECTION("rms: the finest level meets the target, coarser levels get 2^(m-l) steps, the file shrinks") {
+  SECTION("rms: the finest level meets the target, coarser levels get 2^(m-l) steps and fewer bytes") {
     const BuildFileResult a = build_with(src, dir.file("a.pyr"), ErrorMode::Rms, 1.0, false);
     const BuildFileResult s = build_with(src, dir.file("s.pyr"), ErrorMode::Rms, 1.0, true);
     const size_t m = s.build.levels.size() - 1;
@@ -49,7 +49,10 @@ TEST_CASE("level error schedule: screen grows each level's step with its spacing
     CHECK(s.build.levels[m].error_rms * mpu == Approx(1.0).epsilon(0.1));
     CHECK(a.build.levels[m].error_rms * mpu == Approx(1.0).epsilon(0.1));
     CHECK(s.build.levels[0].error_rms > 2 * a.build.levels[0].error_rms);  // coarse levels coarser
-    CHECK(s.file_bytes < a.file_bytes);
+    // The coarse levels shrink; the whole file need not: with the residual transform (libcodec
+    // format 5) a coarser level's larger error is re-coded in the finer residual's low band, and on
+    // this smooth synthetic tile that costs more than the coarse levels save (docs/pyramid.md).
+    for (size_t l = 0; l < m; ++l) CHECK(s.build.levels[l].bytes < a.build.levels[l].bytes);
     auto file = PyramidFile::open(dir.file("s.pyr"));
     CHECK(file->container().metadata_json().find("\"level_error\":\"screen\"") != std::string::npos);
   }

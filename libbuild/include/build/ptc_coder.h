@@ -5,6 +5,7 @@
 
 #include <cstdint>
 
+#include "codec/codec.h"
 #include "pyramid/pyramid.h"
 
 namespace terrain {
@@ -24,7 +25,11 @@ struct PtcCoderOptions {
   // kLargestStep and libcodec's largest max error.
   bool screen_level_error = false;
   uint32_t tile_size = 64;  // libcodec tile side; also the band height unless band_rows says otherwise
-  int64_t band_rows = 0;    // 0: 4 tile rows per band
+  // Transform of the finer levels' residual streams: Residual (libcodec format 5: 12-17 % fewer bits
+  // than Lapped on closed-loop residuals, docs/codec.md) or Lapped (the format-4 streams of .pyr 2.x).
+  // The coarsest level, coded as values, always uses Lapped.
+  codec::Transform residual_transform = codec::Transform::Residual;
+  int64_t band_rows = 0;  // 0: 4 tile rows per band
 };
 
 class PtcResidualCoder final : public ResidualCoder {
@@ -36,7 +41,7 @@ class PtcResidualCoder final : public ResidualCoder {
   // Throws std::runtime_error naming the libcodec status if a band cannot be coded (e.g. a residual
   // beyond libcodec's +-2^20 range).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
-                              int levels_above_finest) override;
+                              int levels_above_finest, bool coarsest) override;
   // The step and max error a level gets (see screen_level_error).
   PtcCoderOptions level_options(int levels_above_finest) const;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;

@@ -43,9 +43,11 @@ using codec::crc32c_portable;
 // records are those of 1.1 (with the error figures). 1.x files must be rebuilt. 2.1 adds the
 // georeference's full geotransform and its CRS (EPSG code, CRS text); 2.0 files still open. 2.2
 // adds copy-on-write editing (an edited flag and generation in the superblock, a tail copy of it,
-// dead bytes between regions, band-map level blobs: docs/format.md "Editing (2.2)").
-inline constexpr uint16_t kFormatMajor = 2;
-inline constexpr uint16_t kFormatMinor = 2;
+// dead bytes between regions, band-map level blobs: docs/format.md "Editing (2.2)"). 3.0 has 2.2's
+// layout; its band streams may be libcodec format 5 (the residual transform), so 2.x readers must
+// refuse it; this reader reads 2.0-2.2 and 3.x.
+inline constexpr uint16_t kFormatMajor = 3;
+inline constexpr uint16_t kFormatMinor = 0;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
@@ -264,6 +266,7 @@ class Container {
   // False if level's stored CRC does not match; true if it matches or none is stored.
   bool level_checksum_ok(uint32_t level) const;
   const std::string& path() const { return path_; }
+  uint16_t major_version() const { return major_version_; }
   uint16_t minor_version() const { return minor_version_; }
   // 2.2 editing: whether the file has been edited, its edit generation (0 unedited), the bytes the
   // current version spans (file_size in its superblock) and those past it (an interrupted edit's
@@ -295,6 +298,7 @@ class Container {
   std::string_view metadata_json_;
   const uint8_t* mask_runs_ = nullptr;
   size_t mask_runs_size_ = 0;
+  uint16_t major_version_ = 0;
   uint16_t minor_version_ = 0;
   bool edited_ = false, from_tail_superblock_ = false;
   uint64_t generation_ = 0, committed_size_ = 0, file_bytes_ = 0;

@@ -23,8 +23,10 @@ class ResidualCoder {
   // that reconstructs to all zeros (decode then gets n = 0); the pyramid file stores no stream for it.
   // levels_above_finest: 0 for the finest level, m - l for level l of m + 1 (a coder may scale its
   // error with the level's spacing; decode() never needs it: streams carry their own step).
+  // coarsest: the band belongs to level 0, whose "residual" is the level itself (heights, not the
+  // small closed-loop residual of the finer levels), so a coder may transform it differently.
   virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
-                                      int levels_above_finest) = 0;
+                                      int levels_above_finest, bool coarsest) = 0;
   // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).
   virtual bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) = 0;
 };
@@ -37,7 +39,7 @@ class UniformQuantizerCoder final : public ResidualCoder {
   int64_t band_rows() const override { return band_rows_; }
   // One step at every level (levels_above_finest is ignored).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
-                              int levels_above_finest) override;
+                              int levels_above_finest, bool coarsest) override;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;
   int32_t step() const { return step_; }
 

@@ -37,6 +37,14 @@ const double* band_synthesis_norms();
 BandSteps band_steps_for(uint32_t step_q8, int fraction_bits);
 // All bands at step 1 (lossless).
 BandSteps unit_band_steps();
+// The residual transform's four band steps (lifting_transform.h) in q8[0..3], the same rule with the
+// lifting bands' norms; the other entries are unused.
+BandSteps lifting_band_steps_for(uint32_t step_q8, int fraction_bits);
+// A stream's steps: unit steps when lossless (fraction_bits 0), else the lapped or the lifting rule.
+inline BandSteps stream_band_steps(uint32_t step_q8, int fraction_bits, bool lifting) {
+  if (fraction_bits == 0) return unit_band_steps();
+  return lifting ? lifting_band_steps_for(step_q8, fraction_bits) : band_steps_for(step_q8, fraction_bits);
+}
 
 // Encoder side: q = sign(c) * floor(|c| / step + 3/8).
 inline int32_t quantize(int32_t c, double inverse_step) {

@@ -17,7 +17,12 @@ enum class TileMode : uint8_t {
 };
 
 struct TileParams {
-  BandSteps steps;        // for transform-mode tiles
+  BandSteps steps;          // lapped transform-mode tiles
+  BandSteps lifting_steps;  // residual-transform tiles (q8[0..3])
+  // Format 5: every transform-mode tile starts with one bit, 0 = residual transform
+  // (lifting_transform.h), 1 = lapped; the encoder keeps the one with the lower rate-distortion cost.
+  bool lifting = false;
+  double lambda = 0;      // format 5, lossy: the choice's bits per squared sample unit (encoder only)
   int fraction_bits = 0;  // extra sample precision of transform-mode tiles (0 = lossless)
   bool bound_max_error = false;
   uint32_t max_error = 0;
@@ -41,6 +46,9 @@ struct TileWork {
   std::vector<int32_t> sequence;        // one band's values in coding order
   std::vector<int32_t> reconstruction;  // width x height
   std::vector<uint8_t> alternative;     // second candidate payload in max-error mode
+  std::vector<int32_t> line;            // one row or column of the residual transform
+  std::vector<int32_t> candidate;       // the first transform's reconstruction while the second is tried
+  std::vector<uint8_t> second;          // the second transform's payload
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
   // window and needs none.
   void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
