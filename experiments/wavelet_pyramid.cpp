@@ -422,6 +422,16 @@ int main(int argc, char** argv) {
     if (std::getenv("REFD")) {  // the builder's D cascade (per-terrain optimal 11x11 D) instead
       BuildOptions bo;
       bo.level_count = levels + 1;
+      if (std::getenv("LIFTD")) {  // D = the (4,4) lifting low-pass, truncated to 11 taps (+-6: -1/512)
+        const double h[11] = {18, -16, -63, 144, 348, 144, -63, -16, 18, 0, 0};
+        double h11[11], sum = 0;
+        for (int i = 0; i < 11; ++i) h11[i] = i < 1 ? 0 : h[i - 1], sum += h11[i];
+        bo.use_fixed_filter = true;
+        bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
+        for (int y = 0; y < 11; ++y)
+          for (int x = 0; x < 11; ++x)
+            bo.fixed_filter.taps[size_t(y * 11 + x)] = h11[y] * h11[x] / (sum * sum);
+      }
       const ReferenceLevels ref = reference_levels(map, bo);
       for (size_t l = 0; l < T.size(); ++l)
         for (size_t i = 0; i < T[l].v.size(); ++i) T[l].v[i] = double(ref.levels[l][i]);

@@ -9,6 +9,7 @@
 // independent. Arithmetic wraps in 32 bits: garbage coefficients give garbage samples, never UB.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 namespace codec::detail {
@@ -23,9 +24,11 @@ inline LiftingBands lifting_bands(int w, int h) { return {(w + 1) / 2, (h + 1) /
 // 2 = LH (odd rows, even columns), 3 = HH. Mallat layout: LL at the top-left of the tile.
 inline constexpr int kLiftingBandCount = 4;
 
-// In place on w x h samples with row stride w; `line` needs room for max(w, h) values.
-void forward_lifting(int32_t* tile, int w, int h, int32_t* line);
-void inverse_lifting(int32_t* tile, int w, int h, int32_t* line);
+// Values of scratch forward_lifting and inverse_lifting need for a w x h tile.
+inline size_t lifting_scratch_size(int w, int h) { return size_t(w) * size_t(h) + size_t(2 * w); }
+// In place on w x h samples with row stride w.
+void forward_lifting(int32_t* tile, int w, int h, int32_t* scratch);
+void inverse_lifting(int32_t* tile, int w, int h, int32_t* scratch);
 
 // Synthesis norm of each band's basis (measured once on the integer inverse, as for the lapped bands).
 const double* lifting_synthesis_norms();
