@@ -4,7 +4,8 @@
 // with every checksum recomputed (so mutations reach the RLGR and transform decoders, which a CRC
 // would otherwise shield). Any status is fine; crashes, sanitizer reports and leaks are not. When the
 // re-checksummed stream decodes, region decodes must agree with the full decode. Inputs of the form
-// 'E' + bytes are also encoded as a tiny image and must round-trip losslessly.
+// 'E' + bytes are encoded as a tiny image (lapped or residual transform, lossless, lossy or
+// max-error) and must decode to the encoder's reconstruction; 'M' + bytes mutate such a stream.
 //   Run: fuzz_codec_decode -max_len=4096 -max_total_time=60 [corpus_dir]
 #include <cstdint>
 #include <cstdlib>
@@ -92,32 +93,57 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
       if (part[size_t(y * r.width + x)] != full[size_t((r.y0 + y) * h.width + r.x0 + x)]) std::abort();
 }
 
-void round_trip(const uint8_t* data, size_t size, codec::Scratch& scratch) {
-  if (size < 4) return;
+// A small image from the input bytes, encoded with options the bytes choose: data[1], data[2] the
+// size, data[3] bits 0-1 the tile size, bit 2 the residual transform (format 5), bits 3-5 a lossy
+// step (0: lossless), bit 6 max-error mode. The decoder must reproduce the encoder's reconstruction
+// exactly (the input itself when lossless). Returns the stream.
+std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
   const int64_t w = 1 + data[1] % 40, h = 1 + data[2] % 40;
   codec::EncodeOptions o;
   o.tile_size = 16u * (1 + data[3] % 3);
-  std::vector<int32_t> img(size_t(w * h));
+  o.transform = data[3] & 4 ? codec::Transform::Residual : codec::Transform::Lapped;
+  const int lossy = (data[3] >> 3) & 7;
+  o.step = lossy ? 1.5 * lossy : 1.0;
+  o.bound_max_error = lossy && (data[3] & 64);
+  o.max_error = o.bound_max_error ? uint32_t(lossy) : 0;
+  std::vector<int32_t> img(size_t(w * h)), recon(img.size());
   for (size_t i = 0; i < img.size(); ++i) {
     const uint8_t b = size > 4 ? data[4 + i % (size - 4)] : data[i % size];
     img[i] = (int32_t(b) - 128) * (b & 1 ? 8191 : 1);
   }
   std::vector<uint8_t> stream(codec::encode_bound(w, h, o));
   size_t written = 0;
-  if (codec::encode(img.data(), w, w, h, o, stream.data(), stream.size(), &written, scratch) !=
-      codec::Status::Ok)
+  if (codec::encode(img.data(), w, w, h, o, stream.data(), stream.size(), &written, scratch, recon.data(),
+                    w) != codec::Status::Ok)
     std::abort();
+  stream.resize(written);
   std::vector<int32_t> out(img.size());
   if (codec::decode(stream.data(), written, out.data(), w, scratch) != codec::Status::Ok) std::abort();
-  if (out != img) std::abort();
+  if (out != recon || (!lossy && out != img)) std::abort();
+  return stream;
 }
 
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static codec::Scratch scratch;
-  if (size > 0 && data[0] == 'E') {
-    round_trip(data, size, scratch);
+  if (size >= 4 && data[0] == 'E') {
+    encode_checked(data, size, scratch);
+    return 0;
+  }
+  // 'M' + 3 option bytes + 8 mutation bytes + image bytes: a valid stream of those options with
+  // four bytes past its header xor-ed (offset, value pairs), re-checksummed, so that mutations reach
+  // every tile decoder (the residual transform's included) however rarely random bytes form a stream.
+  if (size >= 12 && data[0] == 'M') {
+    std::vector<uint8_t> image(data, data + 4);
+    image.insert(image.end(), data + 12, data + size);
+    std::vector<uint8_t> stream = encode_checked(image.data(), image.size(), scratch);
+    for (int k = 0; k < 4 && stream.size() > 8; ++k) {
+      const size_t at = 6 + size_t(data[4 + 2 * k] * 131 + k * 17) % (stream.size() - 10);
+      stream[at] ^= data[5 + 2 * k];
+    }
+    fix_checksums(stream);
+    decode_checked(stream.data(), stream.size(), scratch);
     return 0;
   }
   decode_checked(data, size, scratch);

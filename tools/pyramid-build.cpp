@@ -79,7 +79,8 @@ int run(int argc, char** argv) {
   parser.option("--level-error", "absolute|screen",
                 "error schedule over the levels: one absolute step at every level (default, as in the "
                 "paper), or screen: level l's step and max error 2^(m-l) times the finest level's, the same "
-                "error in screen space at every level (smaller files; the target is the finest level's)",
+                "error in screen space at every level (usually smaller files: -5 to -7 % on SRTM tiles at "
+                "--rms 1, though not on every terrain; the target is the finest level's)",
                 [&](const std::string& v) {
                   if (v != "absolute" && v != "screen")
                     throw cli::UsageError("--level-error must be absolute or screen");
