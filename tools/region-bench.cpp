@@ -45,9 +45,9 @@ int run(int argc, char** argv) {
   auto file = terrain::container::PyramidFile::open(input);
   if (level < 0) level = file->level_count() - 1;
   if (level >= file->level_count())
-    throw terrain::Error(terrain::ErrorCode::InvalidOption,
-                         input + ": no level " + std::to_string(level) + " (" +
-                             std::to_string(file->level_count()) + " levels)");
+    throw terrain::Error(terrain::ErrorCode::InvalidOption, input + ": no level " + std::to_string(level) +
+                                                                " (" + std::to_string(file->level_count()) +
+                                                                " levels)");
   terrain::runtime::RegionDecoder decoder(file, size_t(cache_mib) << 20);
   const terrain::GridSize size = file->level_size(int(level));
   const terrain::Rect whole{0, 0, size.width, size.height};
@@ -79,8 +79,8 @@ int run(int argc, char** argv) {
     std::snprintf(line, sizeof line,
                   "%s level %lld (%lldx%lld): best %.1f, median %.1f Msamples/s (thread CPU, %lld reps), "
                   "crc32c %08x\n",
-                  input.c_str(), (long long)level, (long long)size.width, (long long)size.height, best, median,
-                  (long long)repeat, crc);
+                  input.c_str(), (long long)level, (long long)size.width, (long long)size.height, best,
+                  median, (long long)repeat, crc);
     std::cout << line;
   }
   return 0;

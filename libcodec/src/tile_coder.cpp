@@ -55,6 +55,13 @@ constexpr RlgrState kDcStart[2] = {{0, 16}, {0, 48}};
 constexpr DeadZone kAcDeadZone{0.42, 0.30, 0.05, 0.05};
 
 inline int32_t saturate(int64_t v) { return int32_t(std::clamp<int64_t>(v, INT32_MIN, INT32_MAX)); }
+// a + b clamped to the int32 range, in 32-bit lanes so that a row of them vectorises: the sum
+// overflowed iff both operands' signs differ from its sign, and then the bound is the one on a's side.
+inline int32_t saturating_add(int32_t a, int32_t b) {
+  const int32_t sum = int32_t(uint32_t(a) + uint32_t(b));
+  const int32_t bound = (a >> 31) ^ INT32_MAX;
+  return ((a ^ sum) & (b ^ sum)) < 0 ? bound : sum;
+}
 
 inline int64_t med_predict(int64_t left, int64_t top, int64_t top_left) {
   const int64_t lo = std::min(left, top), hi = std::max(left, top);
@@ -420,7 +427,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   const size_t head = params.bound_max_error ? 1 : 0;  // mode byte
   if (size < 1) return TileResult::Corrupt;
   const int pw = padded_side(w), ph = padded_side(h);
-  work.reserve(pw, ph, 0, 0);
+  work.reserve(pw, ph, window.add ? size_t(w) : 0, 0);
   const uint8_t mode = head ? payload[0] : uint8_t(TileMode::Transform);
   const bool spatial = mode == uint8_t(TileMode::SpatialQuantized);
   if (mode != uint8_t(TileMode::Transform) && !spatial) return TileResult::Corrupt;
@@ -436,21 +443,26 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   }
   if (bits.overrun()) return TileResult::Corrupt;
   inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
-  // Straight from the padded tile into the caller's window: no intermediate copy.
+  // Straight from the padded tile into the caller's window: no intermediate copy (add: through one
+  // row, then added).
   const int64_t bin = 2 * int64_t(params.max_error) + 1;
   const int n = window.x1 - window.x0;
+  int32_t* row = work.reconstruction.data();
   for (int y = window.y0; y < window.y1; ++y) {
     const int32_t* from = tile + size_t(y) * pw + window.x0;
-    int32_t* to = window.dst + ptrdiff_t(y - window.y0) * window.stride;
+    int32_t* dst = window.dst + ptrdiff_t(y - window.y0) * window.stride;
+    int32_t* to = window.add ? row : dst;
     if (spatial) {
       for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);
-      continue;
+    } else {
+      scale_down_row(from, to, n, params.fraction_bits);
+      if (corrected) {
+        const int32_t* c = corrections + size_t(y) * w + window.x0;
+        for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(to[x]) + c[x]);
+      }
     }
-    scale_down_row(from, to, n, params.fraction_bits);
-    if (corrected) {
-      const int32_t* c = corrections + size_t(y) * w + window.x0;
-      for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(to[x]) + c[x]);
-    }
+    if (window.add)
+      for (int x = 0; x < n; ++x) dst[x] = saturating_add(dst[x], to[x]);
   }
   return TileResult::Ok;
 }
