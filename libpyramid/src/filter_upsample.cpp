@@ -213,6 +213,20 @@ bool within(const int32_t* data, int64_t stride, int64_t width, int64_t height, 
   return lo >= -limit && hi <= limit;
 }
 
+// The int32 path (the decoder's and the encoder's prediction), with the bound check, compiled for
+// AVX-512 and AVX2 as well as the baseline and picked at load time (target_clones; flatten compiles
+// the templates into each clone): the baseline's SSE2 has no 32-bit min/max and 4 lanes.
+[[gnu::target_clones("arch=x86-64-v4", "avx2", "default"), gnu::flatten]] bool upsample_int32(
+    const CoarseWindow& coarse, const Rect& need, int32_t limit, const Rect& fine, int32_t* out,
+    int64_t out_stride, int32_t* scratch) {
+  const int32_t* need_data =
+      coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
+  if (!within(need_data, coarse.stride, need.width, need.height, limit)) return false;
+  upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(coarse.data, coarse.stride, coarse.rect,
+                                                           coarse.level, fine, out, out_stride, scratch);
+  return true;
+}
+
 }  // namespace
 
 std::vector<GridSize> pyramid_level_sizes(GridSize finest, int level_count, int64_t min_coarsest_side) {
@@ -250,14 +264,9 @@ void upsample_region(const CoarseWindow& coarse, GridSize fine_level, const Rect
   horizontal_rows(fine, coarse.level, &row_lo, &row_hi);
   const size_t count = size_t((row_hi - row_lo + 1) * fine.width);
   const Rect need = upsample_required_window(fine, fine_level);
-  const int32_t* need_data =
-      coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
-  const int32_t limit = int32_path_limit(fine, coarse.level);
-  if (within(need_data, coarse.stride, need.width, need.height, limit)) {
-    scratch.rows32.resize(count);
-    upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(
-        coarse.data, coarse.stride, coarse.rect, coarse.level, fine, out, out_stride, scratch.rows32.data());
-  } else {
+  scratch.rows32.resize(count);
+  if (!upsample_int32(coarse, need, int32_path_limit(fine, coarse.level), fine, out, out_stride,
+                      scratch.rows32.data())) {
     scratch.rows.resize(count);
     upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(
         coarse.data, coarse.stride, coarse.rect, coarse.level, fine, out, out_stride, scratch.rows.data());
