@@ -161,6 +161,11 @@ void upsample_generic(const In* data, int64_t stride, const Rect& have, GridSize
     const int64_t y = fine.y0 + r;
     const int64_t j = y >> 1;
     Out* o = out + r * out_stride;
+    // The output is usually cold (a whole level is larger than the caches): ask for the row after
+    // next while this one is computed, so that its stores do not wait for each line.
+    if (r + 2 < fine.height)
+      for (int64_t k = 0; k < fw; k += int64_t(64 / sizeof(Out)))
+        __builtin_prefetch(o + 2 * out_stride + k, 1, 3);
     if ((y & 1) == 0) {
       const Acc* a = hrow(j);
       for (int64_t k = 0; k < fw; ++k) o[k] = Finish::even(a[k]);
