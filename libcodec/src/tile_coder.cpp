@@ -318,11 +318,22 @@ void scale_down_row(const int32_t* from, int32_t* to, int n, int bits) {
   for (int x = 0; x < n; ++x) to[x] = int32_t(uint32_t(from[x]) + half) >> bits;
 }
 
-// dst[x] += scale_down_row's output, saturating. Cloned for AVX-512 and AVX2 (picked at load time):
-// the baseline's SSE2 needs about twice the instructions for the saturation.
-[[gnu::target_clones("arch=x86-64-v4", "avx2", "default")]] void add_scaled_down_row(const int32_t* from,
-                                                                                     int32_t* dst, int n,
-                                                                                     int bits) {
+// The decoder's row outputs below are cloned for AVX-512 and AVX2 (picked at load time): the
+// baseline's SSE2 needs about twice the instructions for the saturation and has no 64-bit multiply.
+#define CODEC_ROW_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx2", "default")]]
+
+// dst[x] += from[x], saturating (the same as saturate(int64 sum)).
+CODEC_ROW_CLONES void add_row(const int32_t* from, int32_t* dst, int n) {
+  for (int x = 0; x < n; ++x) dst[x] = saturating_add(dst[x], from[x]);
+}
+
+// to[x] = from[x] * bin, saturating: a spatial-mode tile's samples.
+CODEC_ROW_CLONES void spatial_row(const int32_t* from, int32_t* to, int n, int64_t bin) {
+  for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);
+}
+
+// dst[x] += scale_down_row's output, saturating.
+CODEC_ROW_CLONES void add_scaled_down_row(const int32_t* from, int32_t* dst, int n, int bits) {
   if (bits == 0) {
     for (int x = 0; x < n; ++x) dst[x] = saturating_add(dst[x], from[x]);
     return;
@@ -453,7 +464,8 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
       const int32_t* row = window.dst + ptrdiff_t(y - window.y0) * window.stride;
       for (int x = 0; x < window.x1 - window.x0; x += 16) __builtin_prefetch(row + x, 1, 3);
     }
-  if (!decode_bands(bits, tile, pw, ph, spatial ? unit_band_steps() : params.steps, work))
+  static const BandSteps unit_steps = unit_band_steps();
+  if (!decode_bands(bits, tile, pw, ph, spatial ? unit_steps : params.steps, work))
     return TileResult::Corrupt;
   const bool corrected = !spatial && params.bound_max_error;
   const int32_t* corrections = work.sequence.data();
@@ -477,16 +489,12 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
     }
     int32_t* to = window.add ? row : dst;
     if (spatial) {
-      for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);
+      spatial_row(from, to, n, bin);
     } else {
       scale_down_row(from, to, n, params.fraction_bits);
-      if (corrected) {
-        const int32_t* c = corrections + size_t(y) * w + window.x0;
-        for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(to[x]) + c[x]);
-      }
+      if (corrected) add_row(corrections + size_t(y) * w + window.x0, to, n);
     }
-    if (window.add)
-      for (int x = 0; x < n; ++x) dst[x] = saturating_add(dst[x], to[x]);
+    if (window.add) add_row(to, dst, n);
   }
   return TileResult::Ok;
 }
