@@ -332,6 +332,14 @@ CODEC_ROW_CLONES void spatial_row(const int32_t* from, int32_t* to, int n, int64
   for (int x = 0; x < n; ++x) to[x] = saturate(int64_t(from[x]) * bin);
 }
 
+// dst[x] += saturate(scale_down_row's output + c[x]), saturating: a corrected tile in add mode.
+CODEC_ROW_CLONES void add_corrected_row(const int32_t* from, const int32_t* c, int32_t* dst, int n,
+                                        int bits) {
+  const uint32_t half = bits == 0 ? 0 : uint32_t(1) << (bits - 1);
+  for (int x = 0; x < n; ++x)
+    dst[x] = saturating_add(dst[x], saturating_add(int32_t(uint32_t(from[x]) + half) >> bits, c[x]));
+}
+
 // dst[x] += scale_down_row's output, saturating.
 CODEC_ROW_CLONES void add_scaled_down_row(const int32_t* from, int32_t* dst, int n, int bits) {
   if (bits == 0) {
@@ -483,8 +491,11 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   for (int y = window.y0; y < window.y1; ++y) {
     const int32_t* from = tile + size_t(y) * pw + window.x0;
     int32_t* dst = window.dst + ptrdiff_t(y - window.y0) * window.stride;
-    if (window.add && !spatial && !corrected) {  // the common case without the row
-      add_scaled_down_row(from, dst, n, params.fraction_bits);
+    if (window.add && !spatial) {  // without the row
+      if (corrected)
+        add_corrected_row(from, corrections + size_t(y) * w + window.x0, dst, n, params.fraction_bits);
+      else
+        add_scaled_down_row(from, dst, n, params.fraction_bits);
       continue;
     }
     int32_t* to = window.add ? row : dst;
