@@ -345,7 +345,7 @@ TEST_CASE("decode_region equals the same window of a full decode", "[codec]") {
   }
 }
 
-TEST_CASE("decode_region_add adds (saturating) what decode_region writes; a damaged tile adds nothing",
+TEST_CASE("decode_region_add adds (saturating) what decode_region writes, and a damaged tile adds nothing",
           "[codec]") {
   const Image img = residual_like(333, 257, 6.0, 22);
   std::mt19937 rng(6);
