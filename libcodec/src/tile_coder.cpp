@@ -483,8 +483,8 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   }
   if (bits.overrun()) return TileResult::Corrupt;
   inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
-  // Straight from the padded tile into the caller's window: no intermediate copy (add: through one
-  // row, then added).
+  // Straight from the padded tile into the caller's window: no intermediate copy (add mode: in one
+  // pass for transform tiles; spatial ones through one row, then added).
   const int64_t bin = 2 * int64_t(params.max_error) + 1;
   const int n = window.x1 - window.x0;
   int32_t* row = work.reconstruction.data();

@@ -291,7 +291,6 @@ struct InverseBlock {
   }
 };
 
-// Same result as inverse_impl (lapped_transform.cpp) with lanes of type V.
 // inverse_stage2 with 4-lane vectors: the grid of block DCs (every 4th sample of every 4th row) is
 // copied out into a compact (width / 4) x (height / 4) array, where the stage's steps have the shape
 // of stage 1 (4-point steps inside 4x4 blocks, post-filters across every 4th row and column), and
@@ -319,6 +318,7 @@ template <class Post, bool Two> void inverse_stage2_lanes(int32_t* tile, int wid
     for (int i = 0; i < cw; ++i) tile[ptrdiff_t(4 * j) * width + 4 * i] = grid[j * cw + i];
 }
 
+// Same result as inverse_impl (lapped_transform.cpp) with lanes of type V.
 template <class V, class Post, bool Two> void inverse_lanes(int32_t* tile, int width, int height) {
   constexpr int kLanes = int(sizeof(V) / sizeof(int32_t));
   inverse_stage2_lanes<Post, Two>(tile, width, height);
