@@ -239,14 +239,16 @@ const uint32_t* band_layout(TileWork& work, int pw, int ph) {
 
 // Decodes one band group (LP or HP) and dequantises each non-zero value into its slot. Out of line,
 // so that the RLGR loop has the registers to itself (GCC 12: 30-50% faster than inlined into the caller).
-#if defined(__GNUC__) || defined(__clang__)
-__attribute__((noinline))
-#endif
+// GCC also compiles it for x86-64-v3 (picked at load time): LZCNT and BMI2's flagless shifts, about
+// 2% (clang does not combine target_clones with noinline).
 // any_nonzero: whether the group held a non-zero level (the HP start state depends on it for LP).
-// Also compiled for x86-64-v3 (picked at load time): LZCNT and BMI2's flagless shifts, about 2%.
-[[gnu::target_clones("arch=x86-64-v3", "default"), gnu::flatten]] bool
-decode_band_group(BitReader& in, size_t count, RlgrState state, const uint32_t* slots, const BandSteps& steps,
-                  int32_t* tile, bool& any_nonzero) {
+#if defined(__clang__)
+__attribute__((noinline))
+#elif defined(__GNUC__)
+__attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
+#endif
+bool decode_band_group(BitReader& in, size_t count, RlgrState state, const uint32_t* slots,
+                       const BandSteps& steps, int32_t* tile, bool& any_nonzero) {
   // dequantize() for |q| < kRlgrMaxMagnitude: (16 |q| + 1) * step < 2^34 * kMaxBandStep = 2^64.
   static_assert(uint64_t(kRlgrMaxMagnitude) * 16 <= (uint64_t(1) << 34) && kMaxBandStep <= (1u << 30));
   bool nonzero = false;  // a local, not any_nonzero: the stores through tile may alias a reference

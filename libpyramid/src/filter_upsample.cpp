@@ -219,9 +219,15 @@ bool within(const int32_t* data, int64_t stride, int64_t width, int64_t height, 
 }
 
 // The int32 path (the decoder's and the encoder's prediction), with the bound check, compiled for
-// AVX-512 and AVX2 as well as the baseline and picked at load time (target_clones; flatten compiles
-// the templates into each clone): the baseline's SSE2 has no 32-bit min/max and 4 lanes.
-[[gnu::target_clones("arch=x86-64-v4", "avx2", "default"), gnu::flatten]] bool upsample_int32(
+// AVX-512 and AVX2 as well as the baseline and picked at load time (target_clones; GCC's flatten
+// compiles the templates into each clone; clang does not combine the two): the baseline's SSE2 has
+// no 32-bit min/max and 4 lanes.
+#if defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#else
+__attribute__((target_clones("arch=x86-64-v4", "avx2", "default"), flatten))
+#endif
+bool upsample_int32(
     const CoarseWindow& coarse, const Rect& need, int32_t limit, const Rect& fine, int32_t* out,
     int64_t out_stride, int32_t* scratch) {
   const int32_t* need_data =
