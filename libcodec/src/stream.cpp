@@ -450,6 +450,16 @@ Status Decoder::check_row(int64_t tile_row) const {
 }
 
 Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const {
+  return decode_into(rect, dst, dst_stride, scratch, false);
+}
+
+Status Decoder::decode_region_add(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride,
+                                  Scratch& scratch) const {
+  return decode_into(rect, dst, dst_stride, scratch, true);
+}
+
+Status Decoder::decode_into(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch,
+                            bool add) const {
   assert(dst && dst_stride >= rect.width);
   if (!data_) return Status::InvalidArgument;
   if (rect.width < 1 || rect.height < 1 || rect.x0 < 0 || rect.y0 < 0 ||
@@ -473,8 +483,9 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
       const int64_t x0 = std::max(rect.x0, tx * t), x1 = std::min(rect.x0 + rect.width, tx * t + tw);
       const int64_t y0 = std::max(rect.y0, ty * t), y1 = std::min(rect.y0 + rect.height, ty * t + th);
       int32_t* out = dst + (y0 - rect.y0) * dst_stride + (x0 - rect.x0);
-      if (entry.size == 0) {
-        for (int64_t y = y0; y < y1; ++y) std::fill_n(out + (y - y0) * dst_stride, x1 - x0, 0);
+      if (entry.size == 0) {  // adds nothing
+        if (!add)
+          for (int64_t y = y0; y < y1; ++y) std::fill_n(out + (y - y0) * dst_stride, x1 - x0, 0);
         continue;
       }
       if (!row_checked) {
@@ -483,7 +494,7 @@ Status Decoder::decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stri
         row_checked = true;
       }
       const detail::TileWindow window{
-          int(x0 - tx * t), int(y0 - ty * t), int(x1 - tx * t), int(y1 - ty * t), out, dst_stride};
+          int(x0 - tx * t), int(y0 - ty * t), int(x1 - tx * t), int(y1 - ty * t), out, dst_stride, add};
       if (detail::decode_tile(data_ + entry.offset, entry.size, tw, th, params, work, window) !=
           detail::TileResult::Ok)
         return Status::Corrupt;

@@ -161,6 +161,11 @@ void upsample_generic(const In* data, int64_t stride, const Rect& have, GridSize
     const int64_t y = fine.y0 + r;
     const int64_t j = y >> 1;
     Out* o = out + r * out_stride;
+    // The output is usually cold (a whole level is larger than the caches): ask for the row after
+    // next while this one is computed, so that its stores do not wait for each line.
+    if (r + 2 < fine.height)
+      for (int64_t k = 0; k < fw; k += int64_t(64 / sizeof(Out)))
+        __builtin_prefetch(o + 2 * out_stride + k, 1, 3);
     if ((y & 1) == 0) {
       const Acc* a = hrow(j);
       for (int64_t k = 0; k < fw; ++k) o[k] = Finish::even(a[k]);
@@ -213,6 +218,26 @@ bool within(const int32_t* data, int64_t stride, int64_t width, int64_t height, 
   return lo >= -limit && hi <= limit;
 }
 
+// The int32 path (the decoder's and the encoder's prediction), with the bound check, compiled for
+// AVX-512 and AVX2 as well as the baseline and picked at load time (target_clones; GCC's flatten
+// compiles the templates into each clone; clang does not combine the two): the baseline's SSE2 has
+// no 32-bit min/max and 4 lanes.
+#if defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#else
+__attribute__((target_clones("arch=x86-64-v4", "avx2", "default"), flatten))
+#endif
+bool upsample_int32(
+    const CoarseWindow& coarse, const Rect& need, int32_t limit, const Rect& fine, int32_t* out,
+    int64_t out_stride, int32_t* scratch) {
+  const int32_t* need_data =
+      coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
+  if (!within(need_data, coarse.stride, need.width, need.height, limit)) return false;
+  upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(coarse.data, coarse.stride, coarse.rect,
+                                                           coarse.level, fine, out, out_stride, scratch);
+  return true;
+}
+
 }  // namespace
 
 std::vector<GridSize> pyramid_level_sizes(GridSize finest, int level_count, int64_t min_coarsest_side) {
@@ -250,14 +275,9 @@ void upsample_region(const CoarseWindow& coarse, GridSize fine_level, const Rect
   horizontal_rows(fine, coarse.level, &row_lo, &row_hi);
   const size_t count = size_t((row_hi - row_lo + 1) * fine.width);
   const Rect need = upsample_required_window(fine, fine_level);
-  const int32_t* need_data =
-      coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
-  const int32_t limit = int32_path_limit(fine, coarse.level);
-  if (within(need_data, coarse.stride, need.width, need.height, limit)) {
-    scratch.rows32.resize(count);
-    upsample_generic<int32_t, int32_t, int32_t, Int32Finish>(
-        coarse.data, coarse.stride, coarse.rect, coarse.level, fine, out, out_stride, scratch.rows32.data());
-  } else {
+  scratch.rows32.resize(count);
+  if (!upsample_int32(coarse, need, int32_path_limit(fine, coarse.level), fine, out, out_stride,
+                      scratch.rows32.data())) {
     scratch.rows.resize(count);
     upsample_generic<int32_t, int64_t, int32_t, IntegerFinish>(
         coarse.data, coarse.stride, coarse.rect, coarse.level, fine, out, out_stride, scratch.rows.data());

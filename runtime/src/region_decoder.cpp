@@ -63,6 +63,17 @@ void add_rows(int32_t* out, int64_t out_stride, const int32_t* res, int64_t res_
   }
 }
 
+// Rows U and the residual add work on at a time in decode_refined (rounded up to whole tile rows):
+// 32 rows of a 4096-sample level are 512 KiB of int32, half of an L2 cache.
+constexpr int64_t kStripRows = 32;
+
+// A request at least this wide and high at its level is a bulk read (a whole level, an extract,
+// a cold window): the residual tiles wholly inside it that are not cached are decoded straight into
+// the output and not cached. A later request meets such a tile again only where its own rectangle
+// overlaps this one's interior, which moving windows and row-by-row reads rarely do, while caching
+// them costs an allocation, a copy and a second pass per tile (about 10% of a whole-level decode).
+constexpr int64_t kBulkSide = 128;
+
 // Sum of the extents of the tiles [t0, t1] of size ts along an axis of length n.
 int64_t tiles_extent(int64_t t0, int64_t t1, int64_t ts, int64_t n) {
   return std::min(n, (t1 + 1) * ts) - t0 * ts;
@@ -195,19 +206,20 @@ const RegionDecoder::Band* RegionDecoder::band(int level, size_t b) const {
   return nullptr;
 }
 
+std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::cached_tile(uint64_t key) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = map_.find(key);
+  if (it == map_.end()) return nullptr;
+  lru_.splice(lru_.begin(), lru_, it->second);
+  hits_ += 1;
+  return it->second->tile;
+}
+
 std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int level, size_t b, const Band& bd,
                                                                         int64_t tx, int64_t ty) const {
   const codec::HeaderInfo& h = bd.decoder.header();
   const uint64_t key = tile_key(level, b, ty * h.tiles_x + tx);
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    auto it = map_.find(key);
-    if (it != map_.end()) {
-      lru_.splice(lru_.begin(), lru_, it->second);
-      hits_ += 1;
-      return it->second->tile;
-    }
-  }
+  if (std::shared_ptr<const Tile> t = cached_tile(key)) return t;
   // Decoded outside the lock: two threads may race on the same tile; both get identical data.
   const int64_t ts = h.tile_size;
   const codec::Rect r{tx * ts, ty * ts, std::min(ts, h.width - tx * ts), std::min(ts, h.height - ty * ts)};
@@ -234,7 +246,8 @@ std::shared_ptr<const RegionDecoder::Tile> RegionDecoder::residual_tile(int leve
   return t;
 }
 
-void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const {
+void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride,
+                                 bool bulk) const {
   const auto& views = file_->bands(level);
   for (size_t b = file_->band_of_row(level, rect.y0); b < views.size(); ++b) {
     const BandView& view = views[b];
@@ -273,15 +286,30 @@ void RegionDecoder::add_residual(int level, const Rect& rect, int32_t* out, int6
       add_rows(band_out, out_stride, residual.data(), cr.width, cr.width, cr.height);
       continue;
     }
+    uint64_t bulk_tiles = 0, bulk_samples = 0;
     for (int64_t ty = ty0; ty <= ty1; ++ty)
       for (int64_t tx = tx0; tx <= tx1; ++tx) {
-        const std::shared_ptr<const Tile> t = residual_tile(level, b, bd, tx, ty);
-        const int64_t tw = std::min(ts, h.width - tx * ts);
+        const int64_t tw = std::min(ts, h.width - tx * ts), th = std::min(ts, h.height - ty * ts);
         const int64_t x0 = std::max(cr.x0, tx * ts), x1 = std::min(cr.x0 + cr.width, tx * ts + tw);
-        const int64_t ya = std::max(cr.y0, ty * ts), yb = std::min(cr.y0 + cr.height, (ty + 1) * ts);
-        add_rows(band_out + (ya - cr.y0) * out_stride + (x0 - cr.x0), out_stride,
-                 t.get() + (ya - ty * ts) * tw + (x0 - tx * ts), tw, x1 - x0, yb - ya);
+        const int64_t ya = std::max(cr.y0, ty * ts), yb = std::min(cr.y0 + cr.height, ty * ts + th);
+        int32_t* dst = band_out + (ya - cr.y0) * out_stride + (x0 - cr.x0);
+        std::shared_ptr<const Tile> t;
+        if (bulk && x1 - x0 == tw && yb - ya == th &&
+            !(t = cached_tile(tile_key(level, b, ty * h.tiles_x + tx)))) {
+          // A whole tile of a bulk request: added straight into out, not kept (see kBulkSide).
+          const codec::Status s = bd.decoder.decode_region_add(codec::Rect{x0, ya, tw, th}, dst, out_stride,
+                                                               thread_codec_scratch());
+          // On failure out is untouched there: the coarser level shows, as Degrade wants.
+          if (s != codec::Status::Ok)
+            damaged(level, b, &bd, s == codec::Status::ChecksumMismatch ? -1 : tx, ty, s);
+          bulk_tiles += 1;
+          bulk_samples += uint64_t(tw * th);
+          continue;
+        }
+        if (!t) t = residual_tile(level, b, bd, tx, ty);
+        add_rows(dst, out_stride, t.get() + (ya - ty * ts) * tw + (x0 - tx * ts), tw, x1 - x0, yb - ya);
       }
+    if (bulk_tiles) count_decoded(level, bulk_tiles, bulk_samples);
   }
 }
 
@@ -292,7 +320,7 @@ void RegionDecoder::decode_units(int level, const Rect& rect, int32_t* out, int6
   if (rect.width == 0 || rect.height == 0) return;
   if (level == 0) {
     for (int64_t y = 0; y < rect.height; ++y) std::fill_n(out + y * out_stride, rect.width, 0);
-    add_residual(level, rect, out, out_stride);
+    add_residual(level, rect, out, out_stride, rect.width >= kBulkSide && rect.height >= kBulkSide);
     samples_ += uint64_t(rect.width * rect.height);
     return;
   }
@@ -313,15 +341,41 @@ void RegionDecoder::decode_refined(int level, const Rect& rect, const CoarseWind
   const GridSize size = checked_size(*file_, level, rect);
   if (rect.width == 0 || rect.height == 0) return;
   const bool timed = seconds_upsample || seconds_residual;
-  const Clock::time_point t0 = timed ? Clock::now() : Clock::time_point{};
-  upsample_region(coarser, size, rect, out, out_stride, thread_upsample_scratch());
-  const Clock::time_point t1 = timed ? Clock::now() : Clock::time_point{};
-  add_residual(level, rect, out, out_stride);
-  if (timed) {
-    const Clock::time_point t2 = Clock::now();
-    if (seconds_upsample) *seconds_upsample += std::chrono::duration<double>(t1 - t0).count();
-    if (seconds_residual) *seconds_residual += std::chrono::duration<double>(t2 - t1).count();
+  double up = 0, res = 0;
+  // Strip by strip of whole residual tile rows (at least kStripRows rows), so that the residual is
+  // added while U's output for the strip is still in cache: a whole level's U written first and
+  // the residual added afterwards misses the cache on every sample. U is pointwise, so its strips
+  // give exactly the samples of one call over the rectangle.
+  UpsampleScratch& scratch = thread_upsample_scratch();
+  const bool bulk = rect.width >= kBulkSide && rect.height >= kBulkSide;
+  const auto& views = file_->bands(level);
+  const int64_t rect_y1 = rect.y0 + rect.height;
+  for (size_t b = file_->band_of_row(level, rect.y0); b < views.size(); ++b) {
+    const BandView& view = views[b];
+    if (view.y0 >= rect_y1) break;
+    const int64_t y0 = std::max(rect.y0, view.y0), y1 = std::min(rect_y1, view.y0 + view.rows);
+    int64_t strip = y1 - y0;
+    if (!view.empty())
+      if (const Band* bd = band(level, b)) {
+        const int64_t ts = bd->decoder.header().tile_size;
+        strip = ts * std::max<int64_t>(1, (kStripRows + ts - 1) / ts);
+      }
+    for (int64_t ya = y0, yb; ya < y1; ya = yb) {
+      yb = std::min(y1, view.y0 + ((ya - view.y0) / strip + 1) * strip);
+      const Rect part{rect.x0, ya, rect.width, yb - ya};
+      int32_t* part_out = out + (ya - rect.y0) * out_stride;
+      const Clock::time_point t0 = timed ? Clock::now() : Clock::time_point{};
+      upsample_region(coarser, size, part, part_out, out_stride, scratch);
+      const Clock::time_point t1 = timed ? Clock::now() : Clock::time_point{};
+      add_residual(level, part, part_out, out_stride, bulk);
+      if (timed) {
+        up += std::chrono::duration<double>(t1 - t0).count();
+        res += std::chrono::duration<double>(Clock::now() - t1).count();
+      }
+    }
   }
+  if (seconds_upsample) *seconds_upsample += up;
+  if (seconds_residual) *seconds_residual += res;
   samples_ += uint64_t(rect.width * rect.height);
 }
 

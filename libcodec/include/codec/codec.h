@@ -202,8 +202,15 @@ class Decoder {
   // InvalidArgument for an empty rect or one outside the image, ChecksumMismatch or Corrupt for a
   // damaged tile row (dst then holds unspecified values).
   Status decode_region(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const;
+  // The same, but adds each decoded sample to dst's (int32, saturating at the int32 range) instead
+  // of storing it: what a caller that adds the samples to a prediction would do, without a buffer
+  // and a second pass. On an error status the tiles before the damaged one (in row-major order)
+  // have been added and the rest of dst is untouched (a tile is validated whole before any of it is
+  // added; a tile row's CRC before any of that row), so a one-tile call leaves dst as it was.
+  Status decode_region_add(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch) const;
 
  private:
+  Status decode_into(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride, Scratch& scratch, bool add) const;
   const TileEntry& entry_of(int64_t tile) const;
   Status check_row(int64_t tile_row) const;
   const uint8_t* data_ = nullptr;

@@ -82,9 +82,10 @@ class RegionDecoder {
 
   // cache_bytes bounds the decoded-residual cache (0 disables it: each call decodes exactly the
   // libcodec tiles its rectangles intersect, and nothing is kept); any other bound keeps at least the
-  // most recent tile. `file` must not be null. policy: what damaged data does (the damage contract
-  // above). Throws Error(Corrupt) for a file of more than kMaxLevels levels. Band streams are opened
-  // on first use, not here.
+  // most recent tile it caches. A request of at least 128x128 samples at a level does not cache the
+  // tiles wholly inside it (it uses those already cached): they are decoded straight into the output. `file`
+  // must not be null. policy: what damaged data does (the damage contract above). Throws Error(Corrupt) for a
+  // file of more than kMaxLevels levels. Band streams are opened on first use, not here.
   explicit RegionDecoder(std::shared_ptr<const container::PyramidFile> file,
                          size_t cache_bytes = size_t(256) << 20, DamagePolicy policy = DamagePolicy::Throw);
   ~RegionDecoder();
@@ -130,7 +131,9 @@ class RegionDecoder {
   const Band* band(int level, size_t b) const;
   // Throw: throws Error. Degrade: records the damage (once per part) and returns.
   void damaged(int level, size_t b, const Band* bd, int64_t tx, int64_t ty, codec::Status s) const;
-  void add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride) const;
+  // bulk: tiles wholly inside rect that are not cached are added straight into out, not cached.
+  void add_residual(int level, const Rect& rect, int32_t* out, int64_t out_stride, bool bulk) const;
+  std::shared_ptr<const Tile> cached_tile(uint64_t key) const;  // null when not cached (counts a hit)
   std::shared_ptr<const Tile> residual_tile(int level, size_t b, const Band& band, int64_t tx,
                                             int64_t ty) const;
   void count_decoded(int level, uint64_t tiles, uint64_t samples) const;

@@ -115,11 +115,9 @@ class BitReader {
     skip(n);
     return v;
   }
-  // Leading one bits in the cache (valid up to the cached count, at least 56 after refill()).
-  int leading_ones() const {
-    const uint64_t inverted = ~cache_;
-    return inverted ? __builtin_clzll(inverted) : 64;
-  }
+  // Leading one bits in the cache (valid up to the cached count, at least 56 after refill()); a
+  // cache of all ones gives 63, so compare the result only with counts below 63.
+  int leading_ones() const { return __builtin_clzll(~cache_ | 1); }
   int leading_zeros() const { return cache_ ? __builtin_clzll(cache_) : 64; }
   void skip(int n) {
     cache_ <<= n;

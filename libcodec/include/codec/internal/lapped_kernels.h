@@ -291,10 +291,37 @@ struct InverseBlock {
   }
 };
 
+// inverse_stage2 with 4-lane vectors: the grid of block DCs (every 4th sample of every 4th row) is
+// copied out into a compact (width / 4) x (height / 4) array, where the stage's steps have the shape
+// of stage 1 (4-point steps inside 4x4 blocks, post-filters across every 4th row and column), and
+// copied back. The same steps on the same values in the same order, so the same result; the scalar
+// stage was about a quarter of a 32x32 tile's inverse. Tiles above 256x256 keep the scalar stage.
+template <class Post, bool Two> void inverse_stage2_lanes(int32_t* tile, int width, int height) {
+  const int cw = width / 4, ch = height / 4;
+  constexpr int kMaxGrid = 64 * 64;
+  if (cw * ch > kMaxGrid) {
+    inverse_stage2<Post, Two>(tile, width, height);
+    return;
+  }
+  int32_t grid[kMaxGrid];
+  for (int j = 0; j < ch; ++j)
+    for (int i = 0; i < cw; ++i) grid[j * cw + i] = tile[ptrdiff_t(4 * j) * width + 4 * i];
+  for (int y = 0; y < ch; y += 4)
+    for (int x = 0; x < cw; x += 4) on_rows<InverseBlock, V4>(grid + y * cw + x, cw);
+  if (Two) {
+    for (int edge = 4; edge < ch; edge += 4)
+      for (int x = 0; x < cw; x += 4) on_rows<Post, V4>(grid + (edge - 2) * cw + x, cw);
+    for (int y = 0; y < ch; y += 4)
+      for (int edge = 4; edge < cw; edge += 4) on_rows<Transposed<Post>, V4>(grid + y * cw + edge - 2, cw);
+  }
+  for (int j = 0; j < ch; ++j)
+    for (int i = 0; i < cw; ++i) tile[ptrdiff_t(4 * j) * width + 4 * i] = grid[j * cw + i];
+}
+
 // Same result as inverse_impl (lapped_transform.cpp) with lanes of type V.
 template <class V, class Post, bool Two> void inverse_lanes(int32_t* tile, int width, int height) {
   constexpr int kLanes = int(sizeof(V) / sizeof(int32_t));
-  inverse_stage2<Post, Two>(tile, width, height);
+  inverse_stage2_lanes<Post, Two>(tile, width, height);
   for (int y = 0; y < height; y += 4)
     for (int x = 0; x < width; x += kLanes) on_rows<InverseBlock, V>(tile + ptrdiff_t(y) * width + x, width);
   for (int edge = 4; edge < height; edge += 4)

@@ -95,9 +95,12 @@ template <class Sink>
   const auto rice = [&](int kr, uint32_t limit, bool& in_range) -> uint32_t {
     const int ones = in.leading_ones();
     if (ones < kUnaryCap) [[likely]] {
-      in.skip(ones + 1);
+      // The remainder from the cache shifted to the terminating zero, whose bit on top keeps kr = 0
+      // defined; then one skip of the whole codeword.
+      const uint32_t remainder = uint32_t((in.cache() << ones) >> (63 - kr));
+      in.skip(ones + 1 + kr);
       adapt_rice(s, ones);
-      return (uint32_t(ones) << kr) | in.take(kr);
+      return (uint32_t(ones) << kr) | remainder;
     }
     in.skip(kUnaryCap);
     in.refill();
@@ -124,11 +127,13 @@ template <class Sink>
     s.kp = clamp_kp(s.kp + kUpRun);
     return true;
   }
-  const size_t run = in.take(k);
+  // Run length (k bits) and sign in one read.
+  const uint32_t run_sign = in.take(k + 1);
+  const size_t run = run_sign >> 1;
   if (run >= count - i) [[unlikely]]
     return false;
   i += run;
-  const uint32_t negative = in.take(1);
+  const uint32_t negative = run_sign & 1;
   const uint32_t magnitude_minus_1 = rice(s.krp >> 3, uint32_t(kRlgrMaxMagnitude) - 1, in_range);
   if (!in_range) [[unlikely]]
     return false;

@@ -66,14 +66,16 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int heig
 
 enum class TileResult { Ok, Corrupt };
 // The part of a decoded tile the caller wants: samples [x0, x1) x [y0, y1) of the tile (inside
-// width x height), written to dst (the sample at (x0, y0)) with row stride `stride`.
+// width x height), written to dst (the sample at (x0, y0)) with row stride `stride`, or added to
+// dst's samples (saturating) when `add`.
 struct TileWindow {
   int x0, y0, x1, y1;
   int32_t* dst;
   ptrdiff_t stride;
+  bool add = false;
 };
-// Decodes a width x height payload and writes `window` of it. On Corrupt the window's contents are
-// unspecified.
+// Decodes a width x height payload and writes `window` of it. On Corrupt the window is untouched
+// (the whole payload is decoded and checked before the first sample is written).
 TileResult decode_tile(const uint8_t* payload, size_t size, int width, int height, const TileParams& params,
                        TileWork& work, const TileWindow& window);
 
