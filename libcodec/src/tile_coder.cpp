@@ -345,21 +345,41 @@ void code_lifting_bands(BitWriter& out, int32_t* tile, int w, int h, const BandS
 }
 
 // Reads the four bands and writes dequantised coefficients into the w x h tile.
-bool decode_lifting_bands(BitReader& in, int32_t* tile, int w, int h, const BandSteps& steps, int32_t* seq) {
+// Non-zero values only, dequantised straight into their tile positions (the tile is zeroed once),
+// as decode_band_group does for the lapped bands; out of line and cloned for the same reasons.
+#if defined(__clang__)
+__attribute__((noinline))
+#elif defined(__GNUC__)
+__attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
+#endif
+bool decode_lifting_band(BitReader& in, size_t count, RlgrState state, int32_t* origin, int band_w, int w,
+                         uint32_t step_q8) {
+  int64_t row = 0, col = 0;
+  size_t last = 0;
+  return rlgr_decode_nonzero(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
+    col += int64_t(i - last);
+    last = i;
+    if (col >= band_w) {
+      row += col / band_w;
+      col %= band_w;
+    }
+    const uint64_t value = ((uint64_t(magnitude) * 16 + 1) * step_q8 + 2048) >> 12;
+    origin[row * w + col] = int32_t(negative ? 0u - uint32_t(value) : uint32_t(value));
+    return value <= uint64_t(kMaxCoefficient);
+  });
+}
+
+// Reads the four bands and writes dequantised coefficients into the w x h tile.
+bool decode_lifting_bands(BitReader& in, int32_t* tile, int w, int h, const BandSteps& steps) {
+  std::memset(tile, 0, size_t(w) * h * sizeof(int32_t));
   for (int band = 0; band < kLiftingBandCount; ++band) {
     const LiftingRect r = lifting_rect(w, h, band);
     const size_t n = size_t(r.x1 - r.x0) * size_t(r.y1 - r.y0);
     if (n == 0) continue;
     in.refill();
-    RlgrState state = kLiftingStart[in.take(1)];
-    if (!rlgr_decode(in, seq, n, state)) return false;
-    size_t i = 0;
-    for (int y = r.y0; y < r.y1; ++y)
-      for (int x = r.x0; x < r.x1; ++x) {
-        const int64_t value = dequantize(seq[i++], steps.q8[band]);
-        if (value > kMaxCoefficient || value < -kMaxCoefficient) return false;
-        tile[size_t(y) * w + x] = int32_t(value);
-      }
+    const RlgrState state = kLiftingStart[in.take(1)];
+    if (!decode_lifting_band(in, n, state, tile + size_t(r.y0) * w + r.x0, r.x1 - r.x0, w, steps.q8[band]))
+      return false;
   }
   return true;
 }
@@ -616,7 +636,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
     bits.refill();
     lifting = bits.take(1) == 0;
   }
-  if (lifting ? !decode_lifting_bands(bits, tile, w, h, params.lifting_steps, work.sequence.data())
+  if (lifting ? !decode_lifting_bands(bits, tile, w, h, params.lifting_steps)
               : !decode_bands(bits, tile, pw, ph, spatial ? unit_steps : params.steps, work))
     return TileResult::Corrupt;
   const bool corrected = !spatial && params.bound_max_error;
