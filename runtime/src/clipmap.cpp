@@ -366,8 +366,6 @@ void Clipmap::refill(int level, int64_t x0, int64_t y0, ClipmapUpdateStats& stat
     stats.samples_filled += r.width * r.height;
   }
   const double seconds_fill = since(t0);
-  int64_t samples = 0;
-  for (const Rect& r : rects) samples += r.width * r.height;
   t0 = Clock::now();
   for (const Rect& r : rects) compute_coarse(level, r);
   const double seconds_coarse = since(t0);
