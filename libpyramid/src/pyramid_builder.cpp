@@ -58,6 +58,7 @@ void validate(const BuildOptions& o, const GridInfo& info) {
   if (o.fill_band_rows < 1) throw std::invalid_argument("pyramid: fill_band_rows must be >= 1");
   if (o.fit_rows < 1) throw std::invalid_argument("pyramid: fit_rows must be >= 1");
   if (o.level_count < 0) throw std::invalid_argument("pyramid: level_count must be >= 0");
+  if (o.memory_budget < 0) throw std::invalid_argument("pyramid: memory_budget must be >= 0");
   if (o.use_fixed_filter && !(std::abs(o.fixed_filter.sum() - 1.0) < 1e-9))
     throw std::invalid_argument("pyramid: the fixed filter must sum to 1");
 }
@@ -257,6 +258,99 @@ class MaskRows {
 // Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
 constexpr int64_t kMinCoarseBandRows = 16;
 
+// Band heights per level, coarsest first.
+std::vector<int64_t> level_band_rows(int level_count, int64_t finest_band_rows) {
+  // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
+  // until it is: halving the band height per coarser level keeps every level's lag near band_rows
+  // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)). But bands of a
+  // few rows code badly (the codec pads them to 16 rows and every band restarts its tiles), so a
+  // coarse band gets up to kMinCoarseBandRows rows as long as its lag stays within 4 band_rows input
+  // rows: a constant 4096^2 grid's coarsest level costs 8 bands instead of 32.
+  const int finest = level_count - 1;
+  std::vector<int64_t> rows(static_cast<size_t>(level_count));
+  for (int l = 0; l < level_count; ++l) {
+    const int shift = std::min(62, finest - l);
+    const int64_t halved = finest_band_rows >> shift;
+    const int64_t floor_rows =
+        std::min({kMinCoarseBandRows, finest_band_rows, (4 * finest_band_rows) >> shift});
+    rows[size_t(l)] = std::max<int64_t>({int64_t(1), halved, floor_rows});
+  }
+  return rows;
+}
+
+// The builder's bytes with c bands of each level in flight (plan_build_memory; docs/scale.md
+// "Memory model"). Doubles: a 40-level pyramid's shifts overflow int64, the heights bound the rows.
+double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
+                      const std::vector<int64_t>& band_rows, int c) {
+  const int m = int(sizes.size()) - 1;
+  const double W = double(info.width), H = double(info.height);
+  const double B = double(std::min(opt.fill_band_rows, info.height));
+  const auto scale = [m](int l) { return std::ldexp(1.0, m - l); };  // level l's spacing in input rows
+  // Finest rows held: every level's band height in input rows (a band of level l waits for its
+  // rows, the finer ones for its T^), D's reach (5 rows a level, doubled per level up: 5 * 2^m),
+  // U's (2 coarse rows a level), the coarse engines' batches (about 32 input rows each), the group
+  // of c bands the finest level codes at once and one fill band; at least D's fit rows.
+  double lag = 7 * scale(0) + 32.0 * (m + 1) + double(c - 1) * double(band_rows[size_t(m)]) + B;
+  for (int l = 0; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
+  lag = std::min(H, std::max(lag, double(std::min(opt.fit_rows, info.height)) + B));
+  const bool narrow = info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
+  // Level rows (int16 or int32) and their validity bits.
+  double bytes = lag * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8);
+  const int engine_workers = std::max(1, opt.threads);
+  for (int l = 0; l <= m; ++l) {
+    const double w = double(sizes[size_t(l)].width), h = double(sizes[size_t(l)].height);
+    const double S = std::min(h, double(band_rows[size_t(l)]));
+    // The bands in flight: T, U's prediction, R and T^ (int32 each), the validity (finest), the
+    // stream, the coder's buffer and libcodec's body (about 2 bytes a sample each).
+    bytes += double(c) * S * w * (16 + (l == m ? 1 : 0) + 6);
+    if (l < m) {
+      // T_l rows not yet coded and T^_l rows the finer level's U still needs, and the copy of
+      // those U reads for a group of the finer level.
+      const double S_finer = double(band_rows[size_t(l + 1)]);
+      const double held = std::min(2 * h, lag / scale(l) + 2 * c * double(band_rows[size_t(l)]) + 8);
+      bytes += (held + c * S_finer / 2 + 8) * w * 4;
+    }
+    if (l >= 1) {
+      // D engine of level l: its padded fine rows, a batch of coarse rows (double and int32) and
+      // each worker's fold / even / odd / sum rows.
+      const double batch = std::max(1.0, std::floor(32.0 / scale(l)));
+      const double cw = double(sizes[size_t(l - 1)].width), pw = w + 2 * DownsampleFilter::kRadius;
+      bytes += std::min(h, 2 * batch + 16) * pw * 8 + batch * cw * 12 +
+               std::min(double(engine_workers), batch) * (2 * pw + cw) * 8;
+    }
+  }
+  // Two input bands (level integers and validity, 8 rows of samples as read), D's fit windows.
+  bytes += 2 * (B * W * 5 + std::min(B, 8.0) * W * 8) + W * 4;
+  bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
+  return bytes;
+}
+
+BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
+                            const std::vector<int64_t>& band_rows, bool striped) {
+  // A stripe also reads the rows above its own in whole fill bands of samples (8 bytes each).
+  const double extra =
+      striped ? double(std::min(opt.fill_band_rows, info.height)) * double(info.width) * 8 : 0.0;
+  const auto estimate = [&](int c) { return estimate_bytes(info, opt, sizes, band_rows, c) + extra; };
+  BuildMemoryPlan plan;
+  const double minimum = estimate(1);
+  plan.minimum_bytes = int64_t(std::min(minimum, 9e18));
+  int c = opt.threads;
+  if (opt.memory_budget > 0) {
+    const auto mib = [](double b) { return std::to_string(int64_t(std::ceil(b / 1048576.0))); };
+    if (minimum > double(opt.memory_budget))
+      throw std::invalid_argument(
+          "pyramid: a memory budget of " + mib(double(opt.memory_budget)) + " MiB is below the " +
+          mib(minimum) + " MiB a " + std::to_string(info.width) + "-column input of " +
+          std::to_string(sizes.size()) +
+          " levels needs (the rows each level lags behind the input, docs/scale.md); give at least " +
+          mib(minimum) + " MiB, or fewer levels");
+    while (c > 1 && estimate(c) > double(opt.memory_budget)) --c;
+  }
+  plan.bands_in_flight = c;
+  plan.estimated_bytes = int64_t(std::min(estimate(c), 9e18));
+  return plan;
+}
+
 class StreamingBuilder {
  public:
   StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink,
@@ -268,20 +362,8 @@ class StreamingBuilder {
     finest_ = level_count_ - 1;
     finest_band_rows_ = coder.band_rows();
     if (finest_band_rows_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
-    // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
-    // until it is: halving the band height per coarser level keeps every level's lag near band_rows
-    // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)). But bands of a
-    // few rows code badly (the codec pads them to 16 rows and every band restarts its tiles), so a
-    // coarse band gets up to kMinCoarseBandRows rows as long as its lag stays within 4 band_rows input
-    // rows: a constant 4096^2 grid's coarsest level costs 8 bands instead of 32.
-    level_band_rows_.resize(size_t(level_count_));
-    for (int l = 0; l < level_count_; ++l) {
-      const int shift = std::min(62, finest_ - l);
-      const int64_t halved = finest_band_rows_ >> shift;
-      const int64_t floor_rows =
-          std::min({kMinCoarseBandRows, finest_band_rows_, (4 * finest_band_rows_) >> shift});
-      level_band_rows_[size_t(l)] = std::max<int64_t>({int64_t(1), halved, floor_rows});
-    }
+    level_band_rows_ = level_band_rows(level_count_, finest_band_rows_);
+    memory_ = plan_memory(info, opt, sizes_, level_band_rows_, stripe.y0 > 0);
     plan_stripe(stripe);
     levels_.resize(size_t(level_count_));
     reconstructed_.resize(size_t(level_count_));
@@ -306,6 +388,14 @@ class StreamingBuilder {
     s << "levels " << level_count_ << ":";
     for (auto& g : sizes_) s << " " << g.width << "x" << g.height;
     result_.log.push_back(s.str());
+    std::ostringstream mem;
+    const auto mib = [](int64_t b) { return (b + (1 << 20) - 1) >> 20; };
+    mem << "memory: estimate " << mib(memory_.estimated_bytes) << " MiB with " << memory_.bands_in_flight
+        << " band(s) of each level in flight (" << opt.threads << " threads";
+    if (opt.memory_budget > 0) mem << ", budget " << (opt.memory_budget >> 20) << " MiB";
+    mem << ", at least " << mib(memory_.minimum_bytes) << " MiB; the builder alone)";
+    result_.log.push_back(mem.str());
+    result_.memory = memory_;
   }
 
   // Which bands the stripe owns and codes, and which input rows its D cascade runs on (the whole
@@ -618,7 +708,7 @@ class StreamingBuilder {
         const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
         const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
         if (y0 >= end) continue;
-        const int limit = opt_.threads;
+        const int limit = memory_.bands_in_flight;
         int64_t nb = 0;
         while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
           ++nb;
@@ -637,7 +727,7 @@ class StreamingBuilder {
   }
 
   void code_groups(std::vector<Group>& groups) {
-    if (windows_.size() < groups.size()) windows_.resize(groups.size());
+    if (windows_.size() < size_t(level_count_)) windows_.resize(size_t(level_count_));
     // Per level, so that each slot's buffers keep the size of that level's bands.
     for (const Group& g : groups)
       if (work_[size_t(g.level)].size() < g.tasks) work_[size_t(g.level)].resize(g.tasks);
@@ -654,7 +744,7 @@ class StreamingBuilder {
       if (l > 0) {
         const GridSize cs = sizes_[size_t(l - 1)];
         const Rect need = upsample_required_window(Rect{0, g.gy0, fs.width, g.gy1 - g.gy0}, fs);
-        std::vector<int32_t>& window = windows_[gi];
+        std::vector<int32_t>& window = windows_[size_t(l)];
         window.resize(size_t(need.height * cs.width));
         reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, window.data());
         g.window = CoarseWindow{window.data(), cs.width, need, cs};
@@ -772,6 +862,7 @@ class StreamingBuilder {
   int64_t finest_band_rows_ = 0;  // S, the coder's band height at the finest level
   int64_t fit_rows_ = 0;
   std::vector<int64_t> level_band_rows_;
+  BuildMemoryPlan memory_;
   DownsampleFilter filter_;
   bool filter_ready_ = false;
   PyramidHeader header_;
@@ -788,11 +879,20 @@ class StreamingBuilder {
   int64_t read_a_ = 0, read_b_ = 0;  // input rows the D cascade runs on
   std::vector<LevelFigures> figures_;
   std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
-  std::vector<std::vector<int32_t>> windows_;  // per group of a round: the coarse rows U reads
+  std::vector<std::vector<int32_t>> windows_;  // per level: the coarse rows U reads for its group
   BuildResult result_;
 };
 
 }  // namespace
+
+BuildMemoryPlan plan_build_memory(const GridInfo& input, const BuildOptions& options, int64_t band_rows,
+                                  bool striped) {
+  validate(options, input);
+  if (band_rows < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
+  const std::vector<GridSize> sizes =
+      pyramid_level_sizes({input.width, input.height}, options.level_count, options.min_coarsest_side);
+  return plan_memory(input, options, sizes, level_band_rows(int(sizes.size()), band_rows), striped);
+}
 
 BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder,
                           PyramidSink& sink) {

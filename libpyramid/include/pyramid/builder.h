@@ -39,7 +39,29 @@ struct BuildOptions {
   int threads = 2;              // results are bit-identical for every thread count
   int64_t fill_band_rows = 64;  // nodata push-pull works on bands of this many input rows
   int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
+  // Bytes the builder may hold (its estimate, plan_build_memory): bands of every level are coded at
+  // most bands_in_flight at a time, fewer than `threads` when the budget is tight (the bytes are the
+  // same: only the schedule changes). 0: no budget (threads bands in flight).
+  int64_t memory_budget = 0;
 };
+
+// What the builder will hold, estimated from the sizes alone (docs/scale.md "Memory model"): the
+// rows each level lags behind the input, the bands being coded with their coder buffers (a coded
+// stream is counted at 2 bytes a sample: incompressible input coded losslessly holds more), the D
+// engines and the input bands. Not counted: the sink (a file writer holds a few MiB per level),
+// the reader's own buffers and the process itself.
+struct BuildMemoryPlan {
+  int bands_in_flight = 1;      // bands of each level coded at once (1 .. threads)
+  int64_t minimum_bytes = 0;    // the estimate with one band of each level in flight
+  int64_t estimated_bytes = 0;  // the estimate at bands_in_flight
+};
+// bands_in_flight is the largest count <= options.threads whose estimate fits options.memory_budget
+// (threads when the budget is 0). Throws std::invalid_argument naming the minimum when even one band
+// in flight does not fit, and as build_pyramid for unusable options. `band_rows`: the coder's
+// (ResidualCoder::band_rows); `striped`: a stripe of a striped build (it also holds a fill band of
+// samples read above its rows). Thread-safe.
+BuildMemoryPlan plan_build_memory(const GridInfo& input, const BuildOptions& options, int64_t band_rows,
+                                  bool striped = false);
 
 // Everything a decoder needs besides the per-band bytes.
 struct PyramidHeader {
@@ -89,6 +111,7 @@ struct BuildResult {
   // Wall time: seconds_pass_input = fitting D; seconds_pass_residual = the rest of the streaming build
   // (read, D cascade, closed loop).
   double seconds_pass_input = 0, seconds_pass_residual = 0;
+  BuildMemoryPlan memory;        // the schedule the budget allowed and its estimate
   std::vector<std::string> log;  // human-readable build log (filter choice, fallbacks)
 };
 
