@@ -29,6 +29,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <utility>
 
 #include "pyramid/internal/filter_downsample.h"
 #include "pyramid/internal/pyramid_fill.h"
@@ -124,6 +125,11 @@ class InputConverter {
 // Per-band state of the closed loop, reused across band groups.
 struct BandWork {
   int64_t y0 = 0, rows = 0;
+  // Its rows of T_l and validity as the level holds them, taken when the round starts: the coder
+  // threads read them while the main thread appends rows (each row is a buffer of its own, which
+  // neither appending nor dropping other rows moves).
+  std::vector<const void*> src;
+  std::vector<const std::vector<uint64_t>*> src_mask;
   std::vector<int32_t> t, pred, res, rhat;
   std::vector<uint8_t> valid, bytes;
   UpsampleScratch scratch;
@@ -197,6 +203,10 @@ class LevelRows {
   void copy_rows(int64_t r0, int64_t n, int32_t* out) const {
     narrow_ ? r16_.copy_rows(r0, n, out) : r32_.copy_rows(r0, n, out);
   }
+  const void* row(int64_t r) const {
+    return narrow_ ? static_cast<const void*>(r16_.row(r)) : static_cast<const void*>(r32_.row(r));
+  }
+  bool narrow() const { return narrow_; }
   int64_t first() const { return narrow_ ? r16_.first() : r32_.first(); }
   int64_t end() const { return narrow_ ? r16_.end() : r32_.end(); }
   int64_t peak() const { return narrow_ ? r16_.peak() : r32_.peak(); }
@@ -229,15 +239,13 @@ class MaskRows {
       rows_.push_back(std::move(bits));
     }
   }
-  void copy_rows(int64_t r0, int64_t n, uint8_t* out) const {
-    for (int64_t k = 0; k < n; ++k) {
-      const std::vector<uint64_t>& bits = rows_[size_t(r0 + k - first_)];
-      uint8_t* row = out + k * width_;
-      if (bits.empty())
-        std::fill(row, row + width_, uint8_t(1));
-      else
-        for (int64_t x = 0; x < width_; ++x) row[x] = uint8_t((bits[size_t(x / 64)] >> (x % 64)) & 1);
-    }
+  // Row r's bits (empty: no voids); the reference stays valid until the row is dropped.
+  const std::vector<uint64_t>* row_bits(int64_t r) const { return &rows_[size_t(r - first_)]; }
+  static void unpack(const std::vector<uint64_t>& bits, int64_t width, uint8_t* row) {
+    if (bits.empty())
+      std::fill(row, row + width, uint8_t(1));
+    else
+      for (int64_t x = 0; x < width; ++x) row[x] = uint8_t((bits[size_t(x / 64)] >> (x % 64)) & 1);
   }
   void drop_before(int64_t r) {
     while (first_ < r && !rows_.empty()) {
@@ -281,7 +289,7 @@ std::vector<int64_t> level_band_rows(int level_count, int64_t finest_band_rows) 
 // The builder's bytes with c bands of each level in flight (plan_build_memory; docs/scale.md
 // "Memory model"). Doubles: a 40-level pyramid's shifts overflow int64, the heights bound the rows.
 double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
-                      const std::vector<int64_t>& band_rows, int c) {
+                      const std::vector<int64_t>& band_rows, int c, int64_t* finest_rows = nullptr) {
   const int m = int(sizes.size()) - 1;
   const double W = double(info.width), H = double(info.height);
   const double B = double(std::min(opt.fill_band_rows, info.height));
@@ -289,10 +297,14 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   // Finest rows held: every level's band height in input rows (a band of level l waits for its
   // rows, the finer ones for its T^), D's reach (5 rows a level, doubled per level up: 5 * 2^m),
   // U's (2 coarse rows a level), the coarse engines' batches (about 32 input rows each), the group
-  // of c bands the finest level codes at once and one fill band; at least D's fit rows.
-  double lag = 7 * scale(0) + 32.0 * (m + 1) + double(c - 1) * double(band_rows[size_t(m)]) + B;
+  // of c bands the finest level codes at once (with threads > 1 twice: the next group's rows
+  // arrive while a round is coded) and one fill band; at least D's fit rows. The main thread does
+  // not read beyond it while a round is in flight.
+  const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
+  double lag = 7 * scale(0) + 32.0 * (m + 1) + groups * double(band_rows[size_t(m)]) + B;
   for (int l = 0; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
   lag = std::min(H, std::max(lag, double(std::min(opt.fit_rows, info.height)) + B));
+  if (finest_rows) *finest_rows = int64_t(lag);
   const bool narrow = info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
   // Level rows (int16 or int32) and their validity bits.
   double bytes = lag * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8);
@@ -347,7 +359,8 @@ BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const
     while (c > 1 && estimate(c) > double(opt.memory_budget)) --c;
   }
   plan.bands_in_flight = c;
-  plan.estimated_bytes = int64_t(std::min(estimate(c), 9e18));
+  plan.estimated_bytes =
+      int64_t(std::min(estimate_bytes(info, opt, sizes, band_rows, c, &plan.finest_rows) + extra, 9e18));
   return plan;
 }
 
@@ -397,6 +410,12 @@ class StreamingBuilder {
     result_.log.push_back(mem.str());
     result_.memory = memory_;
   }
+
+  ~StreamingBuilder() {
+    if (round_.worker.joinable()) round_.worker.join();
+  }
+  StreamingBuilder(const StreamingBuilder&) = delete;
+  StreamingBuilder& operator=(const StreamingBuilder&) = delete;
 
   // Which bands the stripe owns and codes, and which input rows its D cascade runs on (the whole
   // build: every band, all rows). own: the bands whose first row times 2^(m-l) lies in the stripe.
@@ -557,6 +576,11 @@ class StreamingBuilder {
       // Rows above a stripe's cascade serve only D's fit (and the fill's carry, in the converter).
       const bool in_cascade = cur.y + cur.rows > read_a_ && cur.y < read_b_;
       if (in_cascade) result_.void_count += cur.voids;
+      // The coders are behind: holding more rows would exceed the memory plan.
+      while (must_wait_for_round()) {
+        finish_round();
+        pump(false);
+      }
       if (!filter_ready_) {
         levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
         mask_.append(cur.valid.data(), cur.rows);
@@ -693,50 +717,78 @@ class StreamingBuilder {
     CoarseWindow window;
   };
 
-  // Codes every band that can be coded now. Each round takes, at every level, the bands ready at
-  // its start (a band whose coarser rows are coded in the same round waits for the next), and codes
-  // all of them at once on `threads` workers, largest first: the coarse levels' bands then run beside
-  // the finest level's instead of one at a time between them (the 2-thread build had one core idle
-  // for half its time). Results are committed level by level, top to bottom, so the output and the
-  // statistics do not depend on the thread count. The finest level codes in groups of `threads`
-  // bands; before the end a partial group waits for more rows (a coarse level never waits: it
-  // would delay all finer ones).
+  // Codes every band that can be coded now, in rounds. A round takes, at every level, the bands
+  // ready at its start (a band whose coarser rows are coded in the same round waits for the next),
+  // at most bands_in_flight of them, and codes all of them at once on `threads` workers, largest
+  // first: the coarse levels' bands run beside the finest level's instead of one at a time between
+  // them. With threads > 1 a round runs in the background while the main thread goes on reading the
+  // input and running the D cascade (the next round's rows), so neither waits for the other; the
+  // main thread commits a round once it has finished, level by level, top to bottom, so the output
+  // and the statistics do not depend on the thread count or on the timing. The finest level codes
+  // in groups of bands_in_flight bands; before the end a partial group waits for more rows (a coarse
+  // level never waits: it would delay all finer ones). final: codes everything that is left.
   void pump(bool final) {
     for (;;) {
-      std::vector<Group> groups;
-      for (int l = 0; l < level_count_; ++l) {
-        const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
-        const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
-        if (y0 >= end) continue;
-        const int limit = memory_.bands_in_flight;
-        int64_t nb = 0;
-        while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
-          ++nb;
-        const bool more_after = y0 + nb * S < end;
-        if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
-        Group g;
-        g.level = l;
-        g.gy0 = y0;
-        g.gy1 = std::min(end, y0 + nb * S);
-        g.tasks = size_t(nb);
-        groups.push_back(g);
+      if (round_.active) {
+        if (!final && !round_.done.load(std::memory_order_acquire)) return;
+        finish_round();
       }
+      std::vector<Group> groups = ready_groups(final);
       if (groups.empty()) return;
-      code_groups(groups);
+      start_round(std::move(groups));
+      if (!final && opt_.threads > 1) return;
     }
   }
 
-  void code_groups(std::vector<Group>& groups) {
+  // Waits for the round in flight (if any) and commits it.
+  void finish_round() {
+    if (!round_.active) return;
+    if (round_.worker.joinable()) round_.worker.join();
+    round_.active = false;
+    if (round_.error) std::rethrow_exception(std::exchange(round_.error, nullptr));
+    for (const Group& g : round_.groups) commit_group(g);
+  }
+
+  // True while the main thread should not read further: a round is in flight and the finest level
+  // already holds the rows the memory plan allows (the rows of the next group included).
+  bool must_wait_for_round() const {
+    const LevelRows& tm = levels_[size_t(finest_)];
+    return round_.active && tm.end() - next_band_[size_t(finest_)] >= memory_.finest_rows;
+  }
+
+  std::vector<Group> ready_groups(bool final) const {
+    std::vector<Group> groups;
+    for (int l = 0; l < level_count_; ++l) {
+      const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
+      const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
+      if (y0 >= end) continue;
+      const int limit = memory_.bands_in_flight;
+      int64_t nb = 0;
+      while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
+        ++nb;
+      const bool more_after = y0 + nb * S < end;
+      if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
+      Group g;
+      g.level = l;
+      g.gy0 = y0;
+      g.gy1 = std::min(end, y0 + nb * S);
+      g.tasks = size_t(nb);
+      groups.push_back(g);
+    }
+    return groups;
+  }
+
+  // Takes everything a round's bands read from the level stores (U's coarse windows, the row
+  // pointers), then codes them: in the background with threads > 1, else here.
+  void start_round(std::vector<Group>&& round_groups) {
+    round_.groups = std::move(round_groups);
+    std::vector<Group>& groups = round_.groups;
     if (windows_.size() < size_t(level_count_)) windows_.resize(size_t(level_count_));
     // Per level, so that each slot's buffers keep the size of that level's bands.
     for (const Group& g : groups)
       if (work_[size_t(g.level)].size() < g.tasks) work_[size_t(g.level)].resize(g.tasks);
-    struct Task {
-      size_t group;
-      int64_t band;
-      int64_t samples;
-    };
-    std::vector<Task> order;
+    std::vector<Task>& order = round_.order;
+    order.clear();
     for (size_t gi = 0; gi < groups.size(); ++gi) {
       Group& g = groups[gi];
       const int l = g.level;
@@ -754,32 +806,71 @@ class StreamingBuilder {
       const int64_t S = level_band_rows_[size_t(l)];
       for (size_t b = 0; b < g.tasks; ++b) {
         const int64_t y0 = g.gy0 + int64_t(b) * S;
-        order.push_back({gi, int64_t(b), std::min(S, g.gy1 - y0) * fs.width});
+        BandWork& bw = work_[size_t(l)][b];
+        bw.y0 = y0;
+        bw.rows = std::min(S, g.gy1 - y0);
+        bw.src.resize(size_t(bw.rows));
+        bw.src_mask.resize(l == finest_ ? size_t(bw.rows) : 0);
+        for (int64_t r = 0; r < bw.rows; ++r) {
+          bw.src[size_t(r)] = levels_[size_t(l)].row(y0 + r);
+          if (l == finest_) bw.src_mask[size_t(r)] = mask_.row_bits(y0 + r);
+        }
+        order.push_back({gi, int64_t(b), bw.rows * fs.width});
       }
     }
     // Largest bands first, so the small coarse ones fill the gaps at the end.
     std::stable_sort(order.begin(), order.end(),
                      [](const Task& a, const Task& b) { return a.samples > b.samples; });
+    round_.active = true;
+    round_.done.store(false, std::memory_order_relaxed);
+    if (opt_.threads == 1) {
+      code_round();
+      round_.done.store(true, std::memory_order_release);
+      return;
+    }
+    round_.worker = std::thread([this] {
+      try {
+        code_round();
+      } catch (...) {
+        round_.error = std::current_exception();
+      }
+      round_.done.store(true, std::memory_order_release);
+    });
+  }
+
+  // Codes the round's bands on `threads` workers. Touches only the round's BandWork, the windows
+  // and the rows the band pointers name (none of which the main thread changes meanwhile).
+  void code_round() {
+    const std::vector<Task>& order = round_.order;
     std::atomic<size_t> next{0};
     detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
       for (size_t i; (i = next.fetch_add(1)) < order.size();) {
-        const Group& g = groups[order[i].group];
+        const Group& g = round_.groups[order[i].group];
         const int l = g.level;
-        const int64_t fw = sizes_[size_t(l)].width, S = level_band_rows_[size_t(l)];
+        const int64_t fw = sizes_[size_t(l)].width;
         const bool finest = l == finest_;
         BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
-        bw.y0 = g.gy0 + order[i].band * S;
-        bw.rows = std::min(S, g.gy1 - bw.y0);
         const int64_t n = bw.rows * fw;
         bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)),
             bw.rhat.resize(size_t(n));
-        levels_[size_t(l)].copy_rows(bw.y0, bw.rows, bw.t.data());
+        const bool narrow = levels_[size_t(l)].narrow();
+        for (int64_t r = 0; r < bw.rows; ++r) {
+          int32_t* out = bw.t.data() + r * fw;
+          if (narrow) {
+            const int16_t* in = static_cast<const int16_t*>(bw.src[size_t(r)]);
+            std::copy(in, in + fw, out);
+          } else {
+            const int32_t* in = static_cast<const int32_t*>(bw.src[size_t(r)]);
+            std::copy(in, in + fw, out);
+          }
+        }
         bw.valid.resize(finest ? size_t(n) : 0);
-        if (finest) mask_.copy_rows(bw.y0, bw.rows, bw.valid.data());
+        if (finest)
+          for (int64_t r = 0; r < bw.rows; ++r)
+            MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
         code_band(l, g.window, bw);
       }
     });
-    for (const Group& g : groups) commit_group(g);
   }
 
   // Hands a group's bands to the sink in order and drops the rows nothing needs any more.
@@ -880,6 +971,20 @@ class StreamingBuilder {
   std::vector<LevelFigures> figures_;
   std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
   std::vector<std::vector<int32_t>> windows_;  // per level: the coarse rows U reads for its group
+  // The round being coded (at most one at a time).
+  struct Task {
+    size_t group;
+    int64_t band;
+    int64_t samples;
+  };
+  struct Round {
+    bool active = false;
+    std::atomic<bool> done{false};
+    std::thread worker;
+    std::exception_ptr error;
+    std::vector<Group> groups;
+    std::vector<Task> order;
+  } round_;
   BuildResult result_;
 };
 

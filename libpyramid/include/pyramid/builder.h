@@ -54,6 +54,7 @@ struct BuildMemoryPlan {
   int bands_in_flight = 1;      // bands of each level coded at once (1 .. threads)
   int64_t minimum_bytes = 0;    // the estimate with one band of each level in flight
   int64_t estimated_bytes = 0;  // the estimate at bands_in_flight
+  int64_t finest_rows = 0;      // finest rows held at most (reading waits for the coders beyond)
 };
 // bands_in_flight is the largest count <= options.threads whose estimate fits options.memory_budget
 // (threads when the budget is 0). Throws std::invalid_argument naming the minimum when even one band
