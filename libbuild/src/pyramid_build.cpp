@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <exception>
 #include <filesystem>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -271,7 +272,15 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   }
   out.memory = plan_build_memory(g, bo, band_rows, striped_plan);
 
-  std::vector<Heightmap> window = read_calibration_windows(input, read_options, o);
+  // The sample is read only when something needs it: an rms or max-error target, or an input whose
+  // values may reach beyond half of libcodec's range (16-bit integers times a unit scale up to 8
+  // cannot: their offset is 0). Reading it is a serial pass down the whole input (the windows
+  // are spread to its bottom), a tenth of a lossless build's time on one core.
+  const bool calibrating = o.mode == ErrorMode::Rms || o.mode == ErrorMode::MaxError;
+  const bool narrow_range = (g.sample_type == SampleType::Int16 || g.sample_type == SampleType::UInt16) &&
+                            65535.0 * units.value_scale <= double(codec::kMaxAbsSample / 2);
+  std::vector<Heightmap> window;
+  if (calibrating || !narrow_range) window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
   std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
@@ -407,8 +416,14 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                               open_output, &out.stripes_resumed);
     out.stripes = so.stripes;
   } else {
-    ProgressReader preader(*reader, progress);
-    ProgressSink psink(open_output(), progress);
+    // The reader reports from the builder's input thread, the sink from its coding thread.
+    std::mutex progress_lock;
+    const BuildProgress locked = [&](const std::string& phase, double f) {
+      const std::lock_guard<std::mutex> hold(progress_lock);
+      progress(phase, f);
+    };
+    ProgressReader preader(*reader, progress ? locked : progress);
+    ProgressSink psink(open_output(), progress ? locked : progress);
     out.build = build_pyramid(preader, bo, coder, psink);
   }
   out.seconds_build = seconds_since(t_build);

@@ -63,7 +63,8 @@ struct BuildFileResult {
   bool wrote_output = true;            // false on the ranks other than 0 of a group
 };
 
-// Progress: phase name and fraction done in [0, 1]; called from the building thread.
+// Progress: phase name and fraction done in [0, 1]; called once at a time, from the building thread
+// or, while the levels are coded, from the builder's coding thread.
 using BuildProgress = std::function<void(const std::string& phase, double fraction)>;
 
 // Builds `output` from `input`. Throws Error for input problems (naming the file), Error for

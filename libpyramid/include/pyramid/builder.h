@@ -121,7 +121,9 @@ struct BuildResult {
 // the validity of its rows; whether the input has voids at all is known only at the end, so a
 // sink that stores a mask decides what to keep once every row has arrived. reconstructed_rows()
 // calls may come at any time (even before begin()), each level top to bottom. Ordering levels for
-// a file is the sink's business (PyramidFileWriter does it).
+// a file is the sink's business (PyramidFileWriter does it). The calls come one at a time, but not
+// always from the thread that called build_pyramid (the builder's coding rounds deliver their
+// bands from a thread of their own): a sink needs no lock, only no thread affinity.
 class PyramidSink {
  public:
   virtual ~PyramidSink() = default;
@@ -146,7 +148,7 @@ class PyramidSink {
 };
 
 // Keeps nothing but the number of coded bytes: for trial builds and benchmarks, which need the
-// figures of a build and not its output. Not thread-safe (the builder calls its sink from one thread).
+// figures of a build and not its output. Not thread-safe (the builder calls its sink once at a time).
 class CountingSink final : public PyramidSink {
  public:
   void band(int, int64_t, int64_t, std::vector<uint8_t>&& bytes) override { band_bytes += bytes.size(); }
