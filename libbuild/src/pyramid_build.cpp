@@ -111,6 +111,16 @@ std::vector<Heightmap> read_calibration_windows(const std::string& input, const 
   return windows;
 }
 
+// Whether build_pyramid_file reads the calibration sample: for an rms or max-error target, or for
+// an input whose values may reach beyond half of libcodec's range (16-bit integers times a unit
+// scale up to 8 cannot: their centring offset is 0).
+bool needs_calibration_sample(const GridInfo& g, double value_scale, const BuildFileOptions& o) {
+  const bool calibrating = o.mode == container::ErrorMode::Rms || o.mode == container::ErrorMode::MaxError;
+  const bool narrow_range = (g.sample_type == SampleType::Int16 || g.sample_type == SampleType::UInt16) &&
+                            65535.0 * value_scale <= double(codec::kMaxAbsSample / 2);
+  return calibrating || !narrow_range;
+}
+
 // The file writer's levels held back in memory before they spill (PyramidFileWriter): 4 MiB each,
 // less under a small budget.
 size_t level_memory_limit(const BuildFileOptions& o) {
@@ -136,7 +146,7 @@ int64_t memory_outside_builder(const GridInfo& g, const BuildOptions& bo, const 
   // The calibration sample (read_calibration_windows: values and validity, one input row) and, for
   // an rms or max-error target, the trial builds of its windows, side by side.
   const int64_t cw = std::min(g.width, o.calibration_cols), ch = std::min(g.height, o.calibration_rows);
-  bytes += cw * ch * 9 + g.width * 9;
+  if (needs_calibration_sample(g, bo.value_scale, o)) bytes += cw * ch * 9 + g.width * 9;
   if (o.mode == container::ErrorMode::Rms || o.mode == container::ErrorMode::MaxError) {
     GridInfo w = g;
     w.width = cw;
@@ -272,15 +282,11 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   }
   out.memory = plan_build_memory(g, bo, band_rows, striped_plan);
 
-  // The sample is read only when something needs it: an rms or max-error target, or an input whose
-  // values may reach beyond half of libcodec's range (16-bit integers times a unit scale up to 8
-  // cannot: their offset is 0). Reading it is a serial pass down the whole input (the windows
-  // are spread to its bottom), a tenth of a lossless build's time on one core.
-  const bool calibrating = o.mode == ErrorMode::Rms || o.mode == ErrorMode::MaxError;
-  const bool narrow_range = (g.sample_type == SampleType::Int16 || g.sample_type == SampleType::UInt16) &&
-                            65535.0 * units.value_scale <= double(codec::kMaxAbsSample / 2);
+  // The sample is read only when something needs it (needs_calibration_sample): reading it is a
+  // serial pass down the whole input (the windows are spread to its bottom) before the build.
   std::vector<Heightmap> window;
-  if (calibrating || !narrow_range) window = read_calibration_windows(input, read_options, o);
+  if (needs_calibration_sample(g, bo.value_scale, o))
+    window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
   std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
