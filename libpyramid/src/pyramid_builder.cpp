@@ -130,7 +130,8 @@ struct BandWork {
   // neither appending nor dropping other rows moves).
   std::vector<const void*> src;
   std::vector<const std::vector<uint64_t>*> src_mask;
-  std::vector<int32_t> t, pred, res, rhat;
+  std::vector<int32_t> t;  // one row of T_l (the band's rows are read from the level, src)
+  std::vector<int32_t> pred, res, rhat;
   std::vector<uint8_t> valid, bytes;
   UpsampleScratch scratch;
   BandFigures figures;
@@ -312,9 +313,9 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   for (int l = 0; l <= m; ++l) {
     const double w = double(sizes[size_t(l)].width), h = double(sizes[size_t(l)].height);
     const double S = std::min(h, double(band_rows[size_t(l)]));
-    // The bands in flight: T, U's prediction, R and T^ (int32 each), the validity (finest), the
+    // The bands in flight: U's prediction, R and T^ (int32 each), the validity (finest), the
     // stream, the coder's buffer and libcodec's body (about 2 bytes a sample each).
-    bytes += double(c) * S * w * (16 + (l == m ? 1 : 0) + 6);
+    bytes += double(c) * S * w * (12 + (l == m ? 1 : 0) + 6);
     if (l < m) {
       // T_l rows not yet coded and T^_l rows the finer level's U still needs, and the copy of
       // those U reads for a group of the finer level.
@@ -852,19 +853,7 @@ class StreamingBuilder {
         const bool finest = l == finest_;
         BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
         const int64_t n = bw.rows * fw;
-        bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)),
-            bw.rhat.resize(size_t(n));
-        const bool narrow = levels_[size_t(l)].narrow();
-        for (int64_t r = 0; r < bw.rows; ++r) {
-          int32_t* out = bw.t.data() + r * fw;
-          if (narrow) {
-            const int16_t* in = static_cast<const int16_t*>(bw.src[size_t(r)]);
-            std::copy(in, in + fw, out);
-          } else {
-            const int32_t* in = static_cast<const int32_t*>(bw.src[size_t(r)]);
-            std::copy(in, in + fw, out);
-          }
-        }
+        bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
         bw.valid.resize(finest ? size_t(n) : 0);
         if (finest)
           for (int64_t r = 0; r < bw.rows; ++r)
@@ -925,8 +914,25 @@ class StreamingBuilder {
       upsample_region(cwin, fs, Rect{0, bw.y0, fs.width, bw.rows}, bw.pred.data(), fs.width, bw.scratch);
     else
       std::fill(bw.pred.begin(), bw.pred.end(), 0);
-    for (int64_t k = 0; k < n; ++k)
-      bw.res[size_t(k)] = saturate(int64_t(bw.t[size_t(k)]) - bw.pred[size_t(k)]);
+    // T_l is read from the level's rows (a copy of the band was a sixth of its bytes in flight).
+    const int64_t fw = fs.width;
+    const bool narrow = levels_[size_t(l)].narrow();
+    bw.t.resize(size_t(fw));
+    const auto t_row = [&](int64_t r) {
+      if (narrow) {
+        const int16_t* in = static_cast<const int16_t*>(bw.src[size_t(r)]);
+        std::copy(in, in + fw, bw.t.begin());
+      } else {
+        const int32_t* in = static_cast<const int32_t*>(bw.src[size_t(r)]);
+        std::copy(in, in + fw, bw.t.begin());
+      }
+      return bw.t.data();
+    };
+    for (int64_t r = 0; r < bw.rows; ++r) {
+      const int32_t* t = t_row(r);
+      for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k)
+        bw.res[size_t(k)] = saturate(int64_t(t[x]) - bw.pred[size_t(k)]);
+    }
     // Voids are restored from the mask, so their residual carries no information.
     if (with_mask)
       for (int64_t k = 0; k < n; ++k)
@@ -935,16 +941,17 @@ class StreamingBuilder {
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;
-    const int32_t* t = bw.t.data();
+    const int32_t* t = nullptr;
     const int32_t* pred = bw.pred.data();
     const int32_t* res = bw.res.data();
     int32_t* rhat = bw.rhat.data();
     const bool any_void =
         with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
-    for (int64_t k = 0; k < n; ++k) {
+    for (int64_t k = 0, x = fw; k < n; ++k, ++x) {
+      if (x == fw) t = t_row(k / fw), x = 0;
       const int32_t rec = saturate(int64_t(pred[k]) + rhat[k]);
       if (!any_void || bw.valid[size_t(k)]) {
-        const int64_t r = res[k], e = int64_t(t[k]) - rec;
+        const int64_t r = res[k], e = int64_t(t[x]) - rec;
         res_sq[k & 3] += double(r) * double(r);
         err_sq[k & 3] += double(e) * double(e);
         res_max = std::max(res_max, r < 0 ? -r : r);
