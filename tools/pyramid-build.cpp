@@ -1,4 +1,5 @@
 // pyramid-build: heightmap file -> compressed, error-controlled multiresolution pyramid (.pyr).
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -18,6 +19,31 @@
 namespace {
 
 using terrain::container::ErrorMode;
+
+// "512M", "1G", "1.5GiB", "65536" (bytes; K, M, G, T are powers of 1024).
+int64_t parse_size(const std::string& name, const std::string& v) {
+  size_t end = 0;
+  double n = 0;
+  try {
+    n = std::stod(v, &end);
+  } catch (const std::exception&) {
+    throw cli::UsageError(name + " wants a size such as 512M or 1G, not '" + v + "'");
+  }
+  std::string unit = v.substr(end);
+  for (char& c : unit) c = char(std::toupper(static_cast<unsigned char>(c)));
+  if (unit.size() > 1 && (unit.substr(1) == "B" || unit.substr(1) == "IB")) unit = unit.substr(0, 1);
+  const std::string units = "KMGT";
+  double scale = 1;
+  if (unit == "B" || unit.empty())
+    scale = 1;
+  else if (unit.size() == 1 && units.find(unit[0]) != std::string::npos)
+    scale = std::ldexp(1.0, 10 * int(units.find(unit[0]) + 1));
+  else
+    throw cli::UsageError(name + " wants a size such as 512M or 1G, not '" + v + "'");
+  const double bytes = n * scale;
+  if (!(bytes >= 0) || bytes > 9e18) throw cli::UsageError(name + " is out of range: '" + v + "'");
+  return int64_t(bytes);
+}
 
 int run(int argc, char** argv) {
 #ifdef TERRAIN_HAVE_MPI
@@ -76,6 +102,12 @@ int run(int argc, char** argv) {
                 });
   parser.option("--threads", "N", "worker threads (default: all cores; output is identical for any N)",
                 [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
+  o.memory_bytes = int64_t(1) << 30;
+  parser.option("--memory", "SIZE",
+                "memory budget of the build, e.g. 512M, 2G (default 1G; 0: none): fewer bands are coded at "
+                "once when it is tight (the same output, slower); below what the input's width needs, the "
+                "build fails at the start naming the minimum",
+                [&](const std::string& v) { o.memory_bytes = parse_size("--memory", v); });
   parser.option("--level-error", "absolute|screen",
                 "error schedule over the levels: one absolute step at every level (default, as in the "
                 "paper), or screen: level l's step and max error 2^(m-l) times the finest level's, the same "
@@ -172,6 +204,12 @@ int run(int argc, char** argv) {
     j.field("seconds_calibrate", r.seconds_calibrate).field("seconds_build", r.seconds_build);
     j.field("build_msamples_per_s", double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
     j.field("voids", r.build.void_count);
+    j.field("memory_budget_bytes", o.memory_bytes)
+        .field("memory_estimate_bytes", r.memory.estimated_bytes + r.memory_outside_builder)
+        .field("memory_minimum_bytes", r.memory.minimum_bytes + r.memory_outside_builder)
+        .field("bands_in_flight", int64_t(r.memory.bands_in_flight))
+        .field("threads",
+               int64_t(o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()))));
     j.field("stripes", int64_t(r.stripes)).field("processes", int64_t(ranks));
     j.field("stripes_resumed", int64_t(r.stripes_resumed));
     j.key("levels").begin_array();

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <exception>
 #include <filesystem>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -110,6 +111,57 @@ std::vector<Heightmap> read_calibration_windows(const std::string& input, const 
   return windows;
 }
 
+// Whether build_pyramid_file reads the calibration sample: for an rms or max-error target, or for
+// an input whose values may reach beyond half of libcodec's range (16-bit integers times a unit
+// scale up to 8 cannot: their centring offset is 0).
+bool needs_calibration_sample(const GridInfo& g, double value_scale, const BuildFileOptions& o) {
+  const bool calibrating = o.mode == container::ErrorMode::Rms || o.mode == container::ErrorMode::MaxError;
+  const bool narrow_range = (g.sample_type == SampleType::Int16 || g.sample_type == SampleType::UInt16) &&
+                            65535.0 * value_scale <= double(codec::kMaxAbsSample / 2);
+  return calibrating || !narrow_range;
+}
+
+// The file writer's levels held back in memory before they spill (PyramidFileWriter): 4 MiB each,
+// less under a small budget.
+size_t level_memory_limit(const BuildFileOptions& o) {
+  constexpr int64_t kLimit = int64_t(4) << 20;
+  return size_t(o.memory_bytes > 0 ? std::clamp<int64_t>(o.memory_bytes / 256, 64 << 10, kLimit) : kLimit);
+}
+
+// What the process holds besides the builder (plan_build_memory): the program and its heap's
+// overhead, the file writer's held levels, the calibration sample (freed before the build, but
+// the peak) and a striped build's part buffer and one band on assembly.
+int64_t ptc_band_rows(uint32_t tile_size) {
+  PtcCoderOptions co;
+  co.tile_size = tile_size;
+  return PtcResidualCoder(co).band_rows();
+}
+
+int64_t memory_outside_builder(const GridInfo& g, const BuildOptions& bo, const BuildFileOptions& o,
+                               bool striped) {
+  constexpr int64_t kProcess = int64_t(12) << 20;  // pyramid-build --help peaks at 5 MiB
+  const int levels =
+      int(pyramid_level_sizes({g.width, g.height}, bo.level_count, bo.min_coarsest_side).size());
+  int64_t bytes = kProcess + int64_t(levels) * int64_t(level_memory_limit(o));
+  // The calibration sample (read_calibration_windows: values and validity, one input row) and, for
+  // an rms or max-error target, the trial builds of its windows, side by side.
+  const int64_t cw = std::min(g.width, o.calibration_cols), ch = std::min(g.height, o.calibration_rows);
+  if (needs_calibration_sample(g, bo.value_scale, o)) bytes += cw * ch * 9 + g.width * 9;
+  if (o.mode == container::ErrorMode::Rms || o.mode == container::ErrorMode::MaxError) {
+    GridInfo w = g;
+    w.width = cw;
+    w.height = g.height <= o.calibration_rows ? ch : std::max<int64_t>(1, ch / kCalibrationBands);
+    BuildOptions wo = bo;
+    wo.memory_budget = 0;
+    const int64_t windows = g.height <= o.calibration_rows ? 1 : kCalibrationBands;
+    const int64_t parallel = std::clamp<int64_t>(bo.threads, 1, windows);
+    wo.threads = std::max<int64_t>(1, bo.threads / parallel);
+    bytes += parallel * plan_build_memory(w, wo, ptc_band_rows(o.tile_size)).estimated_bytes;
+  }
+  if (striped) bytes += int64_t(2) << 20;  // the part buffer, one band and its mask on assembly
+  return bytes;
+}
+
 // Integer level-unit offset that centres the window's valid values when they reach beyond half of
 // libcodec's range; 0 otherwise.
 double centring_offset(const std::vector<Heightmap>& windows, double value_scale) {
@@ -152,6 +204,7 @@ Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const 
       CountingSink sink;
       BuildOptions wo = bo;
       wo.threads = std::max(1, bo.threads / parallel);
+      wo.memory_budget = 0;  // a calibration window is small beside the build it calibrates
       if (filters[k]) {
         wo.use_fixed_filter = true;
         wo.fixed_filter = *filters[k];
@@ -209,7 +262,31 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
   // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
   // the calibration sample's mid-range. Ordinary DEMs keep their native units (offset 0).
-  const std::vector<Heightmap> window = read_calibration_windows(input, read_options, o);
+  // The memory budget: what the builder may hold is the budget less what the process holds besides
+  // (a plan that does not fit fails here, before anything is read).
+  const bool striped_plan = o.journal || o.stripes > 0 || (o.group && o.group->size() > 1);
+  const int64_t band_rows = ptc_band_rows(o.tile_size);
+  out.memory_outside_builder = memory_outside_builder(g, bo, o, striped_plan);
+  if (o.memory_bytes > 0) {
+    const int64_t minimum =
+        plan_build_memory(g, bo, band_rows, striped_plan).minimum_bytes + out.memory_outside_builder;
+    const auto mib = [](int64_t b) { return std::to_string((b + (1 << 20) - 1) >> 20); };
+    if (minimum > o.memory_bytes)
+      throw std::invalid_argument(
+          input + ": a memory budget of " + mib(o.memory_bytes) + " MiB is below the " + mib(minimum) +
+          " MiB this " + std::to_string(g.width) + " x " + std::to_string(g.height) +
+          " input needs (the rows each level lags behind the input, one band of each level being coded, "
+          "docs/scale.md): give at least " +
+          mib(minimum) + "M, or fewer levels");
+    bo.memory_budget = o.memory_bytes - out.memory_outside_builder;
+  }
+  out.memory = plan_build_memory(g, bo, band_rows, striped_plan);
+
+  // The sample is read only when something needs it (needs_calibration_sample): reading it is a
+  // serial pass down the whole input (the windows are spread to its bottom) before the build.
+  std::vector<Heightmap> window;
+  if (needs_calibration_sample(g, bo.value_scale, o))
+    window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
   std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
@@ -306,12 +383,17 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   }
   out.seconds_calibrate = seconds_since(t_cal);
   out.step_units = co.step;
+  std::vector<Heightmap>().swap(window);  // calibrated: the build does not need the sample
 
   const auto t_build = std::chrono::steady_clock::now();
   PtcResidualCoder coder(co);
   const int rank = o.group ? o.group->rank() : 0;
   std::optional<PyramidFileWriter> writer;
-  const auto open_output = [&]() -> PyramidFileWriter& { return writer.emplace(output); };
+  const auto open_output = [&]() -> PyramidFileWriter& {
+    writer.emplace(output);
+    writer->set_level_memory_limit(level_memory_limit(o));
+    return *writer;
+  };
   StripeBuildOptions so;
   so.directory = stripe_directory(output);
   // Everything the output depends on: parts of another input or other options are never reused.
@@ -340,8 +422,14 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                               open_output, &out.stripes_resumed);
     out.stripes = so.stripes;
   } else {
-    ProgressReader preader(*reader, progress);
-    ProgressSink psink(open_output(), progress);
+    // The reader reports from the builder's input thread, the sink from its coding thread.
+    std::mutex progress_lock;
+    const BuildProgress locked = [&](const std::string& phase, double f) {
+      const std::lock_guard<std::mutex> hold(progress_lock);
+      progress(phase, f);
+    };
+    ProgressReader preader(*reader, progress ? locked : progress);
+    ProgressSink psink(open_output(), progress ? locked : progress);
     out.build = build_pyramid(preader, bo, coder, psink);
   }
   out.seconds_build = seconds_since(t_build);

@@ -86,9 +86,10 @@ int32_t round_to_int32(double x) {
 }
 
 DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads,
-                                   int64_t batch_rows)
+                                   int64_t batch_rows, bool rounded)
     : filter_(filter),
       symmetric_(filter.symmetric8()),
+      rounded_(rounded),
       fine_(fine),
       coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},
       threads_(std::max(1, threads)),
@@ -171,7 +172,12 @@ void DownsampleEngine::compute(int64_t j0, int64_t j1, const Emit& emit) {
   // Threads only pay for themselves on wide batches.
   const int workers = ((j1 - j0) * fine_.width >= (int64_t(1) << 16)) ? threads_ : 1;
   parallel_chunks(workers, j1 - j0, [&](int w, int64_t b, int64_t e) {
-    for (int64_t j = b; j < e; ++j) compute_row(j0 + j, scratch_[size_t(w)], out_.data() + j * cw);
+    for (int64_t j = b; j < e; ++j) {
+      double* out = out_.data() + j * cw;
+      compute_row(j0 + j, scratch_[size_t(w)], out);
+      if (rounded_)
+        for (int64_t i = 0; i < cw; ++i) out[i] = double(round_to_int32(out[i]));
+    }
   });
   emit(j0, j1 - j0, out_.data());
 }

@@ -29,6 +29,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <utility>
 
 #include "pyramid/internal/filter_downsample.h"
 #include "pyramid/internal/pyramid_fill.h"
@@ -58,6 +59,7 @@ void validate(const BuildOptions& o, const GridInfo& info) {
   if (o.fill_band_rows < 1) throw std::invalid_argument("pyramid: fill_band_rows must be >= 1");
   if (o.fit_rows < 1) throw std::invalid_argument("pyramid: fit_rows must be >= 1");
   if (o.level_count < 0) throw std::invalid_argument("pyramid: level_count must be >= 0");
+  if (o.memory_budget < 0) throw std::invalid_argument("pyramid: memory_budget must be >= 0");
   if (o.use_fixed_filter && !(std::abs(o.fixed_filter.sum() - 1.0) < 1e-9))
     throw std::invalid_argument("pyramid: the fixed filter must sum to 1");
 }
@@ -123,7 +125,13 @@ class InputConverter {
 // Per-band state of the closed loop, reused across band groups.
 struct BandWork {
   int64_t y0 = 0, rows = 0;
-  std::vector<int32_t> t, pred, res, rhat;
+  // Its rows of T_l and validity as the level holds them, taken when the round starts: the coder
+  // threads read them while the main thread appends rows (each row is a buffer of its own, which
+  // neither appending nor dropping other rows moves).
+  std::vector<const void*> src;
+  std::vector<const std::vector<uint64_t>*> src_mask;
+  std::vector<int32_t> t;  // one row of T_l (the band's rows are read from the level, src)
+  std::vector<int32_t> pred, res, rhat;
   std::vector<uint8_t> valid, bytes;
   UpsampleScratch scratch;
   BandFigures figures;
@@ -196,6 +204,10 @@ class LevelRows {
   void copy_rows(int64_t r0, int64_t n, int32_t* out) const {
     narrow_ ? r16_.copy_rows(r0, n, out) : r32_.copy_rows(r0, n, out);
   }
+  const void* row(int64_t r) const {
+    return narrow_ ? static_cast<const void*>(r16_.row(r)) : static_cast<const void*>(r32_.row(r));
+  }
+  bool narrow() const { return narrow_; }
   int64_t first() const { return narrow_ ? r16_.first() : r32_.first(); }
   int64_t end() const { return narrow_ ? r16_.end() : r32_.end(); }
   int64_t peak() const { return narrow_ ? r16_.peak() : r32_.peak(); }
@@ -228,15 +240,13 @@ class MaskRows {
       rows_.push_back(std::move(bits));
     }
   }
-  void copy_rows(int64_t r0, int64_t n, uint8_t* out) const {
-    for (int64_t k = 0; k < n; ++k) {
-      const std::vector<uint64_t>& bits = rows_[size_t(r0 + k - first_)];
-      uint8_t* row = out + k * width_;
-      if (bits.empty())
-        std::fill(row, row + width_, uint8_t(1));
-      else
-        for (int64_t x = 0; x < width_; ++x) row[x] = uint8_t((bits[size_t(x / 64)] >> (x % 64)) & 1);
-    }
+  // Row r's bits (empty: no voids); the reference stays valid until the row is dropped.
+  const std::vector<uint64_t>* row_bits(int64_t r) const { return &rows_[size_t(r - first_)]; }
+  static void unpack(const std::vector<uint64_t>& bits, int64_t width, uint8_t* row) {
+    if (bits.empty())
+      std::fill(row, row + width, uint8_t(1));
+    else
+      for (int64_t x = 0; x < width; ++x) row[x] = uint8_t((bits[size_t(x / 64)] >> (x % 64)) & 1);
   }
   void drop_before(int64_t r) {
     while (first_ < r && !rows_.empty()) {
@@ -257,6 +267,110 @@ class MaskRows {
 // Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
 constexpr int64_t kMinCoarseBandRows = 16;
 
+// Band heights per level, coarsest first.
+std::vector<int64_t> level_band_rows(int level_count, int64_t finest_band_rows) {
+  // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
+  // until it is: halving the band height per coarser level keeps every level's lag near band_rows
+  // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)). But bands of a
+  // few rows code badly (the codec pads them to 16 rows and every band restarts its tiles), so a
+  // coarse band gets up to kMinCoarseBandRows rows as long as its lag stays within 4 band_rows input
+  // rows: a constant 4096^2 grid's coarsest level costs 8 bands instead of 32.
+  const int finest = level_count - 1;
+  std::vector<int64_t> rows(static_cast<size_t>(level_count));
+  for (int l = 0; l < level_count; ++l) {
+    const int shift = std::min(62, finest - l);
+    const int64_t halved = finest_band_rows >> shift;
+    const int64_t floor_rows =
+        std::min({kMinCoarseBandRows, finest_band_rows, (4 * finest_band_rows) >> shift});
+    rows[size_t(l)] = std::max<int64_t>({int64_t(1), halved, floor_rows});
+  }
+  return rows;
+}
+
+// The builder's bytes with c bands of each level in flight (plan_build_memory; docs/scale.md
+// "Memory model"). Doubles: a 40-level pyramid's shifts overflow int64, the heights bound the rows.
+double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
+                      const std::vector<int64_t>& band_rows, int c, int64_t* finest_rows = nullptr) {
+  const int m = int(sizes.size()) - 1;
+  const double W = double(info.width), H = double(info.height);
+  const double B = double(std::min(opt.fill_band_rows, info.height));
+  const auto scale = [m](int l) { return std::ldexp(1.0, m - l); };  // level l's spacing in input rows
+  // Finest rows held: every level's band height in input rows (a band of level l waits for its
+  // rows, the finer ones for its T^), D's reach (5 rows a level, doubled per level up: 5 * 2^m),
+  // U's (2 coarse rows a level), the coarse engines' batches (about 32 input rows each), the group
+  // of c bands the finest level codes at once (with threads > 1 twice: the next group's rows
+  // arrive while a round is coded) and one fill band; at least D's fit rows. The main thread does
+  // not read beyond it while a round is in flight.
+  const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
+  double lag = 7 * scale(0) + 32.0 * (m + 1) + groups * double(band_rows[size_t(m)]) + B;
+  for (int l = 0; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
+  lag = std::min(H, std::max(lag, double(std::min(opt.fit_rows, info.height)) + B));
+  if (finest_rows) *finest_rows = int64_t(lag);
+  const bool narrow = info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
+  // Level rows (int16 or int32) and their validity bits.
+  double bytes = lag * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8);
+  const int engine_workers = std::max(1, opt.threads);
+  for (int l = 0; l <= m; ++l) {
+    const double w = double(sizes[size_t(l)].width), h = double(sizes[size_t(l)].height);
+    const double S = std::min(h, double(band_rows[size_t(l)]));
+    // The bands in flight: U's prediction, R and T^ (int32 each), the validity (finest), the
+    // stream, the coder's buffer and libcodec's body (about 2 bytes a sample each).
+    bytes += double(c) * S * w * (12 + (l == m ? 1 : 0) + 6);
+    if (l < m) {
+      // T_l rows not yet coded and T^_l rows the finer level's U still needs, and the copy of
+      // those U reads for a group of the finer level.
+      const double S_finer = double(band_rows[size_t(l + 1)]);
+      const double held = std::min(2 * h, lag / scale(l) + 2 * c * double(band_rows[size_t(l)]) + 8);
+      bytes += (held + c * S_finer / 2 + 8) * w * 4;
+    }
+    if (l >= 1) {
+      // D engine of level l: its padded fine rows, a batch of coarse rows (double and int32) and
+      // each worker's fold / even / odd / sum rows.
+      const double batch = std::max(1.0, std::floor(32.0 / scale(l)));
+      const double cw = double(sizes[size_t(l - 1)].width), pw = w + 2 * DownsampleFilter::kRadius;
+      bytes += std::min(h, 2 * batch + 16) * pw * 8 + batch * cw * 12 +
+               std::min(double(engine_workers), batch) * (2 * pw + cw) * 8;
+    }
+  }
+  // Two input bands (level integers and validity, 8 rows of samples as read), D's fit windows.
+  bytes += 2 * (B * W * 5 + std::min(B, 8.0) * W * 8) + W * 4;
+  bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
+  return bytes;
+}
+
+BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
+                            const std::vector<int64_t>& band_rows, bool striped) {
+  // A stripe also reads the rows above its own in whole fill bands of samples (8 bytes each).
+  const double extra =
+      striped ? double(std::min(opt.fill_band_rows, info.height)) * double(info.width) * 8 : 0.0;
+  // On top of the items, the heap's slack (freed blocks the allocator keeps, one arena per thread):
+  // the peak RSS of a 32768^2 build at 16 and 64 threads was 2-3 % above the items' sum.
+  const double per_thread = double(int64_t(256) << 10);
+  const auto with_slack = [&](double items) { return items * 1.05 + per_thread * opt.threads; };
+  const auto estimate = [&](int c) {
+    return with_slack(estimate_bytes(info, opt, sizes, band_rows, c) + extra);
+  };
+  BuildMemoryPlan plan;
+  const double minimum = estimate(1);
+  plan.minimum_bytes = int64_t(std::min(minimum, 9e18));
+  int c = opt.threads;
+  if (opt.memory_budget > 0) {
+    const auto mib = [](double b) { return std::to_string(int64_t(std::ceil(b / 1048576.0))); };
+    if (minimum > double(opt.memory_budget))
+      throw std::invalid_argument(
+          "pyramid: a memory budget of " + mib(double(opt.memory_budget)) + " MiB is below the " +
+          mib(minimum) + " MiB a " + std::to_string(info.width) + "-column input of " +
+          std::to_string(sizes.size()) +
+          " levels needs (the rows each level lags behind the input, docs/scale.md); give at least " +
+          mib(minimum) + " MiB, or fewer levels");
+    while (c > 1 && estimate(c) > double(opt.memory_budget)) --c;
+  }
+  plan.bands_in_flight = c;
+  plan.estimated_bytes = int64_t(
+      std::min(with_slack(estimate_bytes(info, opt, sizes, band_rows, c, &plan.finest_rows) + extra), 9e18));
+  return plan;
+}
+
 class StreamingBuilder {
  public:
   StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink,
@@ -268,20 +382,8 @@ class StreamingBuilder {
     finest_ = level_count_ - 1;
     finest_band_rows_ = coder.band_rows();
     if (finest_band_rows_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
-    // A band of level l spans band_rows * 2^(m-l) input rows, and the finer levels cannot be coded
-    // until it is: halving the band height per coarser level keeps every level's lag near band_rows
-    // input rows (memory stays O(width * 2^m) instead of O(width * band_rows * 2^m)). But bands of a
-    // few rows code badly (the codec pads them to 16 rows and every band restarts its tiles), so a
-    // coarse band gets up to kMinCoarseBandRows rows as long as its lag stays within 4 band_rows input
-    // rows: a constant 4096^2 grid's coarsest level costs 8 bands instead of 32.
-    level_band_rows_.resize(size_t(level_count_));
-    for (int l = 0; l < level_count_; ++l) {
-      const int shift = std::min(62, finest_ - l);
-      const int64_t halved = finest_band_rows_ >> shift;
-      const int64_t floor_rows =
-          std::min({kMinCoarseBandRows, finest_band_rows_, (4 * finest_band_rows_) >> shift});
-      level_band_rows_[size_t(l)] = std::max<int64_t>({int64_t(1), halved, floor_rows});
-    }
+    level_band_rows_ = level_band_rows(level_count_, finest_band_rows_);
+    memory_ = plan_memory(info, opt, sizes_, level_band_rows_, stripe.y0 > 0);
     plan_stripe(stripe);
     levels_.resize(size_t(level_count_));
     reconstructed_.resize(size_t(level_count_));
@@ -306,7 +408,21 @@ class StreamingBuilder {
     s << "levels " << level_count_ << ":";
     for (auto& g : sizes_) s << " " << g.width << "x" << g.height;
     result_.log.push_back(s.str());
+    std::ostringstream mem;
+    const auto mib = [](int64_t b) { return (b + (1 << 20) - 1) >> 20; };
+    mem << "memory: estimate " << mib(memory_.estimated_bytes) << " MiB with " << memory_.bands_in_flight
+        << " band(s) of each level in flight (" << opt.threads << " threads";
+    if (opt.memory_budget > 0) mem << ", budget " << (opt.memory_budget >> 20) << " MiB";
+    mem << ", at least " << mib(memory_.minimum_bytes) << " MiB; the builder alone)";
+    result_.log.push_back(mem.str());
+    result_.memory = memory_;
   }
+
+  ~StreamingBuilder() {
+    if (round_.worker.joinable()) round_.worker.join();
+  }
+  StreamingBuilder(const StreamingBuilder&) = delete;
+  StreamingBuilder& operator=(const StreamingBuilder&) = delete;
 
   // Which bands the stripe owns and codes, and which input rows its D cascade runs on (the whole
   // build: every band, all rows). own: the bands whose first row times 2^(m-l) lies in the stripe.
@@ -467,6 +583,11 @@ class StreamingBuilder {
       // Rows above a stripe's cascade serve only D's fit (and the fill's carry, in the converter).
       const bool in_cascade = cur.y + cur.rows > read_a_ && cur.y < read_b_;
       if (in_cascade) result_.void_count += cur.voids;
+      // The coders are behind: holding more rows would exceed the memory plan.
+      while (must_wait_for_round()) {
+        finish_round();
+        pump(false);
+      }
       if (!filter_ready_) {
         levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
         mask_.append(cur.valid.data(), cur.rows);
@@ -550,13 +671,14 @@ class StreamingBuilder {
       // Coarse engines emit in small batches for the same reason as the band heights.
       const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, finest_ - l));
       engines_[size_t(l)] = std::make_unique<detail::DownsampleEngine>(
-          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, opt_.threads, batch);
+          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, opt_.threads, batch, true);
       cascade_height = coarse_extent(cascade_height);
       emit_[size_t(l)] = [this, l](int64_t, int64_t n, const double* rows) {
         const int64_t cw = sizes_[size_t(l - 1)].width;
         std::vector<int32_t>& out = emitted_[size_t(l - 1)];
         out.resize(size_t(n * cw));
-        for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = detail::round_to_int32(rows[k]);
+        // Rounded by the engine's workers (exact int32 values): a cast, not a serial rounding.
+        for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = static_cast<int32_t>(rows[k]);
         levels_[size_t(l - 1)].append(out.data(), n);
         drop_halo_rows(l - 1);
         if (l - 1 >= 1) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
@@ -603,50 +725,78 @@ class StreamingBuilder {
     CoarseWindow window;
   };
 
-  // Codes every band that can be coded now. Each round takes, at every level, the bands ready at
-  // its start (a band whose coarser rows are coded in the same round waits for the next), and codes
-  // all of them at once on `threads` workers, largest first: the coarse levels' bands then run beside
-  // the finest level's instead of one at a time between them (the 2-thread build had one core idle
-  // for half its time). Results are committed level by level, top to bottom, so the output and the
-  // statistics do not depend on the thread count. The finest level codes in groups of `threads`
-  // bands; before the end a partial group waits for more rows (a coarse level never waits: it
-  // would delay all finer ones).
+  // Codes every band that can be coded now, in rounds. A round takes, at every level, the bands
+  // ready at its start (a band whose coarser rows are coded in the same round waits for the next),
+  // at most bands_in_flight of them, and codes all of them at once on `threads` workers, largest
+  // first: the coarse levels' bands run beside the finest level's instead of one at a time between
+  // them. With threads > 1 a round runs in the background while the main thread goes on reading the
+  // input and running the D cascade (the next round's rows), so neither waits for the other; the
+  // main thread commits a round once it has finished, level by level, top to bottom, so the output
+  // and the statistics do not depend on the thread count or on the timing. The finest level codes
+  // in groups of bands_in_flight bands; before the end a partial group waits for more rows (a coarse
+  // level never waits: it would delay all finer ones). final: codes everything that is left.
   void pump(bool final) {
     for (;;) {
-      std::vector<Group> groups;
-      for (int l = 0; l < level_count_; ++l) {
-        const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
-        const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
-        if (y0 >= end) continue;
-        const int limit = opt_.threads;
-        int64_t nb = 0;
-        while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
-          ++nb;
-        const bool more_after = y0 + nb * S < end;
-        if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
-        Group g;
-        g.level = l;
-        g.gy0 = y0;
-        g.gy1 = std::min(end, y0 + nb * S);
-        g.tasks = size_t(nb);
-        groups.push_back(g);
+      if (round_.active) {
+        if (!final && !round_.done.load(std::memory_order_acquire)) return;
+        finish_round();
       }
+      std::vector<Group> groups = ready_groups(final);
       if (groups.empty()) return;
-      code_groups(groups);
+      start_round(std::move(groups));
+      if (!final && opt_.threads > 1) return;
     }
   }
 
-  void code_groups(std::vector<Group>& groups) {
-    if (windows_.size() < groups.size()) windows_.resize(groups.size());
+  // Waits for the round in flight (if any) and commits it.
+  void finish_round() {
+    if (!round_.active) return;
+    if (round_.worker.joinable()) round_.worker.join();
+    round_.active = false;
+    if (round_.error) std::rethrow_exception(std::exchange(round_.error, nullptr));
+    for (const Group& g : round_.groups) commit_group(g);
+  }
+
+  // True while the main thread should not read further: a round is in flight and the finest level
+  // already holds the rows the memory plan allows (the rows of the next group included).
+  bool must_wait_for_round() const {
+    const LevelRows& tm = levels_[size_t(finest_)];
+    return round_.active && tm.end() - next_band_[size_t(finest_)] >= memory_.finest_rows;
+  }
+
+  std::vector<Group> ready_groups(bool final) const {
+    std::vector<Group> groups;
+    for (int l = 0; l < level_count_; ++l) {
+      const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
+      const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
+      if (y0 >= end) continue;
+      const int limit = memory_.bands_in_flight;
+      int64_t nb = 0;
+      while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
+        ++nb;
+      const bool more_after = y0 + nb * S < end;
+      if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
+      Group g;
+      g.level = l;
+      g.gy0 = y0;
+      g.gy1 = std::min(end, y0 + nb * S);
+      g.tasks = size_t(nb);
+      groups.push_back(g);
+    }
+    return groups;
+  }
+
+  // Takes everything a round's bands read from the level stores (U's coarse windows, the row
+  // pointers), then codes them: in the background with threads > 1, else here.
+  void start_round(std::vector<Group>&& round_groups) {
+    round_.groups = std::move(round_groups);
+    std::vector<Group>& groups = round_.groups;
+    if (windows_.size() < size_t(level_count_)) windows_.resize(size_t(level_count_));
     // Per level, so that each slot's buffers keep the size of that level's bands.
     for (const Group& g : groups)
       if (work_[size_t(g.level)].size() < g.tasks) work_[size_t(g.level)].resize(g.tasks);
-    struct Task {
-      size_t group;
-      int64_t band;
-      int64_t samples;
-    };
-    std::vector<Task> order;
+    std::vector<Task>& order = round_.order;
+    order.clear();
     for (size_t gi = 0; gi < groups.size(); ++gi) {
       Group& g = groups[gi];
       const int l = g.level;
@@ -654,7 +804,7 @@ class StreamingBuilder {
       if (l > 0) {
         const GridSize cs = sizes_[size_t(l - 1)];
         const Rect need = upsample_required_window(Rect{0, g.gy0, fs.width, g.gy1 - g.gy0}, fs);
-        std::vector<int32_t>& window = windows_[gi];
+        std::vector<int32_t>& window = windows_[size_t(l)];
         window.resize(size_t(need.height * cs.width));
         reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, window.data());
         g.window = CoarseWindow{window.data(), cs.width, need, cs};
@@ -664,39 +814,69 @@ class StreamingBuilder {
       const int64_t S = level_band_rows_[size_t(l)];
       for (size_t b = 0; b < g.tasks; ++b) {
         const int64_t y0 = g.gy0 + int64_t(b) * S;
-        order.push_back({gi, int64_t(b), std::min(S, g.gy1 - y0) * fs.width});
+        BandWork& bw = work_[size_t(l)][b];
+        bw.y0 = y0;
+        bw.rows = std::min(S, g.gy1 - y0);
+        bw.src.resize(size_t(bw.rows));
+        bw.src_mask.resize(l == finest_ ? size_t(bw.rows) : 0);
+        for (int64_t r = 0; r < bw.rows; ++r) {
+          bw.src[size_t(r)] = levels_[size_t(l)].row(y0 + r);
+          if (l == finest_) bw.src_mask[size_t(r)] = mask_.row_bits(y0 + r);
+        }
+        order.push_back({gi, int64_t(b), bw.rows * fs.width});
       }
     }
     // Largest bands first, so the small coarse ones fill the gaps at the end.
     std::stable_sort(order.begin(), order.end(),
                      [](const Task& a, const Task& b) { return a.samples > b.samples; });
+    round_.active = true;
+    round_.done.store(false, std::memory_order_relaxed);
+    if (opt_.threads == 1) {
+      code_round();
+      round_.done.store(true, std::memory_order_release);
+      return;
+    }
+    round_.worker = std::thread([this] {
+      try {
+        code_round();
+      } catch (...) {
+        round_.error = std::current_exception();
+      }
+      round_.done.store(true, std::memory_order_release);
+    });
+  }
+
+  // Codes the round's bands on `threads` workers and delivers them. Touches only the round's
+  // BandWork, the windows, the rows the band pointers name (none of which the main thread changes
+  // meanwhile), the level figures and the sink (which the main thread leaves alone meanwhile).
+  void code_round() {
+    const std::vector<Task>& order = round_.order;
     std::atomic<size_t> next{0};
     detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
       for (size_t i; (i = next.fetch_add(1)) < order.size();) {
-        const Group& g = groups[order[i].group];
+        const Group& g = round_.groups[order[i].group];
         const int l = g.level;
-        const int64_t fw = sizes_[size_t(l)].width, S = level_band_rows_[size_t(l)];
+        const int64_t fw = sizes_[size_t(l)].width;
         const bool finest = l == finest_;
         BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
-        bw.y0 = g.gy0 + order[i].band * S;
-        bw.rows = std::min(S, g.gy1 - bw.y0);
         const int64_t n = bw.rows * fw;
-        bw.t.resize(size_t(n)), bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)),
-            bw.rhat.resize(size_t(n));
-        levels_[size_t(l)].copy_rows(bw.y0, bw.rows, bw.t.data());
+        bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
         bw.valid.resize(finest ? size_t(n) : 0);
-        if (finest) mask_.copy_rows(bw.y0, bw.rows, bw.valid.data());
+        if (finest)
+          for (int64_t r = 0; r < bw.rows; ++r)
+            MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
         code_band(l, g.window, bw);
       }
     });
-    for (const Group& g : groups) commit_group(g);
+    for (const Group& g : round_.groups) deliver_group(g);
   }
 
-  // Hands a group's bands to the sink in order and drops the rows nothing needs any more.
-  void commit_group(const Group& g) {
+  // Hands a group's bands to the sink in order, with their figures. Called at the end of the
+  // round's coding, on the round's thread: the output's writing (a tenth of the main thread's work
+  // at 2 threads) stays off the main thread. Rounds end one at a time, in order.
+  void deliver_group(const Group& g) {
     const int l = g.level;
-    const GridSize fs = sizes_[size_t(l)];
-    const int64_t fw = fs.width;
+    const int64_t fw = sizes_[size_t(l)].width;
     const bool finest = l == finest_;
     for (size_t b = 0; b < g.tasks; ++b) {
       BandWork& bw = work_[size_t(l)][b];
@@ -709,8 +889,20 @@ class StreamingBuilder {
         if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
       }
       bw.bytes = {};
-      if (!finest) reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
     }
+  }
+
+  // Takes a delivered group's T^ rows and drops the rows nothing needs any more (main thread).
+  void commit_group(const Group& g) {
+    const int l = g.level;
+    const GridSize fs = sizes_[size_t(l)];
+    const int64_t fw = fs.width;
+    const bool finest = l == finest_;
+    if (!finest)
+      for (size_t b = 0; b < g.tasks; ++b) {
+        const BandWork& bw = work_[size_t(l)][b];
+        reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
+      }
     next_band_[size_t(l)] = g.gy1;
     levels_[size_t(l)].drop_before(g.gy1);
     if (finest) mask_.drop_before(g.gy1);
@@ -729,8 +921,25 @@ class StreamingBuilder {
       upsample_region(cwin, fs, Rect{0, bw.y0, fs.width, bw.rows}, bw.pred.data(), fs.width, bw.scratch);
     else
       std::fill(bw.pred.begin(), bw.pred.end(), 0);
-    for (int64_t k = 0; k < n; ++k)
-      bw.res[size_t(k)] = saturate(int64_t(bw.t[size_t(k)]) - bw.pred[size_t(k)]);
+    // T_l is read from the level's rows (a copy of the band was a sixth of its bytes in flight).
+    const int64_t fw = fs.width;
+    const bool narrow = levels_[size_t(l)].narrow();
+    bw.t.resize(size_t(fw));
+    const auto t_row = [&](int64_t r) {
+      if (narrow) {
+        const int16_t* in = static_cast<const int16_t*>(bw.src[size_t(r)]);
+        std::copy(in, in + fw, bw.t.begin());
+      } else {
+        const int32_t* in = static_cast<const int32_t*>(bw.src[size_t(r)]);
+        std::copy(in, in + fw, bw.t.begin());
+      }
+      return bw.t.data();
+    };
+    for (int64_t r = 0; r < bw.rows; ++r) {
+      const int32_t* t = t_row(r);
+      for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k)
+        bw.res[size_t(k)] = saturate(int64_t(t[x]) - bw.pred[size_t(k)]);
+    }
     // Voids are restored from the mask, so their residual carries no information.
     if (with_mask)
       for (int64_t k = 0; k < n; ++k)
@@ -739,16 +948,17 @@ class StreamingBuilder {
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;
-    const int32_t* t = bw.t.data();
+    const int32_t* t = nullptr;
     const int32_t* pred = bw.pred.data();
     const int32_t* res = bw.res.data();
     int32_t* rhat = bw.rhat.data();
     const bool any_void =
         with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
-    for (int64_t k = 0; k < n; ++k) {
+    for (int64_t k = 0, x = fw; k < n; ++k, ++x) {
+      if (x == fw) t = t_row(k / fw), x = 0;
       const int32_t rec = saturate(int64_t(pred[k]) + rhat[k]);
       if (!any_void || bw.valid[size_t(k)]) {
-        const int64_t r = res[k], e = int64_t(t[k]) - rec;
+        const int64_t r = res[k], e = int64_t(t[x]) - rec;
         res_sq[k & 3] += double(r) * double(r);
         err_sq[k & 3] += double(e) * double(e);
         res_max = std::max(res_max, r < 0 ? -r : r);
@@ -772,6 +982,7 @@ class StreamingBuilder {
   int64_t finest_band_rows_ = 0;  // S, the coder's band height at the finest level
   int64_t fit_rows_ = 0;
   std::vector<int64_t> level_band_rows_;
+  BuildMemoryPlan memory_;
   DownsampleFilter filter_;
   bool filter_ready_ = false;
   PyramidHeader header_;
@@ -788,11 +999,34 @@ class StreamingBuilder {
   int64_t read_a_ = 0, read_b_ = 0;  // input rows the D cascade runs on
   std::vector<LevelFigures> figures_;
   std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
-  std::vector<std::vector<int32_t>> windows_;  // per group of a round: the coarse rows U reads
+  std::vector<std::vector<int32_t>> windows_;  // per level: the coarse rows U reads for its group
+  // The round being coded (at most one at a time).
+  struct Task {
+    size_t group;
+    int64_t band;
+    int64_t samples;
+  };
+  struct Round {
+    bool active = false;
+    std::atomic<bool> done{false};
+    std::thread worker;
+    std::exception_ptr error;
+    std::vector<Group> groups;
+    std::vector<Task> order;
+  } round_;
   BuildResult result_;
 };
 
 }  // namespace
+
+BuildMemoryPlan plan_build_memory(const GridInfo& input, const BuildOptions& options, int64_t band_rows,
+                                  bool striped) {
+  validate(options, input);
+  if (band_rows < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
+  const std::vector<GridSize> sizes =
+      pyramid_level_sizes({input.width, input.height}, options.level_count, options.min_coarsest_side);
+  return plan_memory(input, options, sizes, level_band_rows(int(sizes.size()), band_rows), striped);
+}
 
 BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder,
                           PyramidSink& sink) {

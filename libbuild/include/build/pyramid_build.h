@@ -20,10 +20,14 @@ struct BuildFileOptions {
   container::ErrorMode mode =
       container::ErrorMode::Lossless;  // what target_metres is (stored in the file as given)
   double target_metres = 0;            // the step, rms or max error asked for, in metres
-  double quantum_metres = 0;        // level unit for float input (0: 0.01 m); integer input uses its own unit
-  int levels = 0;                   // 0: automatic
-  uint32_t tile_size = 32;          // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
-  int threads = 0;                  // 0: all cores
+  double quantum_metres = 0;  // level unit for float input (0: 0.01 m); integer input uses its own unit
+  int levels = 0;             // 0: automatic
+  uint32_t tile_size = 32;    // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
+  int threads = 0;            // 0: all cores
+  // Bytes the whole build may hold (pyramid-build --memory): the builder gets this less what the
+  // process holds besides it, and codes fewer bands at once when that is tight (the same bytes).
+  // 0: no budget. A budget below the input's minimum fails at the start (std::invalid_argument).
+  int64_t memory_bytes = 0;
   int64_t calibration_rows = 1024;  // rms/max-error calibration sample: this many rows (taller inputs: in
                                     // 4 bands spread from top to bottom) x up to calibration_cols columns
   int64_t calibration_cols = 2048;
@@ -52,12 +56,15 @@ struct BuildFileResult {
   uint64_t file_bytes = 0;
   double seconds_calibrate = 0, seconds_build = 0;
   int64_t finest_samples = 0;
-  int stripes = 0;           // striped build: stripes (0: the plain build)
-  int stripes_resumed = 0;   // parts an earlier, killed build had completed
-  bool wrote_output = true;  // false on the ranks other than 0 of a group
+  BuildMemoryPlan memory;              // the builder's schedule and estimate under the budget
+  int64_t memory_outside_builder = 0;  // the estimate of what the process holds besides the builder
+  int stripes = 0;                     // striped build: stripes (0: the plain build)
+  int stripes_resumed = 0;             // parts an earlier, killed build had completed
+  bool wrote_output = true;            // false on the ranks other than 0 of a group
 };
 
-// Progress: phase name and fraction done in [0, 1]; called from the building thread.
+// Progress: phase name and fraction done in [0, 1]; called once at a time, from the building thread
+// or, while the levels are coded, from the builder's coding thread.
 using BuildProgress = std::function<void(const std::string& phase, double fraction)>;
 
 // Builds `output` from `input`. Throws Error for input problems (naming the file), Error for

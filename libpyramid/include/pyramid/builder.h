@@ -39,7 +39,30 @@ struct BuildOptions {
   int threads = 2;              // results are bit-identical for every thread count
   int64_t fill_band_rows = 64;  // nodata push-pull works on bands of this many input rows
   int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
+  // Bytes the builder may hold (its estimate, plan_build_memory): bands of every level are coded at
+  // most bands_in_flight at a time, fewer than `threads` when the budget is tight (the bytes are the
+  // same: only the schedule changes). 0: no budget (threads bands in flight).
+  int64_t memory_budget = 0;
 };
+
+// What the builder will hold, estimated from the sizes alone (docs/scale.md "Memory model"): the
+// rows each level lags behind the input, the bands being coded with their coder buffers (a coded
+// stream is counted at 2 bytes a sample: incompressible input coded losslessly holds more), the D
+// engines and the input bands. Not counted: the sink (a file writer holds a few MiB per level),
+// the reader's own buffers and the process itself.
+struct BuildMemoryPlan {
+  int bands_in_flight = 1;      // bands of each level coded at once (1 .. threads)
+  int64_t minimum_bytes = 0;    // the estimate with one band of each level in flight
+  int64_t estimated_bytes = 0;  // the estimate at bands_in_flight
+  int64_t finest_rows = 0;      // finest rows held at most (reading waits for the coders beyond)
+};
+// bands_in_flight is the largest count <= options.threads whose estimate fits options.memory_budget
+// (threads when the budget is 0). Throws std::invalid_argument naming the minimum when even one band
+// in flight does not fit, and as build_pyramid for unusable options. `band_rows`: the coder's
+// (ResidualCoder::band_rows); `striped`: a stripe of a striped build (it also holds a fill band of
+// samples read above its rows). Thread-safe.
+BuildMemoryPlan plan_build_memory(const GridInfo& input, const BuildOptions& options, int64_t band_rows,
+                                  bool striped = false);
 
 // Everything a decoder needs besides the per-band bytes.
 struct PyramidHeader {
@@ -89,6 +112,7 @@ struct BuildResult {
   // Wall time: seconds_pass_input = fitting D; seconds_pass_residual = the rest of the streaming build
   // (read, D cascade, closed loop).
   double seconds_pass_input = 0, seconds_pass_residual = 0;
+  BuildMemoryPlan memory;        // the schedule the budget allowed and its estimate
   std::vector<std::string> log;  // human-readable build log (filter choice, fallbacks)
 };
 
@@ -97,7 +121,9 @@ struct BuildResult {
 // the validity of its rows; whether the input has voids at all is known only at the end, so a
 // sink that stores a mask decides what to keep once every row has arrived. reconstructed_rows()
 // calls may come at any time (even before begin()), each level top to bottom. Ordering levels for
-// a file is the sink's business (PyramidFileWriter does it).
+// a file is the sink's business (PyramidFileWriter does it). The calls come one at a time, but not
+// always from the thread that called build_pyramid (the builder's coding rounds deliver their
+// bands from a thread of their own): a sink needs no lock, only no thread affinity.
 class PyramidSink {
  public:
   virtual ~PyramidSink() = default;
@@ -122,7 +148,7 @@ class PyramidSink {
 };
 
 // Keeps nothing but the number of coded bytes: for trial builds and benchmarks, which need the
-// figures of a build and not its output. Not thread-safe (the builder calls its sink from one thread).
+// figures of a build and not its output. Not thread-safe (the builder calls its sink once at a time).
 class CountingSink final : public PyramidSink {
  public:
   void band(int, int64_t, int64_t, std::vector<uint8_t>&& bytes) override { band_bytes += bytes.size(); }

@@ -26,7 +26,10 @@ class DownsampleEngine {
   // emit(first_coarse_row, rows, data) with data = rows x coarse width doubles.
   using Emit = std::function<void(int64_t, int64_t, const double*)>;
 
-  DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows = 32);
+  // rounded: the coarse rows come out as round_to_int32 of D (still doubles, each an exact int32),
+  // rounded on the workers that compute them rather than by the caller, one thread.
+  DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows = 32,
+                   bool rounded = false);
   void push_rows(const int32_t* rows, int64_t count, const Emit& emit);
   // Emits the remaining coarse rows; every fine row must have been pushed.
   void finish(const Emit& emit);
@@ -47,6 +50,7 @@ class DownsampleEngine {
 
   DownsampleFilter filter_;
   bool symmetric_;
+  bool rounded_;
   GridSize fine_, coarse_;
   int threads_;
   int64_t batch_;
