@@ -9,7 +9,8 @@
 // libcodec streams behind the CRCs. Any Error is fine under DamagePolicy::Throw; crashes,
 // sanitizer reports, leaks, other exception types, and any Error from a decode under
 // DamagePolicy::Degrade are not. When a file opens, small regions of every level are decoded
-// (units and metres): a decode of a sub-rectangle must agree with the larger one, a degraded decode
+// (units and metres; whole levels of 128x128 and more through the bulk path): a decode of a
+// sub-rectangle must agree with the larger one, a degraded decode
 // with a strict one that succeeded, and every damage report must lie inside its level and the file.
 //   Run: fuzz_pyramid_open -max_len=65536 -max_total_time=600 [corpus_dir]
 //   Seeds: scripts/fuzz-seeds DIR (small pyramids covering every container section)
@@ -68,6 +69,20 @@ void decode_some(const std::string& path) {
       for (int64_t x = 0; x < sw; ++x)
         if (small[size_t(y * sw + x)] != big[size_t((s.y0 - r.y0 + y) * w + s.x0 - r.x0 + x)]) std::abort();
     if (level + 1 == file->level_count()) decoder.decode_metres(level, r, metres.data(), w);
+    // Whole levels of at least 128x128 take the region decoder's bulk path (tiles added straight
+    // into the output, not cached): it must give the window's samples too, or throw Error.
+    if (g.width >= 128 && g.height >= 128 && g.width * g.height <= (int64_t(1) << 18)) {
+      std::vector<int32_t> whole(size_t(g.width * g.height));
+      RegionDecoder bulk(file, size_t(4) << 20);
+      try {
+        bulk.decode_units(level, terrain::Rect{0, 0, g.width, g.height}, whole.data(), g.width);
+      } catch (const Error&) {
+        continue;
+      }
+      for (int64_t y = 0; y < h; ++y)
+        for (int64_t x = 0; x < w; ++x)
+          if (whole[size_t((r.y0 + y) * g.width + r.x0 + x)] != big[size_t(y * w + x)]) std::abort();
+    }
   }
   const uint64_t file_size = uint64_t(std::filesystem::file_size(path));
   for (const DamagedTile& d : degraded.damaged_tiles()) {
