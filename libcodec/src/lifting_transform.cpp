@@ -88,11 +88,11 @@ std::array<double, kLiftingBandCount> measure_norms() {
                                         {b.even_w / 2, b.even_h + b.odd_h / 2},
                                         {b.even_w + b.odd_w / 2, b.even_h + b.odd_h / 2}};
   std::vector<int32_t> tile(size_t(kProbeSide) * kProbeSide),
-      line(lifting_scratch_size(kProbeSide, kProbeSide));
+      scratch(lifting_scratch_size(kProbeSide, kProbeSide));
   for (int band = 0; band < kLiftingBandCount; ++band) {
     std::fill(tile.begin(), tile.end(), 0);
     tile[size_t(at[band][1]) * kProbeSide + size_t(at[band][0])] = kImpulse;
-    inverse_lifting(tile.data(), kProbeSide, kProbeSide, line.data());
+    inverse_lifting(tile.data(), kProbeSide, kProbeSide, scratch.data());
     double energy = 0;
     for (int32_t v : tile) energy += double(v) * double(v);
     norms[size_t(band)] = std::sqrt(energy) / kImpulse;

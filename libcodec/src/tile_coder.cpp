@@ -243,6 +243,13 @@ const uint32_t* band_layout(TileWork& work, int pw, int ph) {
   return layout.slots.data();
 }
 
+// dequantize() of a non-zero level |q| = magnitude < kRlgrMaxMagnitude, for the decoders' sinks:
+// (16 |q| + 1) * step < 2^34 * kMaxBandStep = 2^64.
+inline uint64_t dequantized_magnitude(uint32_t magnitude, uint32_t step_q8) {
+  static_assert(uint64_t(kRlgrMaxMagnitude) * 16 <= (uint64_t(1) << 34) && kMaxBandStep <= (1u << 30));
+  return ((uint64_t(magnitude) * 16 + 1) * step_q8 + 2048) >> 12;
+}
+
 // Decodes one band group (LP or HP) and dequantises each non-zero value into its slot. Out of line,
 // so that the RLGR loop has the registers to itself (GCC 12: 30-50% faster than inlined into the caller).
 // GCC also compiles it for x86-64-v3 (picked at load time): LZCNT and BMI2's flagless shifts, about
@@ -255,13 +262,11 @@ __attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
 #endif
 bool decode_band_group(BitReader& in, size_t count, RlgrState state, const uint32_t* slots,
                        const BandSteps& steps, int32_t* tile, bool& any_nonzero) {
-  // dequantize() for |q| < kRlgrMaxMagnitude: (16 |q| + 1) * step < 2^34 * kMaxBandStep = 2^64.
-  static_assert(uint64_t(kRlgrMaxMagnitude) * 16 <= (uint64_t(1) << 34) && kMaxBandStep <= (1u << 30));
   bool nonzero = false;  // a local, not any_nonzero: the stores through tile may alias a reference
   const bool ok = rlgr_decode_nonzero(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
     nonzero = true;
     const uint32_t slot = slots[i];
-    const uint64_t value = ((uint64_t(magnitude) * 16 + 1) * steps.q8[slot >> kSlotOffsetBits] + 2048) >> 12;
+    const uint64_t value = dequantized_magnitude(magnitude, steps.q8[slot >> kSlotOffsetBits]);
     // Stored before the range check, so negated in uint32: a rejected value must not overflow.
     tile[slot & ((1u << kSlotOffsetBits) - 1)] = int32_t(negative ? 0u - uint32_t(value) : uint32_t(value));
     return value <= uint64_t(kMaxCoefficient);
@@ -309,8 +314,8 @@ bool decode_bands(BitReader& in, int32_t* tile, int pw, int ph, const BandSteps&
 }
 
 // The residual transform's bands (format 5): LL, HL, LH, HH of one lifting level, each in raster order
-// with its own RLGR state from the default start, quantised while coded (kAcDeadZone). Band b covers
-// columns [x0, x1) and rows [y0, y1) of the w x h tile (row stride w).
+// with its own RLGR state from a start chosen by a flag bit, quantised while coded (kAcDeadZone). Band b
+// covers columns [x0, x1) and rows [y0, y1) of the w x h tile (row stride w).
 struct LiftingRect {
   int x0, y0, x1, y1;
 };
@@ -344,8 +349,7 @@ void code_lifting_bands(BitWriter& out, int32_t* tile, int w, int h, const BandS
   }
 }
 
-// Reads the four bands and writes dequantised coefficients into the w x h tile.
-// Non-zero values only, dequantised straight into their tile positions (the tile is zeroed once),
+// One band's non-zero values, dequantised straight into their tile positions (the tile is zeroed once),
 // as decode_band_group does for the lapped bands; out of line and cloned for the same reasons.
 #if defined(__clang__)
 __attribute__((noinline))
@@ -363,7 +367,7 @@ bool decode_lifting_band(BitReader& in, size_t count, RlgrState state, int32_t* 
       row += col / band_w;
       col %= band_w;
     }
-    const uint64_t value = ((uint64_t(magnitude) * 16 + 1) * step_q8 + 2048) >> 12;
+    const uint64_t value = dequantized_magnitude(magnitude, step_q8);
     origin[row * w + col] = int32_t(negative ? 0u - uint32_t(value) : uint32_t(value));
     return value <= uint64_t(kMaxCoefficient);
   });
@@ -467,7 +471,7 @@ size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, cons
     for (int y = 0; y < h; ++y)
       std::memcpy(tile + size_t(y) * w, src + y * stride, size_t(w) * sizeof(int32_t));
     scale_up(tile, size_t(w) * h, params.fraction_bits);
-    forward_lifting(tile, w, h, work.line.data());
+    forward_lifting(tile, w, h, work.lifting_scratch.data());
     code_lifting_bands(bits, tile, w, h, params.lifting_steps, work.sequence.data());
   } else {
     load_padded(src, stride, w, h, pw, ph, tile);
@@ -481,7 +485,7 @@ size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, cons
   }
   if (lifting) {
     dequantize_lifting(tile, w, h, params.lifting_steps);
-    inverse_lifting(tile, w, h, work.line.data());
+    inverse_lifting(tile, w, h, work.lifting_scratch.data());
   } else {
     dequantize_tile(tile, pw, ph, params.steps);
     inverse_lapped(tile, pw, ph, params.fraction_bits > 0);
@@ -576,7 +580,8 @@ void TileWork::reserve(int pw, int ph, size_t reconstruction_samples, size_t pay
   if (sequence.size() < padded) sequence.resize(padded);  // also the decoder's correction layer (w x h)
   if (reconstruction.size() < reconstruction_samples) reconstruction.resize(reconstruction_samples);
   if (alternative.size() < payload_bound) alternative.resize(payload_bound);
-  if (line.size() < lifting_scratch_size(pw, ph)) line.resize(lifting_scratch_size(pw, ph));
+  if (lifting_scratch.size() < lifting_scratch_size(pw, ph))
+    lifting_scratch.resize(lifting_scratch_size(pw, ph));
 }
 
 size_t tile_payload_bound(int width, int height) {
@@ -647,7 +652,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   }
   if (bits.overrun()) return TileResult::Corrupt;
   if (lifting)
-    inverse_lifting(tile, w, h, work.line.data());
+    inverse_lifting(tile, w, h, work.lifting_scratch.data());
   else
     inverse_lapped(tile, pw, ph, !spatial && params.fraction_bits > 0);
   const int tile_stride = lifting ? w : pw;

@@ -25,7 +25,7 @@ struct PtcCoderOptions {
   // kLargestStep and libcodec's largest max error.
   bool screen_level_error = false;
   uint32_t tile_size = 64;  // libcodec tile side; also the band height unless band_rows says otherwise
-  // Transform of the finer levels' residual streams: Residual (libcodec format 5: 12-17 % fewer bits
+  // Transform of the finer levels' residual streams: Residual (libcodec format 5: 8-17 % fewer bits
   // than Lapped on closed-loop residuals, docs/codec.md) or Lapped (the format-4 streams of .pyr 2.x).
   // The coarsest level, coded as values, always uses Lapped.
   codec::Transform residual_transform = codec::Transform::Residual;

@@ -25,7 +25,8 @@ inline LiftingBands lifting_bands(int w, int h) { return {(w + 1) / 2, (h + 1) /
 inline constexpr int kLiftingBandCount = 4;
 
 // Values of scratch forward_lifting and inverse_lifting need for a w x h tile.
-inline size_t lifting_scratch_size(int w, int h) { return 2 * size_t(w) * size_t(h) + size_t(2 * w); }
+// (a copy of the tile for the column pass and the transposed tile for the row pass)
+inline size_t lifting_scratch_size(int w, int h) { return 2 * size_t(w) * size_t(h); }
 // In place on w x h samples with row stride w.
 void forward_lifting(int32_t* tile, int w, int h, int32_t* scratch);
 void inverse_lifting(int32_t* tile, int w, int h, int32_t* scratch);

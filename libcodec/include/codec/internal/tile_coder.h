@@ -42,13 +42,13 @@ struct TileWork {
   // A stream has at most four padded tile shapes (interior, right edge, bottom edge, corner).
   std::array<BandLayout, 4> layouts;
   size_t next_layout = 0;
-  std::vector<int32_t> coefficients;    // padded tile
-  std::vector<int32_t> sequence;        // one band's values in coding order
-  std::vector<int32_t> reconstruction;  // width x height
-  std::vector<uint8_t> alternative;     // second candidate payload in max-error mode
-  std::vector<int32_t> line;            // one row or column of the residual transform
-  std::vector<int32_t> candidate;       // the first transform's reconstruction while the second is tried
-  std::vector<uint8_t> second;          // the second transform's payload
+  std::vector<int32_t> coefficients;     // padded tile
+  std::vector<int32_t> sequence;         // one band's values in coding order
+  std::vector<int32_t> reconstruction;   // width x height
+  std::vector<uint8_t> alternative;      // second candidate payload in max-error mode
+  std::vector<int32_t> lifting_scratch;  // the residual transform's copies (lifting_scratch_size)
+  std::vector<int32_t> candidate;        // the first transform's reconstruction while the second is tried
+  std::vector<uint8_t> second;           // the second transform's payload
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
   // window and needs none.
   void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
