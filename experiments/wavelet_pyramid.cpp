@@ -16,6 +16,8 @@
 // context model (what an arithmetic / rANS coder with per-context tables could reach): the
 // magnitude class of the causal neighbours and the parent coefficient selects one of 12 adaptive
 // tables of min(|q|, 18) (escape: Elias-gamma of the rest), plus one bit of sign.
+// Closed loop (CLOSED=r: coarse step r^k S at k levels above the finest) with ROUNDT=1: the coarse
+// truths rounded to the input's unit, as the product stores its levels.
 // Run: build/experiments/wavelet_pyramid DEM RMS [UPDATE 0|2|4] [LEVELS]
 #include <algorithm>
 #include <cmath>
@@ -419,6 +421,9 @@ int main(int argc, char** argv) {
     const double r = std::atof(cl);
     std::vector<Image> T{input};
     for (int l = 0; l < levels; ++l) T.insert(T.begin(), low_band(T.front()));
+    if (std::getenv("ROUNDT"))  // coarse truths rounded to the input's unit, as the product stores them
+      for (size_t l = 0; l + 1 < T.size(); ++l)
+        for (double& v : T[l].v) v = std::round(v);
     if (std::getenv("REFD")) {  // the builder's D cascade (per-terrain optimal 11x11 D) instead
       BuildOptions bo;
       bo.level_count = levels + 1;

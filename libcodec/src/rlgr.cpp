@@ -125,7 +125,7 @@ void rlgr_encode_quantizing(BitWriter& out, int32_t* values, size_t count, size_
 
 bool rlgr_decode(BitReader& in, int32_t* values, size_t count, RlgrState& state) {
   std::fill(values, values + count, 0);
-  return rlgr_decode_nonzero(in, count, state, [values](size_t i, uint32_t magnitude, bool negative) {
+  return rlgr_decode_dense(in, count, state, [values](size_t i, uint32_t magnitude, bool negative) {
     values[i] = negative ? -int32_t(magnitude) : int32_t(magnitude);
     return true;
   });

@@ -263,10 +263,11 @@ __attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
 bool decode_band_group(BitReader& in, size_t count, RlgrState state, const uint32_t* slots,
                        const BandSteps& steps, int32_t* tile, bool& any_nonzero) {
   bool nonzero = false;  // a local, not any_nonzero: the stores through tile may alias a reference
-  const bool ok = rlgr_decode_nonzero(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
-    nonzero = true;
+  const bool ok = rlgr_decode_dense(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
+    nonzero |= magnitude != 0;
     const uint32_t slot = slots[i];
-    const uint64_t value = dequantized_magnitude(magnitude, steps.q8[slot >> kSlotOffsetBits]);
+    const uint64_t value =
+        dequantized_magnitude(magnitude, steps.q8[slot >> kSlotOffsetBits]) & (0 - uint64_t(magnitude != 0));
     // Stored before the range check, so negated in uint32: a rejected value must not overflow.
     tile[slot & ((1u << kSlotOffsetBits) - 1)] = int32_t(negative ? 0u - uint32_t(value) : uint32_t(value));
     return value <= uint64_t(kMaxCoefficient);
@@ -358,17 +359,13 @@ __attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
 #endif
 bool decode_lifting_band(BitReader& in, size_t count, RlgrState state, int32_t* origin, int band_w, int w,
                          uint32_t step_q8) {
-  int64_t row = 0, col = 0;
-  size_t last = 0;
-  return rlgr_decode_nonzero(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
-    col += int64_t(i - last);
-    last = i;
-    if (col >= band_w) {
-      row += col / band_w;
-      col %= band_w;
-    }
-    const uint64_t value = dequantized_magnitude(magnitude, step_q8);
-    origin[row * w + col] = int32_t(negative ? 0u - uint32_t(value) : uint32_t(value));
+  // Index i of the band sits at row i / band_w of the tile: a division off the decoder's critical
+  // path, where tracking the column costs a branch per codeword that mispredicts at each row's end.
+  const uint32_t bw = uint32_t(band_w), gap = uint32_t(w - band_w);
+  return rlgr_decode_dense(in, count, state, [&](size_t i, uint32_t magnitude, bool negative) {
+    const uint32_t row = uint32_t(i) / bw;
+    const uint64_t value = dequantized_magnitude(magnitude, step_q8) & (0 - uint64_t(magnitude != 0));
+    origin[i + size_t(row) * gap] = int32_t(negative ? 0u - uint32_t(value) : uint32_t(value));
     return value <= uint64_t(kMaxCoefficient);
   });
 }

@@ -58,7 +58,13 @@ inline constexpr int kDownZero = 3;  // Golomb-Rice mode: after a non-zero
 inline constexpr int kUnaryCap = 20;
 inline constexpr int kEscapeBits = 31;
 
-inline int clamp_kp(int kp) { return std::clamp(kp, 0, kKpMax); }
+// Branch-free (GCC compiles std::clamp to branches here, and near 0 they mispredict): kp is at most
+// kKpMax + kUpRun and at least -kDownRun before the clamp.
+inline int clamp_kp(int kp) {
+  kp &= ~(kp >> 31);
+  const int over = kp - kKpMax;
+  return kKpMax + (over & (over >> 31));
+}
 // After a Rice code with quotient q (at most kUnaryCap, the escape): q = 0: krp -= 2; q = 1:
 // unchanged; q > 1: krp += q; clamped to [0, kKpMax]. Looked up in a table of the next krp for every
 // (krp, q), 1.7 KB: one L1 load in place of about ten compare and select instructions on each
@@ -82,9 +88,10 @@ inline void adapt_rice(RlgrState& s, int quotient) {
 }
 }  // namespace rlgr
 
-// One codeword of rlgr_decode_nonzero: advances i past the values it codes, calling sink for a
+// One codeword, branching on its shape: advances i past the values it codes, calling sink for a
 // non-zero one. Returns false for an impossible sequence or a value the sink rejects. in must hold
-// at least 56 bits (a codeword without escape needs at most 1 + 10 + 1 + 20 + 10 = 42).
+// at least 56 bits (a codeword without escape needs at most 1 + 10 + 1 + 20 + 10 = 42). The slow
+// path of rlgr_decode_codeword_dense (escapes and corrupt streams).
 template <class Sink>
 [[gnu::always_inline]] inline bool rlgr_decode_codeword(BitReader& in, size_t count, RlgrState& s, size_t& i,
                                                         Sink& sink) {
@@ -144,21 +151,71 @@ template <class Sink>
   return true;
 }
 
-// rlgr_decode without the output array: calls sink(index, magnitude, negative) for each non-zero
-// value only (so the cost follows the non-zeros, and the caller can put each value where it
-// belongs); magnitude < kRlgrMaxMagnitude. A sink that returns false rejects the stream. Same bits,
-// same checks as rlgr_decode.
+// rlgr_decode_codeword for a sink that accepts zeros (see rlgr_decode_dense): the run-mode codeword's
+// two shapes (a complete run, or a run ended by a value) are parsed together and selected by masks,
+// without a branch. Which shape comes next is data (about as likely either way near 2 bits/sample),
+// so that branch of rlgr_decode_codeword mispredicts often; here only the mode (k = 0 or not),
+// escapes and corrupt streams branch. Parsing the Golomb-Rice mode's codeword alongside as well
+// removed the mode's branch but lengthened the dependency chain: 15-25 % slower (Rainier, rms 1 m).
 template <class Sink>
-bool rlgr_decode_nonzero(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
-  // Local copies: stores through the sink could otherwise alias the state and the reader's
-  // counters, forcing reloads on every symbol.
+[[gnu::always_inline]] inline bool rlgr_decode_codeword_dense(BitReader& in, size_t count, RlgrState& s,
+                                                              size_t& i, Sink& sink) {
+  using namespace rlgr;
+  const int k = s.kp >> 3;
+  const int kr = s.krp >> 3;
+  const uint64_t c = in.cache();
+  if (k == 0) {
+    const int ones = __builtin_clzll(~c | 1);
+    if (ones >= kUnaryCap) [[unlikely]]
+      return rlgr_decode_codeword(in, count, s, i, sink);
+    const uint32_t mapped = (uint32_t(ones) << kr) | uint32_t((c << ones) >> (63 - kr));
+    in.skip(ones + 1 + kr);
+    s.krp = kRiceNext.next[s.krp][ones];
+    if (!sink(i, (mapped + 1) >> 1, (mapped & 1) != 0)) [[unlikely]]
+      return false;
+    ++i;
+    s.kp = clamp_kp(s.kp + kUpZero - (kUpZero + kDownZero) * int(mapped != 0));
+    return true;
+  }
+  // The ended run's fields, parsed whether or not the codeword has them: after the flag, k run bits
+  // and the sign, then the Rice code of magnitude - 1.
+  const uint32_t run_sign = uint32_t((c << 1) >> (63 - k));
+  const uint64_t rest = c << (k + 2);
+  const int ones = __builtin_clzll(~rest | 1);
+  const size_t run = run_sign >> 1;
+  const size_t left = count - i;
+  const bool full = (c >> 63) == 0;  // a complete run
+  if (int(!full) & (int(ones >= kUnaryCap) | int(run >= left))) [[unlikely]]
+    return rlgr_decode_codeword(in, count, s, i, sink);  // an escape, or the error it reports
+  const int q = std::min(ones, kUnaryCap);
+  const uint32_t magnitude = ((uint32_t(q) << kr) | uint32_t((rest << q) >> (63 - kr))) + 1;
+  // Masks, not conditionals: GCC turns the equivalent conditionals into branches.
+  const size_t ended = size_t(0) - size_t(!full);  // all ones for a run ended by a value
+  const size_t at = i + (run & ended);
+  if (!sink(at, magnitude & uint32_t(ended), (run_sign & 1 & uint32_t(ended)) != 0)) [[unlikely]]
+    return false;
+  const size_t full_run = std::min(size_t(1) << k, left);
+  in.skip(int(1 + (size_t(k + 2 + q + kr) & ended)));
+  i = ((at + 1) & ended) | ((i + full_run) & ~ended);
+  s.kp = clamp_kp(s.kp + kUpRun - int((kUpRun + kDownRun) & ended));
+  s.krp += int((kRiceNext.next[s.krp][q] - s.krp) & int(ended));
+  return true;
+}
+
+// Decodes exactly count values (rlgr_decode without the output array), calling sink(index, magnitude,
+// negative) in index order for each non-zero value (0 < magnitude < kRlgrMaxMagnitude) and also
+// for some zero values (magnitude 0, negative false; the sink may store the zero or skip it), so
+// that the decoder need not branch on whether a codeword ends with a value. A sink that returns
+// false rejects the stream. Returns false for an impossible sequence (a run longer than the values
+// left, an escape out of range) or a rejected value; the caller also checks the reader's overrun.
+template <class Sink> bool rlgr_decode_dense(BitReader& reader, size_t count, RlgrState& state, Sink&& sink) {
   BitReader in = reader;
   RlgrState s = state;
   size_t i = 0;
   bool ok = true;
   while (i < count) {
-    if (!in.refill_fast()) in.refill();  // one refill per codeword
-    if (!rlgr_decode_codeword(in, count, s, i, sink)) [[unlikely]] {
+    if (!in.refill_fast()) in.refill();
+    if (!rlgr_decode_codeword_dense(in, count, s, i, sink)) [[unlikely]] {
       ok = false;
       break;
     }
