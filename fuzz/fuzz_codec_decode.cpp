@@ -43,8 +43,8 @@ void fix_checksums(std::vector<uint8_t>& s) {
   if ((flags & 1) && !get_varint(s, p, &e)) return;
   if (!get_varint(s, p, &payload)) return;
   const size_t data_offset = p;
-  if (payload > s.size() || s.size() - payload < data_offset + 5 || tile16 == 0 || w == 0 || h == 0 ||
-      w > (uint64_t(1) << 40) || h > (uint64_t(1) << 40))
+  if (payload > s.size() || s.size() - payload < data_offset + 5 || tile16 == 0 || tile16 > (1u << 20) ||
+      w == 0 || h == 0 || w > (uint64_t(1) << 40) || h > (uint64_t(1) << 40))
     return;
   const size_t index_offset = data_offset + size_t(payload), end = s.size() - 4;
   const uint64_t t = tile16 * 16, tiles_x = (w + t - 1) / t, tiles = tiles_x * ((h + t - 1) / t);
