@@ -37,44 +37,50 @@ inline int odd_index(int n, int i) {
 // Both passes are cloned for AVX-512 and AVX2 (picked at load time, as tile_coder's row outputs).
 #define LIFTING_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx2", "default")]]
 
-// Columns, a whole row of values at a time (the inner loops vectorise); copy holds w * h values.
-LIFTING_CLONES void columns(int32_t* tile, int w, int h, int32_t* copy, bool forward) {
+// Columns, a whole row of values at a time (the inner loops vectorise). Forward: in place, copy holds
+// w * h values.
+LIFTING_CLONES void columns_forward(int32_t* tile, int w, int h, int32_t* copy) {
   if (h < 2) return;
   const int ne = (h + 1) / 2, no = h / 2;
   const auto row = [&](int32_t* base, int r) { return base + size_t(r) * w; };
   // copy: the evens in rows [0, ne), the odds in rows [ne, h).
   int32_t* S = copy;
   int32_t* D = copy + size_t(ne) * w;
-  if (forward) {
-    for (int i = 0; i < ne; ++i) std::copy_n(row(tile, 2 * i), w, row(S, i));
-    for (int i = 0; i < no; ++i) {
-      const int32_t *a = row(S, even_index(ne, i - 1)), *b = row(S, i), *c = row(S, even_index(ne, i + 1)),
-                    *e = row(S, even_index(ne, i + 2)), *o = row(tile, 2 * i + 1);
-      int32_t* out = row(D, i);
-      for (int x = 0; x < w; ++x) out[x] = sub(o[x], predict(a[x], b[x], c[x], e[x]));
-    }
-  } else {
-    std::copy_n(tile, size_t(w) * h, copy);
+  for (int i = 0; i < ne; ++i) std::copy_n(row(tile, 2 * i), w, row(S, i));
+  for (int i = 0; i < no; ++i) {
+    const int32_t *a = row(S, even_index(ne, i - 1)), *b = row(S, i), *c = row(S, even_index(ne, i + 1)),
+                  *e = row(S, even_index(ne, i + 2)), *o = row(tile, 2 * i + 1);
+    int32_t* out = row(D, i);
+    for (int x = 0; x < w; ++x) out[x] = sub(o[x], predict(a[x], b[x], c[x], e[x]));
   }
   for (int i = 0; i < ne; ++i) {
     const int32_t *a = row(D, odd_index(no, i - 2)), *b = row(D, odd_index(no, i - 1)),
                   *c = row(D, odd_index(no, i)), *e = row(D, odd_index(no, i + 1));
     int32_t* out = row(S, i);
-    if (forward)
-      for (int x = 0; x < w; ++x) out[x] = add(out[x], update(a[x], b[x], c[x], e[x]));
-    else
-      for (int x = 0; x < w; ++x) out[x] = sub(out[x], update(a[x], b[x], c[x], e[x]));
+    for (int x = 0; x < w; ++x) out[x] = add(out[x], update(a[x], b[x], c[x], e[x]));
   }
-  if (forward) {
-    std::copy_n(copy, size_t(w) * h, tile);
-    return;
+  std::copy_n(copy, size_t(w) * h, tile);
+}
+
+// The inverse of columns_forward from bands (evens in rows [0, ne), odds below) to samples in out (h
+// >= 2): the update is undone in place in bands, the interleave writes out, so no pass copies the tile.
+LIFTING_CLONES void columns_inverse(int32_t* bands, int w, int h, int32_t* out) {
+  const int ne = (h + 1) / 2, no = h / 2;
+  const auto row = [&](int32_t* base, int r) { return base + size_t(r) * w; };
+  int32_t* S = bands;
+  int32_t* D = bands + size_t(ne) * w;
+  for (int i = 0; i < ne; ++i) {
+    const int32_t *a = row(D, odd_index(no, i - 2)), *b = row(D, odd_index(no, i - 1)),
+                  *c = row(D, odd_index(no, i)), *e = row(D, odd_index(no, i + 1));
+    int32_t* s = row(S, i);
+    for (int x = 0; x < w; ++x) s[x] = sub(s[x], update(a[x], b[x], c[x], e[x]));
   }
-  for (int i = 0; i < ne; ++i) std::copy_n(row(S, i), w, row(tile, 2 * i));
+  for (int i = 0; i < ne; ++i) std::copy_n(row(S, i), w, row(out, 2 * i));
   for (int i = 0; i < no; ++i) {
     const int32_t *a = row(S, even_index(ne, i - 1)), *b = row(S, i), *c = row(S, even_index(ne, i + 1)),
                   *e = row(S, even_index(ne, i + 2)), *d = row(D, i);
-    int32_t* out = row(tile, 2 * i + 1);
-    for (int x = 0; x < w; ++x) out[x] = add(d[x], predict(a[x], b[x], c[x], e[x]));
+    int32_t* o = row(out, 2 * i + 1);
+    for (int x = 0; x < w; ++x) o[x] = add(d[x], predict(a[x], b[x], c[x], e[x]));
   }
 }
 
@@ -142,24 +148,33 @@ LIFTING_CLONES void transpose(const int32_t* from, int w, int h, int32_t* to) {
         for (int x = x0; x < std::min(w, x0 + kBlock); ++x) to[size_t(x) * h + y] = from[size_t(y) * w + x];
 }
 
-void rows_by_transpose(int32_t* tile, int w, int h, int32_t* scratch, bool forward) {
-  if (w < 2) return;
-  int32_t* t = scratch + size_t(w) * h;  // the transposed tile: h values per row, w rows
-  transpose(tile, w, h, t);
-  columns(t, h, w, scratch, forward);
-  transpose(t, h, w, tile);
-}
-
 }  // namespace
 
 void forward_lifting(int32_t* tile, int w, int h, int32_t* scratch) {
-  rows_by_transpose(tile, w, h, scratch, true);
-  columns(tile, w, h, scratch, true);
+  if (w >= 2) {
+    int32_t* t = scratch + size_t(w) * h;  // the transposed tile: h values per row, w rows
+    transpose(tile, w, h, t);
+    columns_forward(t, h, w, scratch);
+    transpose(t, h, w, tile);
+  }
+  columns_forward(tile, w, h, scratch);
 }
 
 void inverse_lifting(int32_t* tile, int w, int h, int32_t* scratch) {
-  columns(tile, w, h, scratch, false);
-  rows_by_transpose(tile, w, h, scratch, false);
+  const size_t n = size_t(w) * h;
+  int32_t* samples = scratch;  // after the column pass
+  int32_t* t = scratch + n;    // its transpose: h values per row, w rows
+  if (h >= 2)
+    columns_inverse(tile, w, h, samples);
+  else
+    std::copy_n(tile, n, samples);
+  if (w < 2) {
+    std::copy_n(samples, n, tile);
+    return;
+  }
+  transpose(samples, w, h, t);
+  columns_inverse(t, h, w, samples);
+  transpose(samples, h, w, tile);
 }
 
 const double* lifting_synthesis_norms() {
