@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "build/pyramid_build.h"
+#include "codec/codec.h"
 #include "container/pyramid_file.h"
 #include "edit/pyramid_edit.h"
 #include "io/io_test_util.h"
@@ -329,6 +330,73 @@ TEST_CASE("terrain-edit: options, named errors, --json, --compact", "[runtime][e
   CHECK(decode_all(pyr) == after);
   CHECK_THAT(iotest::run_tool(dir, {"terrain-info", {pyr, "--json"}}).out,
              Catch::Contains("\"dead_bytes\": 0"));
+}
+
+// File offset of a byte in the middle of the tile payloads of the finest level's band `band` (a band of
+// several tile rows, so the byte is covered by a tile-row CRC as well as the stream's own).
+uint64_t payload_byte(const std::string& pyr, size_t band) {
+  const auto f = PyramidFile::open(pyr);
+  const BandView& v = f->bands(f->level_count() - 1).at(band);
+  codec::HeaderInfo h;
+  REQUIRE(codec::read_header(v.data, v.size, &h) == codec::Status::Ok);
+  REQUIRE(h.tiles_y > 1);
+  return f->container().offset_of(v.data) + h.data_offset + (h.index_offset - h.data_offset) / 2;
+}
+
+void flip_byte(const std::string& path, uint64_t offset) {
+  std::vector<uint8_t> bytes = iotest::read_file(path);
+  REQUIRE(offset < bytes.size());
+  bytes[size_t(offset)] ^= 0x10;
+  iotest::write_file(path, bytes);
+}
+
+void require_compaction_refused(const iotest::TempDir& dir, const std::string& pyr,
+                                const std::string& expected) {
+  const auto bytes = iotest::read_file(pyr);
+  try {
+    edit::compact(pyr);
+    FAIL("a damaged file was compacted");
+  } catch (const Error& e) {
+    CHECK(e.code() == ErrorCode::ChecksumMismatch);
+    CHECK_THAT(e.what(), Catch::Contains(pyr) && Catch::Contains(expected));
+  }
+  CHECK(iotest::read_file(pyr) == bytes);  // nothing written, no temporary left renamed over it
+  const auto r = iotest::run_tool(dir, {"terrain-edit", {pyr, "--compact", "-q"}});
+  CHECK(r.status == 10);
+  CHECK_THAT(r.err, Catch::Contains(expected));
+  CHECK(iotest::read_file(pyr) == bytes);
+}
+
+// scripts/hostile: --compact exited 0 on a pyramid with a flipped or zeroed payload byte; the copy
+// got fresh level blob CRCs, so only the stream's tile-row CRC still told (terrain-info --verify).
+TEST_CASE("edit: compaction refuses damaged streams instead of copying them under fresh CRCs",
+          "[runtime][edit]") {
+  iotest::TempDir dir;
+  const edit::Brush brush{60, 20, 8, 10.0, edit::BrushShape::Smooth};
+  write_inputs(dir, brush);
+  const std::string base = dir.file("base.pyr");
+  build_file(dir, base, ErrorMode::Step, 2.0);
+
+  // An unedited file: the byte lies in the finest level's blob, whose CRC fails.
+  const std::string plain = dir.file("plain.pyr");
+  std::filesystem::copy_file(base, plain);
+  flip_byte(plain, payload_byte(plain, 1));
+  require_compaction_refused(dir, plain, "level " + std::to_string(kLevels - 1) + " blob checksum mismatch");
+
+  // An edited file whose finest band 1 kept its stream in the first generation's blob: no blob CRC
+  // covers it any more (the level's band map has its own), only the stream's CRCs do.
+  const std::string edited = dir.file("edited.pyr");
+  std::filesystem::copy_file(base, edited);
+  const uint64_t at = payload_byte(edited, 1);
+  {
+    auto e = edit::PyramidEditor::open(edited);
+    e->apply(brush);
+    REQUIRE(e->commit().changed);
+  }
+  REQUIRE(payload_byte(edited, 1) == at);  // band 1 was out of the edit's reach
+  flip_byte(edited, at);
+  PyramidFile::open(edited)->container().verify();  // the blob CRCs all hold
+  require_compaction_refused(dir, edited, "band record 1 (rows 128..255");
 }
 
 TEST_CASE("terrain-edit killed at any moment leaves the old or the new version", "[runtime][edit]") {

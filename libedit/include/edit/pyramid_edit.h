@@ -111,7 +111,10 @@ struct CompactStats {
 
 // Rewrites `path` without dead bytes (a temporary beside it, renamed over it): every level blob
 // becomes one contiguous 2.1-style band blob, so the result is what pyramid-build would lay out
-// for the same streams. Decodes identically. Throws Error as PyramidFile::open / WriteFailed.
+// for the same streams. Decodes identically. Throws Error as PyramidFile::open / WriteFailed, and,
+// before writing anything, Error(ChecksumMismatch) or Error(CorruptData) naming the level and band
+// record when a level blob or a band stream it would copy fails its CRC or does not open (the new
+// blobs' fresh CRCs would otherwise hide the damage from the container's check).
 CompactStats compact(const std::string& path);
 
 }  // namespace terrain::edit
