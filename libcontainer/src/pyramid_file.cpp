@@ -216,7 +216,7 @@ std::shared_ptr<const PyramidFile> PyramidFile::open(const std::string& path) {
   return f;
 }
 
-void PyramidFile::verify() const {
+void PyramidFile::verify(VerifyDepth checks) const {
   container_.verify();
   codec::Scratch scratch;
   std::vector<int32_t> row;
@@ -249,6 +249,18 @@ void PyramidFile::verify() const {
         throw Error(ErrorCode::CorruptData, what + ": band table rows " + std::to_string(v.rows) +
                                                 ", but the stream codes " + std::to_string(h.height) +
                                                 " rows");
+      if (checks == VerifyDepth::Checksums) {
+        std::vector<codec::TileEntry> entries;
+        std::vector<codec::RowChecksum> rows;
+        if (const codec::Status s = codec::read_tile_index(v.data, v.size, h, &entries, &rows);
+            s != codec::Status::Ok)
+          throw fail(s, "the stream's tile index does not read");
+        // A stream of one tile row has no row CRC: the stream CRC (checked by open) covered it.
+        for (const codec::RowChecksum& r : rows)
+          if (h.tiles_y > 1 && codec::crc32c(v.data + r.offset, size_t(r.size)) != r.crc)
+            throw fail(codec::Status::ChecksumMismatch, "tile row " + std::to_string(r.tile_row));
+        continue;
+      }
       row.resize(size_t(h.width) * h.tile_size);
       for (int64_t ty = 0; ty < h.tiles_y; ++ty) {
         const int64_t rows = std::min<int64_t>(h.tile_size, h.height - ty * h.tile_size);

@@ -6,64 +6,25 @@
 #include <algorithm>
 #include <string>
 
-#include "codec/codec.h"
 #include "container/container.h"
 #include "container/pyramid_file.h"
 #include "core/error.h"
 #include "edit/pyramid_edit.h"
 
 namespace terrain::edit {
-namespace {
-
-// Every checksum that covers the bytes compaction copies, without decoding: the level blobs' CRCs
-// (a 2.1 blob holds its level's streams) and, per band stream (an edited file's streams may lie in
-// earlier generations' blobs, covered by no blob CRC), its libcodec header, index and tile-row CRCs,
-// the level's width and the record's rows. Throws Error(ChecksumMismatch) for a CRC, else
-// Error(CorruptData), naming the file, level and band record (as PyramidFile::verify).
-void check_copied_bytes(const container::PyramidFile& f) {
-  f.container().verify();
-  for (int l = 0; l < f.level_count(); ++l) {
-    const auto& views = f.bands(l);
-    for (size_t b = 0; b < views.size(); ++b) {
-      const container::BandView& v = views[b];
-      if (v.empty()) continue;
-      const std::string what = f.path() + ": level " + std::to_string(l) + ", band record " +
-                               std::to_string(b) + " (rows " + std::to_string(v.y0) + ".." +
-                               std::to_string(v.y0 + v.rows - 1) + ", stream of " + std::to_string(v.size) +
-                               " bytes at file offset " + std::to_string(f.container().offset_of(v.data)) +
-                               "): cannot compact: ";
-      const auto fail = [&](codec::Status s, const std::string& why) {
-        return Error(
-            s == codec::Status::ChecksumMismatch ? ErrorCode::ChecksumMismatch : ErrorCode::CorruptData,
-            what + why + ": " + codec::status_name(s));
-      };
-      codec::HeaderInfo h;
-      std::vector<codec::TileEntry> entries;
-      std::vector<codec::RowChecksum> rows;
-      codec::Status s = codec::read_header(v.data, v.size, &h);
-      if (s == codec::Status::Ok) s = codec::read_tile_index(v.data, v.size, h, &entries, &rows);
-      if (s != codec::Status::Ok) throw fail(s, "the stream does not open");
-      if (h.width != f.level_size(l).width || h.height != v.rows)
-        throw Error(ErrorCode::CorruptData, what + "the stream codes " + std::to_string(h.width) + "x" +
-                                                std::to_string(h.height) + " samples, the band is " +
-                                                std::to_string(f.level_size(l).width) + "x" +
-                                                std::to_string(v.rows));
-      // A stream of one tile row has no row CRC: read_header's stream CRC covered its payloads.
-      for (const codec::RowChecksum& r : rows)
-        if (h.tiles_y > 1 && codec::crc32c(v.data + r.offset, size_t(r.size)) != r.crc)
-          throw fail(codec::Status::ChecksumMismatch, "tile row " + std::to_string(r.tile_row));
-    }
-  }
-}
-
-}  // namespace
 
 CompactStats compact(const std::string& path) {
   CompactStats stats;
   {
     const auto f = container::PyramidFile::open(path);
     const container::Container& c = f->container();
-    check_copied_bytes(*f);
+    // Every checksum over the bytes copied below, without decoding (an edited file's streams may lie
+    // in earlier generations' blobs, which no blob CRC covers any more).
+    try {
+      f->verify(container::PyramidFile::VerifyDepth::Checksums);
+    } catch (const Error& e) {
+      throw Error(e.code(), std::string(e.what()) + " (cannot compact a damaged file)");
+    }
     stats.bytes_before = c.committed_size() + c.uncommitted_bytes();
     container::ContainerWriter w(path);
     w.set_info(c.info());

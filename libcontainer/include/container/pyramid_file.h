@@ -90,8 +90,11 @@ class PyramidFile {
   // every tile row's payload CRC holds and that every tile decodes. A band table that is consistent
   // in itself but wrong (resealed after forging) fails here. Throws Error (CorruptData, or
   // ChecksumMismatch for a CRC) naming the file, level, band record and the field or libcodec status.
-  // Memory: one tile row of one band.
-  void verify() const;
+  // Memory: one tile row of one band. checks = Checksums stops short of decoding: the same checks
+  // except that each tile row's payload CRC is compared instead of the row being decoded (what
+  // libedit's compaction needs before it copies streams under fresh level blob CRCs).
+  enum class VerifyDepth { Decode, Checksums };
+  void verify(VerifyDepth checks = VerifyDepth::Decode) const;
   // 2.2 editing: bytes of the committed file that the current version uses (superblock and its tail
   // copy, level blobs, the band streams their band maps point at, mask, metadata, index) and the
   // rest (earlier generations' streams, band maps and indices), which compaction drops.
