@@ -65,8 +65,8 @@ int run(int argc, char** argv) {
   };
   cli::ArgParser parser(
       "pyramid-build", "INPUT -o OUT.pyr [--rms M | --max-error M | --step S | --lossless] [options]",
-      "Streams a heightmap (any format of terrain-info) once, builds the filtered pyramid with the\n"
-      "per-terrain optimal 11x11 downsampling filter, and codes the closed-loop residuals of every level\n"
+      "Streams a heightmap (any format of terrain-info) once, builds the filtered pyramid (downsampling\n"
+      "filter: the dual of the four-point upsampler), and codes the closed-loop residuals of every level\n"
       "with one absolute quantisation step (libcodec). Memory stays bounded for any input height.\n"
       "Error targets, in metres at the finest level: --rms M (the step is calibrated on bands spread over\n"
       "the whole input), --max-error M (guaranteed at every sample), --step S, or --lossless (default; "
@@ -118,6 +118,16 @@ int run(int argc, char** argv) {
                     throw cli::UsageError("--level-error must be absolute or screen");
                   o.screen_level_error = v == "screen";
                 });
+  parser.option("--downsample", "wavelet|optimal",
+                "downsampling filter D of the coarse levels: wavelet (default), the (4,4) lifting wavelet's "
+                "low pass, the dual of the four-point upsampler (smaller files, nothing to fit), or "
+                "optimal, the paper's per-terrain least-squares 11x11 D fitted on the top rows",
+                [&](const std::string& v) {
+                  if (v != "wavelet" && v != "optimal")
+                    throw cli::UsageError("--downsample must be wavelet or optimal");
+                  o.downsample = v == "optimal" ? terrain::build::DownsampleChoice::Optimal
+                                                : terrain::build::DownsampleChoice::Wavelet;
+                });
   parser.flag("--resume",
               "striped, journalled build: a killed build run again continues from its completed stripes",
               &o.journal);
@@ -151,7 +161,8 @@ int run(int argc, char** argv) {
   std::ostringstream opts;
   opts << "{\"target\":\"" << terrain::container::error_mode_name(o.mode)
        << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
-       << ",\"level_error\":\"" << (o.screen_level_error ? "screen" : "absolute") << "\"}";
+       << ",\"level_error\":\"" << (o.screen_level_error ? "screen" : "absolute") << "\",\"downsample\":\""
+       << (o.downsample == terrain::build::DownsampleChoice::Optimal ? "optimal" : "wavelet") << "\"}";
 
   std::unique_ptr<cli::Progress> bar;
   std::string phase;

@@ -258,6 +258,10 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.level_count = o.levels;
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  if (o.downsample == DownsampleChoice::Wavelet) {
+    bo.use_fixed_filter = true;
+    bo.fixed_filter = DownsampleFilter::wavelet();
+  }
 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
   // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on

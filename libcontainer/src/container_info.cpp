@@ -108,8 +108,7 @@ void validate_info(const ContainerInfo& info) {
   require(info.filter.size() == size_t(info.filter_size) * info.filter_size,
           "filter has " + std::to_string(info.filter.size()) + " coefficients, size " +
               std::to_string(info.filter_size) + " needs its square");
-  require(info.filter_provenance == FilterProvenance::Optimal ||
-              info.filter_provenance == FilterProvenance::Fallback,
+  require(uint32_t(info.filter_provenance) <= uint32_t(FilterProvenance::Wavelet),
           "unknown filter provenance");
   const Quantisation& q = info.quantisation;
   require(uint32_t(q.mode) <= uint32_t(ErrorMode::Lossless), "unknown error mode");

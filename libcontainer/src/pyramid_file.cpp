@@ -121,13 +121,17 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
     li.error = LevelError{s.error_rms, double(s.error_max_abs)};
     info.levels.push_back(li);
   }
-  // The default filter the builder fell back to is implied by the provenance, so it is not stored
-  // (968 bytes: a third of a constant 4096^2 grid's file).
+  // The default filter the builder fell back to and the wavelet D are implied by the provenance, so
+  // they are not stored (968 bytes: a third of a constant 4096^2 grid's file).
   const DownsampleFilter& f = result.header.filter;
-  info.filter_size = result.filter_report.fallback ? 0 : DownsampleFilter::kSize;
-  if (!result.filter_report.fallback) info.filter.assign(f.taps.begin(), f.taps.end());
-  info.filter_provenance =
-      result.filter_report.fallback ? FilterProvenance::Fallback : FilterProvenance::Optimal;
+  const bool wavelet =
+      f.kind == DownsampleFilter::Kind::Wavelet && f.taps == DownsampleFilter::wavelet().taps;
+  const bool implied = result.filter_report.fallback || wavelet;
+  info.filter_size = implied ? 0 : DownsampleFilter::kSize;
+  if (!implied) info.filter.assign(f.taps.begin(), f.taps.end());
+  info.filter_provenance = wavelet                         ? FilterProvenance::Wavelet
+                           : result.filter_report.fallback ? FilterProvenance::Fallback
+                                                           : FilterProvenance::Optimal;
   writer_.set_info(info);
   writer_.set_metadata_json(metadata_json);
   writer_.finish();
@@ -308,7 +312,9 @@ GridSize PyramidFile::level_size(int level) const {
 
 DownsampleFilter PyramidFile::downsample_filter() const {
   const ContainerInfo& i = info();
-  if (i.filter_size != DownsampleFilter::kSize) return DownsampleFilter::default_filter();
+  if (i.filter_size != DownsampleFilter::kSize)
+    return i.filter_provenance == FilterProvenance::Wavelet ? DownsampleFilter::wavelet()
+                                                            : DownsampleFilter::default_filter();
   DownsampleFilter f;
   f.kind = DownsampleFilter::Kind::Custom;
   std::copy(i.filter.begin(), i.filter.end(), f.taps.begin());

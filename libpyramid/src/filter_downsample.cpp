@@ -62,6 +62,16 @@ DownsampleFilter DownsampleFilter::default_filter() {
   return from_orbit_weights(w, Kind::Default);
 }
 
+DownsampleFilter DownsampleFilter::wavelet() {
+  static constexpr double h[kSize] = {0, 18, -16, -63, 144, 348, 144, -63, -16, 18, 0};
+  static constexpr double sum = 514;
+  DownsampleFilter f;
+  f.kind = Kind::Wavelet;
+  for (int y = 0; y < kSize; ++y)
+    for (int x = 0; x < kSize; ++x) f.taps[size_t(y * kSize + x)] = h[y] * h[x] / (sum * sum);
+  return f;
+}
+
 DownsampleFilter DownsampleFilter::impulse() {
   std::array<double, 21> w{};
   w[0] = 1.0;

@@ -29,6 +29,7 @@ std::array<double, kOrbits> default_orbit_weights() {
 
 DownsampleFilter fallback(FilterFitReport* report, const std::string& why) {
   if (report) {
+    report->fitted = true;
     report->fallback = true;
     report->reason = why;
   }
@@ -38,6 +39,7 @@ DownsampleFilter fallback(FilterFitReport* report, const std::string& why) {
 }  // namespace
 
 std::string FilterFitReport::summary() const {
+  if (!fitted) return "D: " + reason;
   std::ostringstream s;
   s << (fallback ? "D: default tent filter (fallback: " + reason + ")" : "D: least-squares optimal 11x11")
     << "; windows " << windows << ", equations " << equations << ", rank " << rank << "/" << kUnknowns
@@ -76,6 +78,7 @@ DownsampleFilter fit_optimal_filter(const std::vector<Rect>& windows,
     if (r.width > 2 * kMargin && r.height > 2 * kMargin)
       rows += (r.width - 2 * kMargin) * (r.height - 2 * kMargin);
   if (report) {
+    report->fitted = true;
     report->windows = int(windows.size());
     report->equations = rows;
   }

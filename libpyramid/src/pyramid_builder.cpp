@@ -640,8 +640,10 @@ class StreamingBuilder {
     const int64_t W = info_.width;
     if (opt_.use_fixed_filter) {
       filter_ = opt_.fixed_filter;
-      result_.filter_report.reason = "fixed filter given by the caller";
-      result_.log.push_back("D: fixed filter given by the caller");
+      result_.filter_report.reason = filter_.kind == DownsampleFilter::Kind::Wavelet
+                                         ? "the (4,4) lifting wavelet's low pass, the dual of U (fixed)"
+                                         : "fixed filter given by the caller";
+      result_.log.push_back(result_.filter_report.summary());
     } else {
       const std::vector<Rect> windows = filter_fit_windows({W, fit_rows_}, opt_.fit);
       std::vector<std::vector<int32_t>> data;

@@ -175,7 +175,7 @@ void GridHeightSource::fill(int level, const Rect& rect, float* out, int64_t out
 }
 
 GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
-                                 int level_count, const std::vector<double>& filter_11x11, double spacing_m) {
+                                 int level_count, const DownsampleFilter& filter, double spacing_m) {
   const Heightmap map = read_heightmap(input, read_options);
   if (map.width() != finest.width || map.height() != finest.height)
     throw std::invalid_argument(input + ": " + std::to_string(map.width()) + "x" +
@@ -187,12 +187,9 @@ GridHeightSource original_source(const std::string& input, const ReadOptions& re
   bo.level_count = level_count;
   bo.value_scale = units.value_scale;
   bo.threads = 1;
-  if (filter_11x11.size() == size_t(DownsampleFilter::kSize * DownsampleFilter::kSize)) {
-    // The compressed file's D, so that the reference's coarse levels are the T_l it approximates.
-    bo.use_fixed_filter = true;
-    bo.fixed_filter.kind = DownsampleFilter::Kind::Custom;
-    std::copy(filter_11x11.begin(), filter_11x11.end(), bo.fixed_filter.taps.begin());
-  }
+  // The compressed file's D, so that the reference's coarse levels are the T_l it approximates.
+  bo.use_fixed_filter = true;
+  bo.fixed_filter = filter;
   const ReferenceLevels reference = reference_levels(map, bo);
   if (int(reference.levels.size()) != level_count)
     throw std::invalid_argument(input + ": the reference pyramid has " +

@@ -280,6 +280,30 @@ TEST_CASE("upsample_region equals the direct U formula on both sides of the int3
   }
 }
 
+TEST_CASE("D wavelet: separable, normalised, and the dual of U up to its two dropped taps") {
+  const DownsampleFilter d = DownsampleFilter::wavelet();
+  CHECK(d.kind == DownsampleFilter::Kind::Wavelet);
+  CHECK(d.sum() == Approx(1.0).epsilon(1e-12));
+  CHECK(d.symmetric8());
+  const double c = std::sqrt(d.tap(0, 0));
+  for (int dy = -5; dy <= 5; ++dy)
+    for (int dx = -5; dx <= 5; ++dx) REQUIRE(d.tap(dx, dy) == Approx(d.tap(dx, 0) / c * d.tap(0, dy) / c));
+  // U's 1-D kernel: a coarse impulse becomes 1 at fine 0, 9/16 at +-1, -1/16 at +-3. D applied to it
+  // at fine 2j is delta(j) for the full 13-tap dual; without its +-6 taps (-1/512, which met U's 1 at
+  // j = +-3) and renormalised by 514 / 512 it is 512 / 514 at j = 0, 1 / 514 at j = +-3, 0 elsewhere.
+  const auto u = [](int k) {
+    return k == 0 ? 1.0 : (k == 1 || k == -1) ? 9.0 / 16 : (k == 3 || k == -3) ? -1.0 / 16 : 0.0;
+  };
+  for (int j = -4; j <= 4; ++j) {
+    double sum = 0;
+    for (int k = -5; k <= 5; ++k) sum += d.tap(k, 0) / c * u(2 * j - k);
+    CHECK(sum == Approx(j == 0 ? 512.0 / 514.0 : (j == 3 || j == -3) ? 1.0 / 514.0 : 0.0).margin(1e-12));
+  }
+  std::vector<int32_t> flat(33 * 20, -777), coarse(17 * 10);
+  downsample(d, flat.data(), GridSize{33, 20}, coarse.data());
+  for (int32_t v : coarse) REQUIRE(v == -777);
+}
+
 TEST_CASE("D basics: impulse subsamples, constants stay constant, filters are normalised") {
   for (GridSize s : {GridSize{1, 1}, GridSize{2, 3}, GridSize{7, 5}, GridSize{33, 20}}) {
     auto g = random_grid(s, 3);

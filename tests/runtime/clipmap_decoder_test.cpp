@@ -97,7 +97,7 @@ TEST_CASE("clipmap: the original input's in-memory reference equals a lossless p
   const int finest = file->level_count() - 1;
   const GridHeightSource original =
       original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(finest), file->level_count(),
-                      file->info().filter, 30.0);
+                      file->downsample_filter(), 30.0);
   REQUIRE(original.level_count() == 3);
   RegionDecoderSource lossless(std::make_shared<const RegionDecoder>(file), 30.0);
   for (int l = 0; l < 3; ++l) {
@@ -151,8 +151,8 @@ TEST_CASE("clipmap: the screen-space error estimate from the pyramid alone, and 
   const Heightmap map = write_terrain(dir, 300, 260, 5);
   build_pyramid_file(dir.file("t.raw"), ReadOptions{}, dir.file("lossless.pyr"), build_options(3));
   auto file = PyramidFile::open(dir.file("lossless.pyr"));
-  const GridHeightSource original =
-      original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(2), 3, file->info().filter, 30.0);
+  const GridHeightSource original = original_source(dir.file("t.raw"), ReadOptions{}, file->level_size(2), 3,
+                                                    file->downsample_filter(), 30.0);
   RegionDecoderSource source(std::make_shared<const RegionDecoder>(file), 30.0);
   const double s_px = triangle_size_px(640, 480, 60, 255);
   const auto truth = screen_space_error(source, original, 0, s_px);

@@ -108,7 +108,7 @@ Sample random_sample(std::mt19937_64& rng, uint64_t width, uint64_t height, size
   info.filter_size = (rng() % 4 == 0) ? 0 : 11;
   info.filter.resize(size_t(info.filter_size) * info.filter_size);
   for (double& c : info.filter) c = unit(rng);
-  info.filter_provenance = (rng() % 2) ? FilterProvenance::Optimal : FilterProvenance::Fallback;
+  info.filter_provenance = FilterProvenance(rng() % 3);
   info.quantisation = {double(1 + rng() % 8), 0.25 * double(1 + rng() % 8), ErrorMode(rng() % 4),
                        unit(rng) + 2};
 
@@ -894,7 +894,7 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
   CHECK(get_le(b, kSbMajor, 2) == 3);
-  CHECK(get_le(b, kSbMinor, 2) == 0);
+  CHECK(get_le(b, kSbMinor, 2) == 1);
   CHECK(get_le(b, index + 0, 4) == 320);  // info size (2.1)
   CHECK(get_le(b, index + 8, 4) == 96);   // level record size
   const uint64_t level2 = index + kInfoBlock + 2 * 96;

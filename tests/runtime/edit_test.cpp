@@ -72,8 +72,9 @@ std::vector<std::vector<int32_t>> decode_all(const std::string& path) {
 std::vector<double> max_error_against(const std::string& pyr, const std::string& input) {
   const auto f = PyramidFile::open(pyr);
   const auto decoded = decode_all(pyr);
-  const runtime::GridHeightSource ref = runtime::original_source(
-      input, ReadOptions{}, f->level_size(f->level_count() - 1), f->level_count(), f->info().filter, 30.0);
+  const runtime::GridHeightSource ref =
+      runtime::original_source(input, ReadOptions{}, f->level_size(f->level_count() - 1), f->level_count(),
+                               f->downsample_filter(), 30.0);
   std::vector<double> out;
   const double scale = f->info().vertical_scale, offset = f->info().vertical_offset;
   for (int l = 0; l < f->level_count(); ++l) {

@@ -281,10 +281,8 @@ int run(int argc, char** argv) {
     if (o.mirror < std::max(fs.width, fs.height))
       throw cli::UsageError("--mirror must be at least the pyramid's finest side (" +
                             std::to_string(std::max(fs.width, fs.height)) + ")");
-    DownsampleFilter d = DownsampleFilter::default_filter();
-    if (info.filter_size == uint32_t(DownsampleFilter::kSize) && info.filter.size() == d.taps.size())
-      std::copy(info.filter.begin(), info.filter.end(), d.taps.begin());
-    mirror = std::make_unique<MirroredSource>(stored, GridSize{o.mirror, o.mirror}, d);
+    mirror =
+        std::make_unique<MirroredSource>(stored, GridSize{o.mirror, o.mirror}, file->downsample_filter());
     if (!o.quiet)
       std::cerr << "clipmap-view: --mirror " << o.mirror << ": " << mirror->level_count() << " levels ("
                 << mirror->level_count() - mirror->base_level(mirror->level_count() - 1) - 1

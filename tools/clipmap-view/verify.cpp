@@ -37,12 +37,11 @@ std::optional<int> open_reference(const Flight& flight, Reference& out) {
       ro.vertical_scale = *o.original_vscale;
     else if (gi.integer_valued())
       ro.vertical_scale = info.vertical_scale, ro.vertical_offset = info.vertical_offset;
-    const DownsampleFilter d = file.downsample_filter();
-    const std::vector<double> filter_taps(d.taps.begin(), d.taps.end());
     const auto t0 = Clock::now();
     try {
-      auto grid = std::make_unique<GridHeightSource>(original_source(
-          o.original, ro, file.level_size(finest_level), file.level_count(), filter_taps, flight.spacing));
+      auto grid = std::make_unique<GridHeightSource>(
+          original_source(o.original, ro, file.level_size(finest_level), file.level_count(),
+                          file.downsample_filter(), flight.spacing));
       out.original = grid.get();
       out.source = std::move(grid);
     } catch (const std::invalid_argument& e) {

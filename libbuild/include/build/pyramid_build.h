@@ -16,6 +16,12 @@
 
 namespace terrain::build {
 
+// D, the downsampling filter of the coarse levels (the decoder never needs it; the file records its taps).
+enum class DownsampleChoice {
+  Wavelet,  // DownsampleFilter::wavelet(), the dual of U: smaller files, nothing to fit (the default)
+  Optimal,  // the paper's per-terrain least-squares 11x11 D (L&H 2004 §7), fitted on the top rows
+};
+
 struct BuildFileOptions {
   container::ErrorMode mode =
       container::ErrorMode::Lossless;  // what target_metres is (stored in the file as given)
@@ -36,6 +42,7 @@ struct BuildFileOptions {
   // times the finest level's, for the same screen-space error at every level. The rms / max-error
   // target and its calibration always refer to the finest level.
   bool screen_level_error = false;
+  DownsampleChoice downsample = DownsampleChoice::Wavelet;
   // The striped build (build/stripe_build.h): the finest rows cut into stripes, each coded into a part
   // file in OUTPUT.build/ and shared out among the processes of `group`; rank 0 writes the output from
   // the parts. Used when journal is set, stripes > 0, the group has more than one process, or a

@@ -45,14 +45,17 @@ using codec::crc32c_portable;
 // adds copy-on-write editing (an edited flag and generation in the superblock, a tail copy of it,
 // dead bytes between regions, band-map level blobs: docs/format.md "Editing (2.2)"). 3.0 has 2.2's
 // layout; its band streams may be libcodec format 5 (the residual transform), so 2.x readers must
-// refuse it; this reader reads 2.0-2.2 and 3.x.
+// refuse it; this reader reads 2.0-2.2 and 3.x. 3.1 adds filter provenance 2 (D is
+// DownsampleFilter::wavelet(), not stored); 3.0 readers refuse such a file ("unknown filter
+// provenance 2") and read every other 3.1 file.
 inline constexpr uint16_t kFormatMajor = 3;
-inline constexpr uint16_t kFormatMinor = 0;
+inline constexpr uint16_t kFormatMinor = 1;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
 
-enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1 };
+// How the builder chose D; Fallback and Wavelet store no taps (readers know them).
+enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1, Wavelet = 2 };
 // What the quantiser step was chosen for; stored as a u32. Also the build's option (BuildFileOptions).
 enum class ErrorMode : uint32_t { Rms = 0, MaxError = 1, Step = 2, Lossless = 3 };
 // "rms", "max-error", "step" or "lossless" (the pyramid-build option that chose it).

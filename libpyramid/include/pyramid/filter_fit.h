@@ -13,6 +13,7 @@ namespace terrain {
 
 // How the optimal filter was chosen; also printed to the build log.
 struct FilterFitReport {
+  bool fitted = false;           // false: no fit ran (a fixed filter; reason names it)
   bool fallback = false;         // true: the default filter was used
   std::string reason;            // why (fallback) or "least squares fit"
   int windows = 0;               // sample windows used

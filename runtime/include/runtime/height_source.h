@@ -135,14 +135,14 @@ class GridHeightSource final : public HeightSource {
 };
 
 // The original (uncompressed) heightmap `input`, in any format libreaders reads, as a lossless
-// pyramid with the level count and the D filter (filter_11x11: 121 taps, row-major; any other size:
-// D fitted to the input, as the builder does) of a compressed pyramid: level l is then the exact T_l that the
+// pyramid with the level count and the D filter (PyramidFile::downsample_filter()) of a compressed
+// pyramid: level l is then the exact T_l that the
 // compressed file approximates by T^_l. Voids come out as 0 m (as from RegionDecoderSource) and
 // are flagged in finest_valid. Reads the whole file and builds the whole pyramid in memory, on the
 // calling thread. Throws Error naming the file (unreadable or malformed input), or
 // std::invalid_argument when the input's size differs from `finest` or the pyramid does not get
 // level_count levels (not the pyramid's input).
 GridHeightSource original_source(const std::string& input, const ReadOptions& read_options, GridSize finest,
-                                 int level_count, const std::vector<double>& filter_11x11, double spacing_m);
+                                 int level_count, const DownsampleFilter& filter, double spacing_m);
 
 }  // namespace terrain::runtime
