@@ -62,9 +62,17 @@ DownsampleFilter DownsampleFilter::default_filter() {
   return from_orbit_weights(w, Kind::Default);
 }
 
+namespace {
+
+// The wavelet D's 1-D taps (x 514), centre at index 5.
+constexpr double kWaveletTaps[DownsampleFilter::kSize] = {0, 18, -16, -63, 144, 348, 144, -63, -16, 18, 0};
+constexpr double kWaveletSum = 514;
+
+}  // namespace
+
 DownsampleFilter DownsampleFilter::wavelet() {
-  static constexpr double h[kSize] = {0, 18, -16, -63, 144, 348, 144, -63, -16, 18, 0};
-  static constexpr double sum = 514;
+  const double* h = kWaveletTaps;
+  const double sum = kWaveletSum;
   DownsampleFilter f;
   f.kind = Kind::Wavelet;
   for (int y = 0; y < kSize; ++y)
@@ -99,6 +107,7 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
                                    int64_t batch_rows, bool rounded)
     : filter_(filter),
       symmetric_(filter.symmetric8()),
+      separable_(filter.taps == DownsampleFilter::wavelet().taps),
       rounded_(rounded),
       fine_(fine),
       coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},
@@ -213,7 +222,28 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
     for (int64_t t = 0; t < half_even; ++t) s.even[size_t(t)] = row[2 * t];
     for (int64_t t = 0; t < half_odd; ++t) s.odd[size_t(t)] = row[2 * t + 1];
   };
-  if (symmetric_) {
+  if (separable_) {
+    // Columns first (the fold of rows 2j +- k), then the same taps along the row.
+    double* v = s.fold.data();
+    const double* centre = rp[R];
+    const double h0 = kWaveletTaps[R] / kWaveletSum;
+    for (int64_t p = 0; p < pw; ++p) v[p] = h0 * centre[p];
+    for (int k = 1; k <= R; ++k) {
+      const double w = kWaveletTaps[R + k] / kWaveletSum;
+      if (w == 0.0) continue;
+      const double *up = rp[R - k], *down = rp[R + k];
+      for (int64_t p = 0; p < pw; ++p) v[p] += w * (up[p] + down[p]);
+    }
+    split(v);
+    const double* a0 = source(0);
+    for (int64_t i = 0; i < cw; ++i) acc[i] = h0 * a0[i];
+    for (int m = 1; m <= R; ++m) {
+      const double w = kWaveletTaps[R + m] / kWaveletSum;
+      if (w == 0.0) continue;
+      const double *a = source(m), *b = source(-m);
+      for (int64_t i = 0; i < cw; ++i) acc[i] += w * (a[i] + b[i]);
+    }
+  } else if (symmetric_) {
     for (int k = 0; k <= R; ++k) {
       const double* row = rp[R + k];
       if (k > 0) {

@@ -50,6 +50,9 @@ class DownsampleEngine {
 
   DownsampleFilter filter_;
   bool symmetric_;
+  // The wavelet D (its taps exactly): rows then columns with the 1-D taps, a quarter of the 2-D
+  // folded path's arithmetic; chosen by the taps alone, so every caller gets the same samples.
+  bool separable_;
   bool rounded_;
   GridSize fine_, coarse_;
   int threads_;
