@@ -116,12 +116,26 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
       padded_width_(fine.width + 2 * DownsampleFilter::kRadius) {
   if (fine.width <= 0 || fine.height <= 0) throw std::invalid_argument("downsample: empty grid");
   capacity_ = std::min(fine.height, 2 * batch_ + 16);
-  rows_.resize(size_t(capacity_ * padded_width_));
+  rows_.resize(size_t(capacity_ * fine.width));
   scratch_.resize(size_t(threads_));
 }
 
-const double* DownsampleEngine::padded_row(int64_t fine_row) const {
-  return rows_.data() + (fine_row - base_) * padded_width_;
+const int32_t* DownsampleEngine::fine_row(int64_t row) const {
+  return rows_.data() + (row - base_) * fine_.width;
+}
+
+void DownsampleEngine::reflect_padding(double* dst) const {
+  const int64_t r = DownsampleFilter::kRadius, w = fine_.width;
+  for (int64_t p = 0; p < r; ++p) {
+    dst[p] = dst[r + reflect_index(p - r, w)];
+    dst[w + r + p] = dst[r + reflect_index(w + p, w)];
+  }
+}
+
+void DownsampleEngine::pad_row(const int32_t* row, double* dst) const {
+  const int64_t r = DownsampleFilter::kRadius;
+  for (int64_t x = 0; x < fine_.width; ++x) dst[x + r] = double(row[x]);
+  reflect_padding(dst);
 }
 
 int64_t DownsampleEngine::min_row_needed(int64_t j) const {
@@ -146,17 +160,11 @@ int64_t DownsampleEngine::rows_needed_through(int64_t j_end) {
 }
 
 void DownsampleEngine::push_rows(const int32_t* rows, int64_t count, const Emit& emit) {
-  const int64_t r = DownsampleFilter::kRadius;
   for (int64_t n = 0; n < count; ++n) {
     if (pushed_ >= fine_.height) throw std::invalid_argument("downsample: more rows than the grid height");
     if (count_ == capacity_) throw std::logic_error("downsample engine: row buffer overflow");
-    const int32_t* src = rows + n * fine_.width;
-    double* dst = rows_.data() + count_ * padded_width_;
-    for (int64_t x = 0; x < fine_.width; ++x) dst[x + r] = double(src[x]);
-    for (int64_t p = 0; p < r; ++p) {
-      dst[p] = double(src[reflect_index(p - r, fine_.width)]);
-      dst[fine_.width + r + p] = double(src[reflect_index(fine_.width + p, fine_.width)]);
-    }
+    std::memcpy(rows_.data() + count_ * fine_.width, rows + n * fine_.width,
+                size_t(fine_.width) * sizeof(int32_t));
     ++count_;
     ++pushed_;
     for (;;) {
@@ -167,8 +175,8 @@ void DownsampleEngine::push_rows(const int32_t* rows, int64_t count, const Emit&
       const int64_t keep_from = std::max(base_, std::min(min_row_needed(next_coarse_), base_ + count_));
       const int64_t drop = keep_from - base_;
       if (drop > 0) {
-        std::memmove(rows_.data(), rows_.data() + drop * padded_width_,
-                     size_t((count_ - drop) * padded_width_) * sizeof(double));
+        std::memmove(rows_.data(), rows_.data() + drop * fine_.width,
+                     size_t((count_ - drop) * fine_.width) * sizeof(int32_t));
         base_ += drop;
         count_ -= drop;
       }
@@ -203,15 +211,16 @@ void DownsampleEngine::compute(int64_t j0, int64_t j1, const Emit& emit) {
 
 void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
   const int R = DownsampleFilter::kRadius;
-  const int64_t cw = coarse_.width, pw = padded_width_;
+  const int64_t cw = coarse_.width, pw = padded_width_, w = fine_.width;
   const int64_t half_even = (pw + 1) / 2, half_odd = pw / 2;
-  const double* rp[DownsampleFilter::kSize];
-  for (int dy = -R; dy <= R; ++dy) rp[dy + R] = padded_row(reflect_index(2 * j + dy, fine_.height));
+  const int32_t* rp[DownsampleFilter::kSize];
+  for (int dy = -R; dy <= R; ++dy) rp[dy + R] = fine_row(reflect_index(2 * j + dy, fine_.height));
   s.acc.assign(size_t(cw), 0.0);
   s.even.resize(size_t(half_even));
   s.odd.resize(size_t(std::max<int64_t>(half_odd, 1)));
   s.fold.resize(size_t(pw));
   double* acc = s.acc.data();
+  double* fold = s.fold.data();
   const double* E = s.even.data();
   const double* O = s.odd.data();
   // Sample at padded position 2i + 5 + d lives in E[i + (5+d)/2] (5+d even) or O[i + (4+d)/2].
@@ -222,56 +231,61 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
     for (int64_t t = 0; t < half_even; ++t) s.even[size_t(t)] = row[2 * t];
     for (int64_t t = 0; t < half_odd; ++t) s.odd[size_t(t)] = row[2 * t + 1];
   };
+  // Columns are independent: combining rows and then padding the result gives the padded result.
   if (separable_) {
     // Columns first (the fold of rows 2j +- k), then the same taps along the row.
-    double* v = s.fold.data();
-    const double* centre = rp[R];
+    double* v = fold + R;
+    const int32_t* centre = rp[R];
     const double h0 = kWaveletTaps[R] / kWaveletSum;
-    for (int64_t p = 0; p < pw; ++p) v[p] = h0 * centre[p];
+    for (int64_t p = 0; p < w; ++p) v[p] = h0 * double(centre[p]);
     for (int k = 1; k <= R; ++k) {
-      const double w = kWaveletTaps[R + k] / kWaveletSum;
-      if (w == 0.0) continue;
-      const double *up = rp[R - k], *down = rp[R + k];
-      for (int64_t p = 0; p < pw; ++p) v[p] += w * (up[p] + down[p]);
+      const double c = kWaveletTaps[R + k] / kWaveletSum;
+      if (c == 0.0) continue;
+      const int32_t *up = rp[R - k], *down = rp[R + k];
+      for (int64_t p = 0; p < w; ++p) v[p] += c * (double(up[p]) + double(down[p]));
     }
-    split(v);
+    reflect_padding(fold);
+    split(fold);
     const double* a0 = source(0);
     for (int64_t i = 0; i < cw; ++i) acc[i] = h0 * a0[i];
     for (int m = 1; m <= R; ++m) {
-      const double w = kWaveletTaps[R + m] / kWaveletSum;
-      if (w == 0.0) continue;
+      const double c = kWaveletTaps[R + m] / kWaveletSum;
+      if (c == 0.0) continue;
       const double *a = source(m), *b = source(-m);
-      for (int64_t i = 0; i < cw; ++i) acc[i] += w * (a[i] + b[i]);
+      for (int64_t i = 0; i < cw; ++i) acc[i] += c * (a[i] + b[i]);
     }
   } else if (symmetric_) {
     for (int k = 0; k <= R; ++k) {
-      const double* row = rp[R + k];
+      const int32_t* row = rp[R + k];
       if (k > 0) {
-        const double* up = rp[R - k];
-        for (int64_t p = 0; p < pw; ++p) s.fold[size_t(p)] = row[p] + up[p];
-        row = s.fold.data();
+        const int32_t* up = rp[R - k];
+        for (int64_t p = 0; p < w; ++p) fold[R + p] = double(row[p]) + double(up[p]);
+        reflect_padding(fold);
+      } else {
+        pad_row(row, fold);
       }
-      split(row);
+      split(fold);
       for (int m = 0; m <= R; ++m) {
-        const double w = filter_.tap(m, k);
-        if (w == 0.0) continue;
+        const double c = filter_.tap(m, k);
+        if (c == 0.0) continue;
         const double* a = source(m);
         if (m == 0) {
-          for (int64_t i = 0; i < cw; ++i) acc[i] += w * a[i];
+          for (int64_t i = 0; i < cw; ++i) acc[i] += c * a[i];
         } else {
           const double* b = source(-m);
-          for (int64_t i = 0; i < cw; ++i) acc[i] += w * (a[i] + b[i]);
+          for (int64_t i = 0; i < cw; ++i) acc[i] += c * (a[i] + b[i]);
         }
       }
     }
   } else {
     for (int dy = -R; dy <= R; ++dy) {
-      split(rp[dy + R]);
+      pad_row(rp[dy + R], fold);
+      split(fold);
       for (int dx = -R; dx <= R; ++dx) {
-        const double w = filter_.tap(dx, dy);
-        if (w == 0.0) continue;
+        const double c = filter_.tap(dx, dy);
+        if (c == 0.0) continue;
         const double* a = source(dx);
-        for (int64_t i = 0; i < cw; ++i) acc[i] += w * a[i];
+        for (int64_t i = 0; i < cw; ++i) acc[i] += c * a[i];
       }
     }
   }
