@@ -554,7 +554,8 @@ void write_report(std::ostream& os, const std::vector<Row>& rows, const std::vec
   os << "Reproduce:\n\n```\n" << (opt.command.empty() ? "scripts/bench" : opt.command) << "\n```\n\n";
   os << "## Method\n\n"
      << "* **pyramid** = this project end to end: `build_pyramid_file` (what `pyramid-build` runs: streamed "
-        "read, optimal D filter, closed-loop residuals, libcodec, container) at each `--rms` / `--max-error` "
+        "read, wavelet D filter (the default), closed-loop residuals, libcodec, container) at each `--rms` / "
+        "`--max-error` "
         "target and `--lossless`, "
      << (opt.threads ? std::to_string(opt.threads) + " build thread(s)"
                      : std::string("all cores for the build"))
