@@ -426,11 +426,15 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                               open_output, &out.stripes_resumed);
     out.stripes = so.stripes;
   } else {
-    // The reader reports from the builder's input thread, the sink from its coding thread.
+    // The reader reports from the builder's input thread, the sink from its coding thread; reading
+    // and coding overlap, so they are one phase, "building", at the mean of the two fractions (two
+    // phases took turns and restarted the bar each time).
     std::mutex progress_lock;
+    double read_fraction = 0, coded_fraction = 0;
     const BuildProgress locked = [&](const std::string& phase, double f) {
       const std::lock_guard<std::mutex> hold(progress_lock);
-      progress(phase, f);
+      (phase == "reading input" ? read_fraction : coded_fraction) = f;
+      progress("building", 0.5 * (read_fraction + coded_fraction));
     };
     ProgressReader preader(*reader, progress ? locked : progress);
     ProgressSink psink(open_output(), progress ? locked : progress);
