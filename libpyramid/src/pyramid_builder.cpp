@@ -341,7 +341,8 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
   double lag = 7 * scale(0) + 32.0 * (m + 1) + groups * double(band_rows[size_t(m)]) + B;
   for (int l = 0; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
-  lag = std::min(H, std::max(lag, double(std::min(opt.fit_rows, info.height)) + B));
+  lag =
+      std::min(H, std::max(lag, double(opt.use_fixed_filter ? 0 : std::min(opt.fit_rows, info.height)) + B));
   if (finest_rows) *finest_rows = int64_t(lag);
   const bool narrow = info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
   // Level rows (int16 or int32) and their validity bits.
@@ -361,17 +362,18 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
       bytes += (held + c * S_finer / 2 + 8) * w * 4;
     }
     if (l >= 1) {
-      // D engine of level l: its padded fine rows, a batch of coarse rows (double and int32) and
+      // D engine of level l: its fine rows (int32), a batch of coarse rows (double and int32) and
       // each worker's fold / even / odd / sum rows.
       const double batch = std::max(1.0, std::floor(32.0 / scale(l)));
       const double cw = double(sizes[size_t(l - 1)].width), pw = w + 2 * DownsampleFilter::kRadius;
-      bytes += std::min(h, 2 * batch + 16) * pw * 8 + batch * cw * 12 +
+      bytes += std::min(h, 2 * batch + 16) * w * 4 + batch * cw * 12 +
                std::min(double(engine_workers), batch) * (2 * pw + cw) * 8;
     }
   }
   // Two input bands (level integers and validity, 8 rows of samples as read), D's fit windows.
   bytes += 2 * (B * W * 5 + std::min(B, 8.0) * W * 8) + W * 4;
-  bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
+  if (!opt.use_fixed_filter)
+    bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
   return bytes;
 }
 
@@ -535,7 +537,9 @@ class StreamingBuilder {
     const double cpu_start = thread_cpu_seconds();
     const int64_t W = info_.width, H = info_.height;
     const int64_t B = std::min(opt_.fill_band_rows, H);
-    fit_rows_ = std::min(H, opt_.fit_rows);
+    // A fixed D (the wavelet D, a stripe's shared one) needs no rows held for a fit: the cascade starts
+    // with the first band, and a stripe does not convert the rows above it.
+    fit_rows_ = opt_.use_fixed_filter ? 0 : std::min(H, opt_.fit_rows);
     // A stripe reads no further than its cascade or D's fit needs (whole fill bands).
     const int64_t stop = std::min(H, std::max(read_b_, (fit_rows_ + B - 1) / B * B));
     InputConverter converter(opt_, info_);
