@@ -191,8 +191,8 @@ int run(int argc, char** argv) {
       for (const auto& line : r.calibration_log) std::cerr << "pyramid-build: calibration: " << line << "\n";
     for (const auto& line : r.build.log) std::cerr << "pyramid-build: " << line << "\n";
     if (r.stripes)
-      std::fprintf(stderr, "pyramid-build: striped build: %d stripes, %d processes, %d stripes resumed\n",
-                   r.stripes, ranks, r.stripes_resumed);
+      std::fprintf(stderr, "pyramid-build: striped build: %d stripes, %d process%s, %d stripes resumed\n",
+                   r.stripes, ranks, ranks == 1 ? "" : "es", r.stripes_resumed);
     std::fprintf(stderr,
                  "pyramid-build: %s: %zu levels, step %.4g m, %llu bytes = %.4f bits/sample, finest rms %.4g "
                  "m, max %.4g m, %.1f Msamples/s\n",
