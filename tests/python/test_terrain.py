@@ -131,3 +131,19 @@ def test_read_equals_the_pyramid_extract_window(tmp_path):
     assert (side["width"], side["height"], side["type"]) == (w, h, "float32")
     extracted = np.fromfile(out, dtype="<f4").reshape(h, w)
     np.testing.assert_array_equal(p.read(level, x, y, w, h), extracted)
+
+
+def test_downsample_choice_both_lossless_and_bad_value_rejected(tmp_path):
+    grid = np.round(synthetic(520, 600, 3)).astype(np.int16)
+    for choice in ("wavelet", "optimal"):
+        path = str(tmp_path / f"{choice}.pyr")
+        assert terrain.build(grid, path, lossless=True, downsample=choice)["finest_max_m"] == 0
+        p = terrain.open(path)
+        assert p.level_count >= 3
+        np.testing.assert_array_equal(p.read(p.level_count - 1, 0, 0, 600, 520), grid.astype(np.float32))
+    # The two D give different coarse levels (the same finest one).
+    a, b = terrain.open(str(tmp_path / "wavelet.pyr")), terrain.open(str(tmp_path / "optimal.pyr"))
+    w, h = a.levels[0]
+    assert not np.array_equal(a.read(0, 0, 0, w, h), b.read(0, 0, 0, w, h))
+    with pytest.raises(ValueError):
+        terrain.build(grid, str(tmp_path / "bad.pyr"), lossless=True, downsample="box")
