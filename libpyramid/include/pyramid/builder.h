@@ -36,7 +36,8 @@ struct BuildOptions {
   bool use_fixed_filter = false;    // true: use `fixed_filter` instead of fitting D
   DownsampleFilter fixed_filter = DownsampleFilter::default_filter();
   FilterFitOptions fit;
-  int threads = 2;              // results are bit-identical for every thread count
+  int threads = 2;              // results are bit-identical for every thread count; the calling thread
+                                // keeps up to threads - 1 idle workers for later builds (D's batches)
   int64_t fill_band_rows = 64;  // nodata push-pull works on bands of this many input rows
   int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
   // Bytes the builder may hold (its estimate, plan_build_memory): bands of every level are coded at
