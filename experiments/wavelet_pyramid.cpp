@@ -305,7 +305,27 @@ Image upsample(const Image& c, int64_t W, int64_t H) {
   inverse(f, 1);
   return f;
 }
+// TILED=1 (with TILE=t): the low band of independent t x t tiles, with the residual transform's own
+// edge extension (MIRROR): D equal to the residual transform's low band tile by tile, so the
+// residual's low band is the coarse level's error also at tile edges.
+Image low_band_tiled(const Image& im, int64_t t) {
+  Image out{(im.w + 1) / 2, (im.h + 1) / 2, std::vector<double>(size_t(((im.w + 1) / 2) * ((im.h + 1) / 2)))};
+  g_mirror = std::getenv("MIRROR") ? std::atoi(std::getenv("MIRROR")) : 0;
+  for (int64_t ty = 0; ty < im.h; ty += t)
+    for (int64_t tx = 0; tx < im.w; tx += t) {
+      const int64_t w = std::min(t, im.w - tx), h = std::min(t, im.h - ty);
+      Image tile{w, h, std::vector<double>(size_t(w * h))};
+      for (int64_t y = 0; y < h; ++y)
+        for (int64_t x = 0; x < w; ++x) tile.at(x, y) = im.v[size_t((ty + y) * im.w + tx + x)];
+      forward(tile, 1);
+      for (int64_t y = 0; y < (h + 1) / 2; ++y)
+        for (int64_t x = 0; x < (w + 1) / 2; ++x) out.at(tx / 2 + x, ty / 2 + y) = tile.at(x, y);
+    }
+  g_mirror = 0;
+  return out;
+}
 Image low_band(const Image& im) {
+  if (std::getenv("TILED") && std::getenv("TILE")) return low_band_tiled(im, std::atoi(std::getenv("TILE")));
   Image c = im;
   forward(c, 1);
   Image out{(im.w + 1) / 2, (im.h + 1) / 2, {}};

@@ -180,10 +180,9 @@ py::dict build_file(const py::object& source, const std::string& output, std::op
                     std::optional<double> max_error, std::optional<double> step, bool lossless,
                     double spacing, int tile, int threads, const std::string& downsample) {
   build::BuildFileOptions o = build_options(rms, max_error, step, lossless, tile, threads);
-  if (downsample != "wavelet" && downsample != "optimal")
-    throw py::value_error("downsample must be 'wavelet' or 'optimal'");
-  o.downsample =
-      downsample == "optimal" ? build::DownsampleChoice::Optimal : build::DownsampleChoice::Wavelet;
+  const auto choice = build::downsample_choice_from_name(downsample);
+  if (!choice) throw py::value_error("downsample must be 'auto', 'wavelet', 'optimal' or 'point'");
+  o.downsample = *choice;
   std::string input, temp_dir;
   if (py::isinstance<py::str>(source) || py::hasattr(source, "__fspath__")) {
     input = py::str(py::module_::import("os").attr("fspath")(source));
@@ -247,8 +246,9 @@ PYBIND11_MODULE(terrain, m) {
   m.def("build", &build_file, py::arg("source"), py::arg("output"), py::kw_only(),
         py::arg("rms") = py::none(), py::arg("max_error") = py::none(), py::arg("step") = py::none(),
         py::arg("lossless") = false, py::arg("spacing") = 1.0, py::arg("tile") = 32, py::arg("threads") = 0,
-        py::arg("downsample") = "wavelet",
+        py::arg("downsample") = "auto",
         "Builds a .pyr from a heightmap file or a 2-D array (integers: exact; floats: NaN = void). One of "
         "rms / max_error / step (metres) or lossless (the default). downsample: the coarse levels' filter, "
-        "'wavelet' (the default, as pyramid-build) or 'optimal' (the paper's fitted D).");
+        "'auto' (the default, as pyramid-build: 'point' for max_error and lossless, else 'wavelet'), "
+        "'wavelet', 'optimal' (the paper's fitted D) or 'point' (subsampling).");
 }

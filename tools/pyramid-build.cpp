@@ -118,15 +118,17 @@ int run(int argc, char** argv) {
                     throw cli::UsageError("--level-error must be absolute or screen");
                   o.screen_level_error = v == "screen";
                 });
-  parser.option("--downsample", "wavelet|optimal",
-                "downsampling filter D of the coarse levels: wavelet (default), the (4,4) lifting wavelet's "
-                "low pass, the dual of the four-point upsampler (smaller files, nothing to fit), or "
-                "optimal, the paper's per-terrain least-squares 11x11 D fitted on the top rows",
+  parser.option("--downsample", "auto|wavelet|optimal|point",
+                "downsampling filter D of the coarse levels: auto (default) is point for --max-error and "
+                "--lossless, wavelet for --rms and --step; wavelet, the (4,4) lifting wavelet's low pass, "
+                "the dual of the four-point upsampler (smaller files at an rms target, nothing to fit); "
+                "optimal, the paper's per-terrain least-squares 11x11 D fitted on the top rows; point, "
+                "plain subsampling (every level's samples are input samples; with a bound the residuals "
+                "skip their even phase)",
                 [&](const std::string& v) {
-                  if (v != "wavelet" && v != "optimal")
-                    throw cli::UsageError("--downsample must be wavelet or optimal");
-                  o.downsample = v == "optimal" ? terrain::build::DownsampleChoice::Optimal
-                                                : terrain::build::DownsampleChoice::Wavelet;
+                  const auto choice = terrain::build::downsample_choice_from_name(v);
+                  if (!choice) throw cli::UsageError("--downsample must be auto, wavelet, optimal or point");
+                  o.downsample = *choice;
                 });
   parser.flag("--resume",
               "striped, journalled build: a killed build run again continues from its completed stripes",
@@ -162,7 +164,7 @@ int run(int argc, char** argv) {
   opts << "{\"target\":\"" << terrain::container::error_mode_name(o.mode)
        << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
        << ",\"level_error\":\"" << (o.screen_level_error ? "screen" : "absolute") << "\",\"downsample\":\""
-       << (o.downsample == terrain::build::DownsampleChoice::Optimal ? "optimal" : "wavelet") << "\"}";
+       << terrain::build::downsample_choice_name(o.downsample) << "\"}";
 
   std::unique_ptr<cli::Progress> bar;
   std::string phase;

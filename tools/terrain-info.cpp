@@ -28,16 +28,14 @@ using terrain::container::error_mode_name;
 using terrain::container::ErrorMode;
 
 // How the builder chose D (the decoder never needs it; edits and terrain-report do).
-const char* filter_name(terrain::container::FilterProvenance p, bool brief = false) {
-  if (brief)
-    return p == terrain::container::FilterProvenance::Optimal    ? "optimal"
-           : p == terrain::container::FilterProvenance::Fallback ? "fallback"
-                                                                 : "wavelet";
+const char* filter_description(terrain::container::FilterProvenance p) {
   switch (p) {
     case terrain::container::FilterProvenance::Optimal:
       return "optimal (fitted to the terrain, taps stored)";
     case terrain::container::FilterProvenance::Fallback:
       return "fallback (the default tent: the fit was degenerate)";
+    case terrain::container::FilterProvenance::Point:
+      return "point (every level's samples are input samples)";
     case terrain::container::FilterProvenance::Wavelet:
       return "wavelet (the dual of the four-point U)";
   }
@@ -115,7 +113,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
     j.field("error_mode", error_mode_name(q.mode)).field("target", q.target);
     j.field("step_units", q.step_units).field("step_m", q.step_metres);
     j.field("void_count", int64_t(info.void_count)).field("filter_size", int64_t(info.filter_size));
-    j.field("downsample_filter", filter_name(info.filter_provenance, true));
+    j.field("downsample_filter", terrain::container::filter_provenance_name(info.filter_provenance));
     j.field("file_bytes", int64_t(file_bytes))
         .field("bits_per_sample", double(file_bytes) * 8 / finest_samples);
     j.field("checksums_verified", verify).field("tiles_decoded", verify);
@@ -168,7 +166,7 @@ int describe_pyramid(const std::string& path, const cli::CommonFlags& common, bo
     std::printf("origin:       unknown\n");
   }
   std::printf("voids:        %" PRIu64 " of %.0f samples\n", info.void_count, finest_samples);
-  std::printf("D filter:     %s\n", filter_name(info.filter_provenance));
+  std::printf("D filter:     %s\n", filter_description(info.filter_provenance));
   std::printf("size:         %" PRIu64 " bytes, %.4f bits per finest sample\n", file_bytes,
               double(file_bytes) * 8 / finest_samples);
   if (c.edited() || c.uncommitted_bytes() > 0)

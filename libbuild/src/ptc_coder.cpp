@@ -19,6 +19,7 @@ codec::EncodeOptions to_codec(const PtcCoderOptions& o) {
   c.bound_max_error = o.bound_max_error;
   c.max_error = o.max_error;
   c.tile_size = o.tile_size;
+  c.phase_tiles = o.phase_tiles;
   return c;
 }
 

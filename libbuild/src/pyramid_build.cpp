@@ -23,6 +23,28 @@
 namespace terrain::build {
 
 using namespace terrain::container;  // the stage below
+
+const char* downsample_choice_name(DownsampleChoice choice) {
+  switch (choice) {
+    case DownsampleChoice::Auto:
+      return "auto";
+    case DownsampleChoice::Wavelet:
+      return "wavelet";
+    case DownsampleChoice::Optimal:
+      return "optimal";
+    case DownsampleChoice::Point:
+      return "point";
+  }
+  return "unknown";
+}
+
+std::optional<DownsampleChoice> downsample_choice_from_name(const std::string& name) {
+  for (const DownsampleChoice c : {DownsampleChoice::Auto, DownsampleChoice::Wavelet,
+                                   DownsampleChoice::Optimal, DownsampleChoice::Point})
+    if (name == downsample_choice_name(c)) return c;
+  return std::nullopt;
+}
+
 namespace {
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -258,9 +280,16 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.level_count = o.levels;
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  if (o.downsample == DownsampleChoice::Wavelet) {
+  // Point sampling pays where every sample is bounded (the phase tiles skip the even phase); at an rms
+  // target the wavelet D's smooth coarse levels cost less (docs/pyramid.md).
+  const bool bounded = o.mode == ErrorMode::MaxError || o.mode == ErrorMode::Lossless;
+  const DownsampleChoice d = o.downsample != DownsampleChoice::Auto ? o.downsample
+                             : bounded                              ? DownsampleChoice::Point
+                                                                    : DownsampleChoice::Wavelet;
+  if (d == DownsampleChoice::Wavelet || d == DownsampleChoice::Point) {
     bo.use_fixed_filter = true;
-    bo.fixed_filter = DownsampleFilter::wavelet();
+    bo.fixed_filter =
+        d == DownsampleChoice::Point ? DownsampleFilter::impulse() : DownsampleFilter::wavelet();
   }
 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
@@ -390,6 +419,11 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   std::vector<Heightmap>().swap(window);  // calibrated: the build does not need the sample
 
   const auto t_build = std::chrono::steady_clock::now();
+  if (d == DownsampleChoice::Point && bounded) {
+    // Lossless streams become max-error streams with E = 0, which may hold phase tiles.
+    co.phase_tiles = true;
+    if (o.mode == ErrorMode::Lossless) co.bound_max_error = true, co.max_error = 0;
+  }
   PtcResidualCoder coder(co);
   const int rank = o.group ? o.group->rank() : 0;
   std::optional<PyramidFileWriter> writer;

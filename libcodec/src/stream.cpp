@@ -51,6 +51,7 @@ constexpr size_t kMaxRecordSize = 5;  // index record of a non-empty tile: size 
 constexpr uint32_t kFlagBoundMaxError = 1;
 constexpr uint32_t kFlagWideFraction = 2;  // lossy streams: kWideFractionBits (else kFineFractionBits)
 constexpr uint32_t kFlagResidual = 4;      // format 5: transform-mode tiles use Transform::Residual
+constexpr uint32_t kFlagPhase = 8;         // format 6 (max-error streams): tiles may use the phase mode
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
@@ -111,6 +112,7 @@ struct StreamFields {
   bool bound_max_error, wide_fraction;
   uint32_t step_q8, max_error;
   bool residual;
+  bool phase;
 };
 
 // The second half of encoding, shared with splice_tiles: `body` holds the payloads of the non-empty
@@ -148,13 +150,13 @@ Status finish_stream(const StreamFields& f, const StreamLayout& layout, const ui
 
   uint8_t header[kMaxHeaderSize];
   std::memcpy(header, kMagic, 4);
-  put_u16(header + 4, uint16_t(f.residual ? kFormatVersion : kOldestFormatVersion));
+  put_u16(header + 4, uint16_t(f.phase ? 6 : f.residual ? 5 : kOldestFormatVersion));
   uint8_t* h = header + kFixedHeader;
   h = put_varint(h, uint64_t(f.width));
   h = put_varint(h, uint64_t(f.height));
   h = put_varint(h, f.tile_size / 16);
   h = put_varint(h, (f.bound_max_error ? kFlagBoundMaxError : 0) | (f.wide_fraction ? kFlagWideFraction : 0) |
-                        (f.residual ? kFlagResidual : 0));
+                        (f.residual ? kFlagResidual : 0) | (f.phase ? kFlagPhase : 0));
   h = put_varint(h, f.step_q8);
   if (f.bound_max_error) h = put_varint(h, f.max_error);
   h = put_varint(h, payload_end);
@@ -237,6 +239,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.lambda = 6.0 / (std::log(2.0) * step * step);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
+  params.phase = options.bound_max_error && options.phase_tiles;
   // Tiles within +-empty_limit are empty outright: zeros meet the bound (lossless: 0, max-error: E).
   const int64_t empty_limit = params.max_error;
   const bool probe = !lossless && !options.bound_max_error;
@@ -286,7 +289,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
                             params.fraction_bits == detail::kWideFractionBits,
                             step_q8,
                             params.max_error,
-                            params.lifting};
+                            params.lifting,
+                            params.phase};
   return finish_stream(fields, layout, sizes.data(), body, pos, dst, dst_capacity, bytes_written);
 }
 
@@ -323,11 +327,14 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   StreamLayout layout;
   if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
   // Version 4 knows two flags; version 5 adds the residual transform, and a version-5 stream must use
-  // it (encoders write 4 otherwise), so every stream has exactly one valid version.
-  const uint64_t known = kFlagBoundMaxError | kFlagWideFraction | (version >= 5 ? kFlagResidual : 0);
-  if ((flags & ~known) != 0 || (version >= 5) != ((flags & kFlagResidual) != 0) ||
-      step_q8 < detail::kStepOne || step_q8 > uint64_t(kMaxAbsSample) * 256u ||
-      max_error > uint64_t(kMaxAbsSample))
+  // it (encoders write 4 otherwise); version 6 adds phase tiles, which it must allow, in max-error
+  // streams only (with either transform). So every stream has exactly one valid version.
+  const uint64_t known = kFlagBoundMaxError | kFlagWideFraction | (version >= 5 ? kFlagResidual : 0) |
+                         (version >= 6 ? kFlagPhase : 0);
+  const bool phase = (flags & kFlagPhase) != 0;
+  if ((flags & ~known) != 0 || (version == 5) != ((flags & kFlagResidual) != 0 && !phase) ||
+      (version == 6) != phase || (phase && !(flags & kFlagBoundMaxError)) || step_q8 < detail::kStepOne ||
+      step_q8 > uint64_t(kMaxAbsSample) * 256u || max_error > uint64_t(kMaxAbsSample))
     return Status::Corrupt;
   // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
   // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
@@ -336,6 +343,7 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   info.bound_max_error = (flags & kFlagBoundMaxError) != 0;
   info.max_error = uint32_t(max_error);
   info.transform = (flags & kFlagResidual) ? Transform::Residual : Transform::Lapped;
+  info.phase_tiles = phase;
   info.fraction_bits = step_q8 == detail::kStepOne ? 0
                        : wide                      ? detail::kWideFractionBits
                                                    : detail::kFineFractionBits;
@@ -471,6 +479,7 @@ Status Decoder::decode_into(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride
   scratch.impl().band_steps(uint32_t(std::lround(header_.step * 256.0)), params.fraction_bits, params);
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
+  params.phase = header_.phase_tiles;
   detail::TileWork& work = scratch.impl().work;
   const int64_t t = header_.tile_size;
   const int64_t tx0 = rect.x0 / t, tx1 = (rect.x0 + rect.width - 1) / t;
@@ -558,7 +567,7 @@ Status open_splice_source(const uint8_t* data, size_t size, SpliceSource* src) {
 bool same_coding(const HeaderInfo& a, const HeaderInfo& b) {
   return a.width == b.width && a.height == b.height && a.tile_size == b.tile_size &&
          a.bound_max_error == b.bound_max_error && a.max_error == b.max_error && a.step == b.step &&
-         a.fraction_bits == b.fraction_bits && a.transform == b.transform;
+         a.fraction_bits == b.fraction_bits && a.transform == b.transform && a.phase_tiles == b.phase_tiles;
 }
 
 }  // namespace
@@ -597,7 +606,8 @@ Status splice_tiles(const uint8_t* old_data, size_t old_size, const uint8_t* fre
                             h.fraction_bits == detail::kWideFractionBits,
                             uint32_t(std::lround(h.step * 256.0)),
                             h.max_error,
-                            h.transform == Transform::Residual};
+                            h.transform == Transform::Residual,
+                            h.phase_tiles};
   out->resize(kMaxHeaderSize + 4 + pos + size_t(layout.index_bound));
   size_t written = 0;
   if ((s = finish_stream(fields, layout, sizes.data(), body, pos, out->data(), out->size(), &written)) !=

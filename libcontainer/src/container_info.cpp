@@ -22,6 +22,20 @@ const char* error_mode_name(ErrorMode mode) {
   return "unknown";
 }
 
+const char* filter_provenance_name(FilterProvenance provenance) {
+  switch (provenance) {
+    case FilterProvenance::Optimal:
+      return "optimal";
+    case FilterProvenance::Fallback:
+      return "fallback";
+    case FilterProvenance::Wavelet:
+      return "wavelet";
+    case FilterProvenance::Point:
+      return "point";
+  }
+  return "unknown";
+}
+
 std::optional<LevelError> level_error_metres(const ContainerInfo& info, size_t level) {
   const std::optional<LevelError>& e = info.levels.at(level).error;
   if (!e) return std::nullopt;
@@ -108,8 +122,7 @@ void validate_info(const ContainerInfo& info) {
   require(info.filter.size() == size_t(info.filter_size) * info.filter_size,
           "filter has " + std::to_string(info.filter.size()) + " coefficients, size " +
               std::to_string(info.filter_size) + " needs its square");
-  require(uint32_t(info.filter_provenance) <= uint32_t(FilterProvenance::Wavelet),
-          "unknown filter provenance");
+  require(uint32_t(info.filter_provenance) <= uint32_t(FilterProvenance::Point), "unknown filter provenance");
   const Quantisation& q = info.quantisation;
   require(uint32_t(q.mode) <= uint32_t(ErrorMode::Lossless), "unknown error mode");
   require(std::isfinite(q.step_units) && std::isfinite(q.step_metres) && std::isfinite(q.target),

@@ -265,9 +265,12 @@ Container Container::open(const std::string& path) {
                     "georeference geotransform or CRS fields are set but its flag is not");
   }
   const uint32_t provenance = get_u32(idx + info::kFilterProvenance);
-  // Provenance 2 (the wavelet D, not stored) came with 3.1.
+  // Provenance 2 (the wavelet D, not stored) came with 3.1, 3 (point sampling) with 3.2.
   const bool since_3_1 = major > 3 || (major == 3 && minor >= 1);
-  parse.require(provenance <= uint32_t(since_3_1 ? FilterProvenance::Wavelet : FilterProvenance::Fallback),
+  const bool since_3_2 = major > 3 || (major == 3 && minor >= 2);
+  parse.require(provenance <= uint32_t(since_3_2   ? FilterProvenance::Point
+                                       : since_3_1 ? FilterProvenance::Wavelet
+                                                   : FilterProvenance::Fallback),
                 "unknown filter provenance " + std::to_string(provenance));
   info.filter_provenance = FilterProvenance(provenance);
   info.quantisation.step_units = get_f64(idx + info::kStepUnits);

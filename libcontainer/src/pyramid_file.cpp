@@ -124,12 +124,12 @@ void PyramidFileWriter::finish(const BuildResult& result, ContainerInfo info,
   // The default filter the builder fell back to and the wavelet D are implied by the provenance, so
   // they are not stored (968 bytes: a third of a constant 4096^2 grid's file).
   const DownsampleFilter& f = result.header.filter;
-  const bool wavelet =
-      f.kind == DownsampleFilter::Kind::Wavelet && f.taps == DownsampleFilter::wavelet().taps;
-  const bool implied = result.filter_report.fallback || wavelet;
+  const bool wavelet = f.is_wavelet(), point = f.is_point();
+  const bool implied = result.filter_report.fallback || wavelet || point;
   info.filter_size = implied ? 0 : DownsampleFilter::kSize;
   if (!implied) info.filter.assign(f.taps.begin(), f.taps.end());
   info.filter_provenance = wavelet                         ? FilterProvenance::Wavelet
+                           : point                         ? FilterProvenance::Point
                            : result.filter_report.fallback ? FilterProvenance::Fallback
                                                            : FilterProvenance::Optimal;
   writer_.set_info(info);
@@ -314,6 +314,7 @@ DownsampleFilter PyramidFile::downsample_filter() const {
   const ContainerInfo& i = info();
   if (i.filter_size != DownsampleFilter::kSize)
     return i.filter_provenance == FilterProvenance::Wavelet ? DownsampleFilter::wavelet()
+           : i.filter_provenance == FilterProvenance::Point ? DownsampleFilter::impulse()
                                                             : DownsampleFilter::default_filter();
   DownsampleFilter f;
   f.kind = DownsampleFilter::Kind::Custom;

@@ -163,6 +163,7 @@ PtcCoderOptions level_coder_options(const PyramidFile& f, int level) {
     o.max_error = h.max_error;
     o.tile_size = h.tile_size;
     o.residual_transform = h.transform;
+    o.phase_tiles = h.phase_tiles;
     return o;
   };
   for (const BandView& v : f.bands(level)) {
@@ -180,7 +181,15 @@ PtcCoderOptions level_coder_options(const PyramidFile& f, int level) {
       }
     }
   const container::Quantisation& q = f.info().quantisation;
-  if (q.mode == container::ErrorMode::MaxError) {
+  // A point-sampled pyramid codes its bounded levels (lossless: E = 0) with phase tiles (pyramid_build.cpp).
+  const bool point = f.info().filter_provenance == container::FilterProvenance::Point;
+  o.phase_tiles =
+      point && (q.mode == container::ErrorMode::MaxError || q.mode == container::ErrorMode::Lossless);
+  if (point && q.mode == container::ErrorMode::Lossless) {
+    o.bound_max_error = true;
+    o.max_error = 0;
+    o.step = 0;
+  } else if (q.mode == container::ErrorMode::MaxError) {
     o.bound_max_error = true;
     o.max_error = uint32_t(std::max(0.0, std::floor(q.target / std::abs(f.info().vertical_scale))));
     o.step = 0;

@@ -80,6 +80,10 @@ DownsampleFilter DownsampleFilter::wavelet() {
   return f;
 }
 
+bool DownsampleFilter::is_wavelet() const { return taps == wavelet().taps; }
+
+bool DownsampleFilter::is_point() const { return taps == impulse().taps; }
+
 DownsampleFilter DownsampleFilter::impulse() {
   std::array<double, 21> w{};
   w[0] = 1.0;
@@ -107,7 +111,7 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
                                    int64_t batch_rows, bool rounded)
     : filter_(filter),
       symmetric_(filter.symmetric8()),
-      separable_(filter.taps == DownsampleFilter::wavelet().taps),
+      separable_(filter.is_wavelet()),
       rounded_(rounded),
       fine_(fine),
       coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},

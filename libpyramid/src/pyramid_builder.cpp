@@ -301,6 +301,12 @@ class MaskRows {
   std::deque<std::vector<uint64_t>> rows_;
 };
 
+// Input rows held before D exists: its fit's rows, none for a fixed D (the wavelet D, a stripe's
+// shared one; the cascade then starts with the first band). The builder and its memory plan agree.
+int64_t fit_rows_held(const BuildOptions& opt, int64_t height) {
+  return opt.use_fixed_filter ? 0 : std::min(height, opt.fit_rows);
+}
+
 // Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
 constexpr int64_t kMinCoarseBandRows = 16;
 
@@ -341,8 +347,7 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
   double lag = 7 * scale(0) + 32.0 * (m + 1) + groups * double(band_rows[size_t(m)]) + B;
   for (int l = 0; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
-  lag =
-      std::min(H, std::max(lag, double(opt.use_fixed_filter ? 0 : std::min(opt.fit_rows, info.height)) + B));
+  lag = std::min(H, std::max(lag, double(fit_rows_held(opt, info.height)) + B));
   if (finest_rows) *finest_rows = int64_t(lag);
   const bool narrow = info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
   // Level rows (int16 or int32) and their validity bits.
@@ -537,9 +542,8 @@ class StreamingBuilder {
     const double cpu_start = thread_cpu_seconds();
     const int64_t W = info_.width, H = info_.height;
     const int64_t B = std::min(opt_.fill_band_rows, H);
-    // A fixed D (the wavelet D, a stripe's shared one) needs no rows held for a fit: the cascade starts
-    // with the first band, and a stripe does not convert the rows above it.
-    fit_rows_ = opt_.use_fixed_filter ? 0 : std::min(H, opt_.fit_rows);
+    // With a fixed D a stripe does not convert the rows above it either.
+    fit_rows_ = fit_rows_held(opt_, H);
     // A stripe reads no further than its cascade or D's fit needs (whole fill bands).
     const int64_t stop = std::min(H, std::max(read_b_, (fit_rows_ + B - 1) / B * B));
     InputConverter converter(opt_, info_);
@@ -700,9 +704,11 @@ class StreamingBuilder {
     const int64_t W = info_.width;
     if (opt_.use_fixed_filter) {
       filter_ = opt_.fixed_filter;
-      result_.filter_report.reason = filter_.kind == DownsampleFilter::Kind::Wavelet
-                                         ? "the (4,4) lifting wavelet's low pass, the dual of U (fixed)"
-                                         : "fixed filter given by the caller";
+      result_.filter_report.reason =
+          filter_.is_wavelet() ? "the (4,4) lifting wavelet's low pass, the dual of U (fixed)"
+          : filter_.is_point()
+              ? "point sampling: coarse samples are the fine level's even-even samples (fixed)"
+              : "fixed filter given by the caller";
       result_.log.push_back(result_.filter_report.summary());
     } else {
       const std::vector<Rect> windows = filter_fit_windows({W, fit_rows_}, opt_.fit);

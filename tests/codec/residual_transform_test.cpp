@@ -11,13 +11,13 @@
 
 #include "codec/codec.h"
 #include "codec/crc32c.h"
+#include "stream_test_util.h"
 
 namespace {
 
-struct Image {
-  int64_t width = 0, height = 0;
-  std::vector<int32_t> samples;
-};
+using codec_test::encode;
+using codec_test::Image;
+using codec_test::reseal;
 
 // A closed-loop-residual-like image: smooth low band (the coarse error, +-s/2) plus Laplacian
 // details of scale b, with a few large outliers.
@@ -44,22 +44,10 @@ codec::EncodeOptions options(double step, uint32_t tile, codec::Transform t) {
   return o;
 }
 
-std::vector<uint8_t> encode(const Image& img, const codec::EncodeOptions& o, std::vector<int32_t>* recon) {
-  codec::Scratch scratch;
-  std::vector<uint8_t> out(codec::encode_bound(img.width, img.height, o));
-  size_t n = 0;
-  recon->assign(img.samples.size(), 0);
-  REQUIRE(codec::encode(img.samples.data(), img.width, img.width, img.height, o, out.data(), out.size(), &n,
-                        scratch, recon->data(), img.width) == codec::Status::Ok);
-  out.resize(n);
-  return out;
-}
-
 std::vector<int32_t> decode(const std::vector<uint8_t>& s, const Image& like,
                             codec::Status* status = nullptr) {
-  codec::Scratch scratch;
-  std::vector<int32_t> out(like.samples.size(), 0);
-  const codec::Status st = codec::decode(s.data(), s.size(), out.data(), like.width, scratch);
+  std::vector<int32_t> out;
+  const codec::Status st = codec_test::decode_into(s, like, &out);
   if (status)
     *status = st;
   else
@@ -127,21 +115,7 @@ TEST_CASE("residual transform: region decodes equal the full decode", "[codec]")
   const Image img = residual(203, 157, 8.0, 12.0, 11);
   std::vector<int32_t> recon;
   const auto s = encode(img, options(3.0, 32, codec::Transform::Residual), &recon);
-  codec::Decoder d;
-  REQUIRE(d.open(s.data(), s.size()) == codec::Status::Ok);
-  codec::Scratch scratch;
-  std::mt19937 rng(3);
-  for (int k = 0; k < 40; ++k) {
-    const int64_t w = 1 + rng() % 90, h = 1 + rng() % 90;
-    const int64_t x0 = rng() % (img.width - w + 1), y0 = rng() % (img.height - h + 1);
-    std::vector<int32_t> part(size_t(w * h));
-    REQUIRE(d.decode_region({x0, y0, w, h}, part.data(), w, scratch) == codec::Status::Ok);
-    bool same = true;
-    for (int64_t y = 0; y < h; ++y)
-      for (int64_t x = 0; x < w; ++x)
-        same = same && part[size_t(y * w + x)] == recon[size_t((y0 + y) * img.width + x0 + x)];
-    CHECK(same);
-  }
+  codec_test::check_regions(s, img, recon);
 }
 
 TEST_CASE("format versions: 5 exactly with the residual flag, lapped streams stay version 4", "[codec]") {
@@ -149,10 +123,6 @@ TEST_CASE("format versions: 5 exactly with the residual flag, lapped streams sta
   // resealed. Header: magic, u16 version, varints width (64), height (16), tile / 16 (2), flags.
   const Image img = residual(64, 16, 4.0, 4.0, 5);
   constexpr size_t kFlags = 9;
-  const auto reseal = [](std::vector<uint8_t>& s) {
-    const uint32_t crc = codec::crc32c(s.data(), s.size() - 4);
-    for (int i = 0; i < 4; ++i) s[s.size() - 4 + size_t(i)] = uint8_t(crc >> (8 * i));
-  };
   std::vector<int32_t> recon;
   const auto lapped = encode(img, options(2.0, 32, codec::Transform::Lapped), &recon);
   const auto lifted = encode(img, options(2.0, 32, codec::Transform::Residual), &recon);
@@ -173,10 +143,14 @@ TEST_CASE("format versions: 5 exactly with the residual flag, lapped streams sta
   v4_with_flag[kFlags] = 4;
   reseal(v4_with_flag);
   CHECK(codec::read_header(v4_with_flag.data(), v4_with_flag.size(), &h) == codec::Status::Corrupt);
-  std::vector<uint8_t> v6 = lifted;
+  std::vector<uint8_t> v6 = lifted;  // version 6 needs the phase flag (and a max-error stream)
   v6[4] = 6;
   reseal(v6);
-  CHECK(codec::read_header(v6.data(), v6.size(), &h) == codec::Status::UnsupportedVersion);
+  CHECK(codec::read_header(v6.data(), v6.size(), &h) == codec::Status::Corrupt);
+  std::vector<uint8_t> v7 = lifted;
+  v7[4] = 7;
+  reseal(v7);
+  CHECK(codec::read_header(v7.data(), v7.size(), &h) == codec::Status::UnsupportedVersion);
   std::vector<uint8_t> v3 = lapped;
   v3[4] = 3;
   reseal(v3);

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -18,9 +19,19 @@ namespace terrain::build {
 
 // D, the downsampling filter of the coarse levels (the decoder never needs it; the file records its taps).
 enum class DownsampleChoice {
-  Wavelet,  // DownsampleFilter::wavelet(), the dual of U: smaller files, nothing to fit (the default)
+  Auto,     // the default: Point for --max-error and --lossless, Wavelet for --rms and --step
+  Wavelet,  // DownsampleFilter::wavelet(), the dual of U: smaller files at an rms target, nothing to fit
   Optimal,  // the paper's per-terrain least-squares 11x11 D (L&H 2004 §7), fitted on the top rows
+  // DownsampleFilter::impulse(): every level's samples are input samples; with a max-error bound (0 =
+  // lossless) the residuals are coded by libcodec's phase tiles, which skip the even phase (21-26 %
+  // smaller at max error 2 m, 9 % lossless on Rainier; docs/pyramid.md "D: point sampling").
+  Point,
 };
+// "auto", "wavelet", "optimal" or "point" (pyramid-build --downsample, Python's downsample=, the
+// file's metadata).
+const char* downsample_choice_name(DownsampleChoice choice);
+// The choice of that name; nullopt for any other string.
+std::optional<DownsampleChoice> downsample_choice_from_name(const std::string& name);
 
 struct BuildFileOptions {
   container::ErrorMode mode =
@@ -42,7 +53,7 @@ struct BuildFileOptions {
   // times the finest level's, for the same screen-space error at every level. The rms / max-error
   // target and its calibration always refer to the finest level.
   bool screen_level_error = false;
-  DownsampleChoice downsample = DownsampleChoice::Wavelet;
+  DownsampleChoice downsample = DownsampleChoice::Auto;
   // The striped build (build/stripe_build.h): the finest rows cut into stripes, each coded into a part
   // file in OUTPUT.build/ and shared out among the processes of `group`; rank 0 writes the output from
   // the parts. Used when journal is set, stripes > 0, the group has more than one process, or a

@@ -45,9 +45,11 @@
 namespace codec {
 
 inline constexpr int32_t kMaxAbsSample = 1 << 20;  // largest |input sample| the coder accepts
-// Stream format versions: 5 adds the residual transform (EncodeOptions::transform); an encoder writes 4
-// for streams that do not use it, so those keep the bytes of earlier releases. Decoders read 4 and 5.
-inline constexpr uint32_t kFormatVersion = 5;
+// Stream format versions: 5 adds the residual transform (EncodeOptions::transform), 6 the phase tiles
+// of max-error streams (EncodeOptions::phase_tiles); an encoder writes the lowest version that holds
+// what a stream uses (4 for lapped streams without phase tiles), so those keep the bytes of earlier
+// releases. Decoders read 4, 5 and 6.
+inline constexpr uint32_t kFormatVersion = 6;
 inline constexpr uint32_t kOldestFormatVersion = 4;
 
 // The transform of transform-mode tiles.
@@ -79,6 +81,11 @@ struct EncodeOptions {
   uint32_t max_error = 0;        // E for max-error mode (0 = lossless); at most kMaxAbsSample
   uint32_t tile_size = 64;       // tile side in samples: multiple of 16 in [16, 4096]
   Transform transform = Transform::Lapped;
+  // Max-error streams only (E may be 0: lossless): tiles may also be coded by their four polyphase
+  // components, predicted from decoded neighbours (format 6). Made for the residuals of a pyramid whose
+  // coarse levels are the fine levels' even-even samples: their even phase is within +-E and costs no
+  // bits. The encoder picks the smallest mode per tile, so it never costs more than a byte per stream.
+  bool phase_tiles = false;
 };
 
 // Step giving about `target_rms` sample-domain rms error (inverse of predicted_rms); never below 1.
@@ -95,6 +102,7 @@ struct HeaderInfo {
   int64_t tiles_x = 0, tiles_y = 0;  // tiles per row and column (the last ones may be partial)
   double step = 1.0;                 // as recorded (1/256 resolution)
   bool bound_max_error = false;      // a max-error stream
+  bool phase_tiles = false;          // format 6: its tiles may use the phase mode
   uint32_t max_error = 0;            // its E (0 otherwise)
   int fraction_bits = 0;             // extra sample precision of the transform (0 = lossless)
   size_t index_offset = 0;           // byte offset of the tile index (it follows the payloads)

@@ -49,13 +49,16 @@ using codec::crc32c_portable;
 // DownsampleFilter::wavelet(), not stored); 3.0 readers refuse such a file ("unknown filter
 // provenance 2") and read every other 3.1 file.
 inline constexpr uint16_t kFormatMajor = 3;
-inline constexpr uint16_t kFormatMinor = 1;
+inline constexpr uint16_t kFormatMinor = 2;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields
 
-// How the builder chose D; Fallback and Wavelet store no taps (readers know them).
-enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1, Wavelet = 2 };
+// How the builder chose D; Fallback, Wavelet and Point store no taps (readers know them). Wavelet
+// came with 3.1, Point (point sampling, DownsampleFilter::impulse()) with 3.2.
+enum class FilterProvenance : uint32_t { Optimal = 0, Fallback = 1, Wavelet = 2, Point = 3 };
+// "optimal", "fallback", "wavelet" or "point".
+const char* filter_provenance_name(FilterProvenance provenance);
 // What the quantiser step was chosen for; stored as a u32. Also the build's option (BuildFileOptions).
 enum class ErrorMode : uint32_t { Rms = 0, MaxError = 1, Step = 2, Lossless = 3 };
 // "rms", "max-error", "step" or "lossless" (the pyramid-build option that chose it).

@@ -37,8 +37,15 @@ struct DownsampleFilter {
   // re-codes less: 1.0-3.3 % fewer bits than the fitted optimal D at equal finest-level rms, max error
   // and lossless on the shared DEMs (docs/pyramid.md "D: the wavelet filter"), and no fit to run.
   static DownsampleFilter wavelet();
-  // Plain subsampling: coarse (i, j) = fine (2i, 2j).
+  // True when the taps are exactly wavelet()'s, whatever `kind` says (the D engine's separable path,
+  // the file's provenance and the build log all decide by this).
+  bool is_wavelet() const;
+  // Plain subsampling: coarse (i, j) = fine (2i, 2j). The point-sampled pyramid of --max-error and
+  // --lossless builds: every level's samples are input samples, so a residual's even phase is the
+  // coarse level's own error and libcodec's phase tiles skip it (docs/pyramid.md "D: point sampling").
   static DownsampleFilter impulse();
+  // True when the taps are exactly impulse()'s.
+  bool is_point() const;
   // The 2x2 box of fine (2i..2i+1, 2j..2j+1) (a half-sample shift: the mipmap baseline).
   static DownsampleFilter box2x2();
   // An 8-fold symmetric filter from its 21 orbit weights (see symmetric_orbits()).

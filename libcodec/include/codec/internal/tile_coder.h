@@ -14,6 +14,7 @@ namespace codec::detail {
 enum class TileMode : uint8_t {
   Transform = 0,         // lapped transform at the stream's band steps (+ corrections if bounded)
   SpatialQuantized = 1,  // max-error mode only: samples quantised with step 2E+1, coded losslessly
+  Phase = 2,             // format 6 max-error streams: polyphase near-lossless coding (phase_coder.h)
 };
 
 struct TileParams {
@@ -26,6 +27,7 @@ struct TileParams {
   int fraction_bits = 0;  // extra sample precision of transform-mode tiles (0 = lossless)
   bool bound_max_error = false;
   uint32_t max_error = 0;
+  bool phase = false;  // format 6: tiles may use TileMode::Phase (max-error streams only)
 };
 
 // Where the LP and HP values of a padded_width x padded_height tile land, in coding order: tile
@@ -49,6 +51,9 @@ struct TileWork {
   std::vector<int32_t> lifting_scratch;  // the residual transform's copies (lifting_scratch_size)
   std::vector<int32_t> candidate;        // the first transform's reconstruction while the second is tried
   std::vector<uint8_t> second;           // the second transform's payload
+  std::vector<uint8_t> phase_payload;    // the phase-mode candidate (mode byte included)
+  std::vector<int32_t> phase_recon;      // its reconstruction (width x height)
+  std::vector<int32_t> phase_levels;     // the phase coder's context scratch (width x height)
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
   // window and needs none.
   void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
