@@ -17,7 +17,8 @@ struct Image {
   std::vector<int32_t> samples;
 };
 
-inline std::vector<uint8_t> encode(const Image& img, const codec::EncodeOptions& o, std::vector<int32_t>* recon) {
+inline std::vector<uint8_t> encode(const Image& img, const codec::EncodeOptions& o,
+                                   std::vector<int32_t>* recon) {
   codec::Scratch scratch;
   std::vector<uint8_t> out(codec::encode_bound(img.width, img.height, o));
   size_t n = 0;
@@ -29,7 +30,8 @@ inline std::vector<uint8_t> encode(const Image& img, const codec::EncodeOptions&
 }
 
 // Decodes the whole stream into `out` (sized like `like`); returns the status.
-inline codec::Status decode_into(const std::vector<uint8_t>& s, const Image& like, std::vector<int32_t>* out) {
+inline codec::Status decode_into(const std::vector<uint8_t>& s, const Image& like,
+                                 std::vector<int32_t>* out) {
   codec::Scratch scratch;
   out->assign(like.samples.size(), 0);
   return codec::decode(s.data(), s.size(), out->data(), like.width, scratch);
@@ -43,7 +45,8 @@ inline void reseal(std::vector<uint8_t>& s) {
 
 // 40 random regions of the stream decode to the encoder's reconstruction (and, added to a
 // destination, add exactly it).
-inline void check_regions(const std::vector<uint8_t>& s, const Image& img, const std::vector<int32_t>& recon) {
+inline void check_regions(const std::vector<uint8_t>& s, const Image& img,
+                          const std::vector<int32_t>& recon) {
   codec::Decoder d;
   REQUIRE(d.open(s.data(), s.size()) == codec::Status::Ok);
   codec::Scratch scratch;
