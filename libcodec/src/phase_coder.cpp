@@ -85,20 +85,21 @@ template <class Io> int64_t code_level(Io& io, Models& m, int phase, int ctx, in
   return negative ? -int64_t(mag) : int64_t(mag);
 }
 
-// Activity around (x, y): the level magnitudes of the 8 neighbours and the two at distance 2 to the
-// left and above; samples not yet coded hold 0 in `levels`.
-int context_class(const int32_t* levels, int w, int h, int x, int y) {
-  uint32_t a = 0;
-  const int x0 = std::max(x - 1, 0), x1 = std::min(x + 1, w - 1);
-  for (int yy = std::max(y - 1, 0); yy <= std::min(y + 1, h - 1); ++yy)
-    for (int xx = x0; xx <= x1; ++xx) a += uint32_t(levels[size_t(yy) * w + xx]);
-  if (x >= 2) a += uint32_t(levels[size_t(y) * w + x - 2]);
-  if (y >= 2) a += uint32_t(levels[size_t(y - 2) * w + x]);
+// The level magnitudes live in a (w + 4) x (h + 4) array with a border of 2 zeros, so the context
+// needs no edge tests: outside the tile counts as 0, like samples not yet coded.
+constexpr int kBorder = 2;
+
+// Activity around the sample at `l` (row stride s): the level magnitudes of the 8 neighbours and the
+// two at distance 2 to the left and above.
+int context_class(const int32_t* l, ptrdiff_t s) {
+  const uint32_t a = uint32_t(l[-s - 1]) + uint32_t(l[-s]) + uint32_t(l[-s + 1]) + uint32_t(l[-1]) +
+                     uint32_t(l[1]) + uint32_t(l[s - 1]) + uint32_t(l[s]) + uint32_t(l[s + 1]) +
+                     uint32_t(l[-2]) + uint32_t(l[-2 * s]);
   return std::min(kClasses - 1, int(std::bit_width(a)));
 }
 
 // Prediction of (x, y) in `phase` from decoded samples (recon, row stride w).
-int64_t predict(const int32_t* r, int w, int h, int x, int y, int phase) {
+template <int phase> int64_t predict(const int32_t* r, int w, int h, int x, int y) {
   const auto at = [&](int xx, int yy) { return int64_t(r[size_t(yy) * w + xx]); };
   switch (phase) {
     case 0: {  // even-even, when coded: MED of its even-even neighbours
@@ -133,7 +134,9 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
                int32_t* levels) {
   Models m(max_error > 0);
   const int64_t e = max_error, bin = 2 * e + 1;
-  std::memset(levels, 0, size_t(w) * h * sizeof(int32_t));
+  const ptrdiff_t ls = w + 2 * kBorder;
+  std::memset(levels, 0, size_t(ls) * size_t(h + 2 * kBorder) * sizeof(int32_t));
+  int32_t* const level0 = levels + kBorder * ls + kBorder;  // (0, 0)
   bool skip = false;
   if (!Io::kDecoding) {
     skip = true;
@@ -145,17 +148,15 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
         }
   }
   skip = io.bit(m.skip_even, skip) != 0;
-  for (int phase = 0; phase < 4; ++phase) {
-    const int px = phase & 1, py = phase >> 1;
+  // One loop per phase, so that each has its prediction inlined without a switch.
+  const auto run = [&]<int phase>() {
+    constexpr int px = phase & 1, py = phase >> 1;
     for (int y = py; y < h; y += 2)
       for (int x = px; x < w; x += 2) {
         int32_t* out = &recon[size_t(y) * w + x];
-        if (phase == 0 && skip) {
-          *out = 0;
-          continue;
-        }
-        const int64_t p = predict(recon, w, h, x, y, phase);
-        const int ctx = context_class(levels, w, h, x, y);
+        const int64_t p = predict<phase>(recon, w, h, x, y);
+        int32_t* const l = level0 + ptrdiff_t(y) * ls + x;
+        const int ctx = context_class(l, ls);
         int64_t q = 0;
         if (!Io::kDecoding) {
           const int64_t r = int64_t(src[y * stride + x]) - p;
@@ -165,15 +166,24 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
         const int64_t v = p + q * bin;
         if (io.bad || v < -kLimit || v > kLimit) return false;
         *out = int32_t(v);
-        levels[size_t(y) * w + x] = int32_t(std::min<int64_t>(q < 0 ? -q : q, 1 << 20));
+        *l = int32_t(std::min<int64_t>(q < 0 ? -q : q, 1 << 20));
       }
+    return true;
+  };
+  if (skip) {
+    for (int y = 0; y < h; y += 2)
+      for (int x = 0; x < w; x += 2) recon[size_t(y) * w + x] = 0;
+  } else if (!run.template operator()<0>()) {
+    return false;
   }
-  return true;
+  return run.template operator()<1>() && run.template operator()<2>() && run.template operator()<3>();
 }
 
 }  // namespace
 
 size_t phase_payload_bound(int w, int h) { return size_t(w) * h * 9 + 16; }
+
+size_t phase_levels_size(int w, int h) { return size_t(w + 2 * kBorder) * size_t(h + 2 * kBorder); }
 
 size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, uint8_t* out,
                     size_t capacity, int32_t* recon, int32_t* levels) {

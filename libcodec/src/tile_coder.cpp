@@ -610,7 +610,7 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
     if (work.phase_payload.size() < 1 + phase_payload_bound(w, h))
       work.phase_payload.resize(1 + phase_payload_bound(w, h));
     if (work.phase_recon.size() < samples) work.phase_recon.resize(samples);
-    if (work.phase_levels.size() < samples) work.phase_levels.resize(samples);
+    if (work.phase_levels.size() < phase_levels_size(w, h)) work.phase_levels.resize(phase_levels_size(w, h));
     work.phase_payload[0] = uint8_t(TileMode::Phase);
     const size_t phase =
         encode_phase(src, src_stride, w, h, params.max_error, work.phase_payload.data() + 1,
@@ -645,7 +645,7 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   if (mode == uint8_t(TileMode::Phase) && params.phase) {
     const size_t samples = size_t(w) * h;
     if (work.phase_recon.size() < samples) work.phase_recon.resize(samples);
-    if (work.phase_levels.size() < samples) work.phase_levels.resize(samples);
+    if (work.phase_levels.size() < phase_levels_size(w, h)) work.phase_levels.resize(phase_levels_size(w, h));
     int32_t* recon = work.phase_recon.data();
     if (!decode_phase(payload + 1, size - 1, w, h, params.max_error, recon, work.phase_levels.data()))
       return TileResult::Corrupt;

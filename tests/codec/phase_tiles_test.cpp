@@ -147,7 +147,7 @@ TEST_CASE("phase tiles: every damaged byte is rejected, never a crash", "[codec]
   // it returns or rejects, stays in its buffers (ASan), and keeps accepted samples within +-2^30. (An
   // arithmetic code accepts most byte strings: the stream's CRCs, checked above, catch damage.)
   std::mt19937 rng(1);
-  std::vector<int32_t> recon_out(32 * 32), levels(32 * 32);
+  std::vector<int32_t> recon_out(32 * 32), levels(codec::detail::phase_levels_size(32, 32));
   for (int k = 0; k < 2000; ++k) {
     std::vector<uint8_t> payload(size_t(rng() % 64));
     for (uint8_t& b : payload) b = uint8_t(rng());

@@ -53,7 +53,7 @@ struct TileWork {
   std::vector<uint8_t> second;           // the second transform's payload
   std::vector<uint8_t> phase_payload;    // the phase-mode candidate (mode byte included)
   std::vector<int32_t> phase_recon;      // its reconstruction (width x height)
-  std::vector<int32_t> phase_levels;     // the phase coder's context scratch (width x height)
+  std::vector<int32_t> phase_levels;     // the phase coder's context scratch (phase_levels_size)
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
   // window and needs none.
   void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
