@@ -5,7 +5,7 @@
 // would otherwise shield). Any status is fine; crashes, sanitizer reports and leaks are not. When the
 // re-checksummed stream decodes, region decodes must agree with the full decode. Inputs of the form
 // 'E' + bytes are encoded as a tiny image (lapped or residual transform, lossless, lossy or
-// max-error) and must decode to the encoder's reconstruction; 'M' + bytes mutate such a stream.
+// max-error, phase tiles) and must decode to the encoder's reconstruction; 'M' + bytes mutate such a stream.
 //   Run: fuzz_codec_decode -max_len=4096 -max_total_time=60 [corpus_dir]
 #include <cstdint>
 #include <cstdlib>
@@ -95,7 +95,8 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
 
 // A small image from the input bytes, encoded with options the bytes choose: data[1], data[2] the
 // size, data[3] bits 0-1 the tile size, bit 2 the residual transform (format 5), bits 3-5 a lossy
-// step (0: lossless), bit 6 max-error mode. The decoder must reproduce the encoder's reconstruction
+// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 6: max-error mode with E = the
+// lossy setting, 0 = lossless). The decoder must reproduce the encoder's reconstruction
 // exactly (the input itself when lossless). Returns the stream.
 std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
   const int64_t w = 1 + data[1] % 40, h = 1 + data[2] % 40;
@@ -106,6 +107,11 @@ std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scr
   o.step = lossy ? 1.5 * lossy : 1.0;
   o.bound_max_error = lossy && (data[3] & 64);
   o.max_error = o.bound_max_error ? uint32_t(lossy) : 0;
+  if (data[3] & 128) {
+    o.phase_tiles = true;
+    o.bound_max_error = true;
+    o.max_error = uint32_t(lossy);
+  }
   std::vector<int32_t> img(size_t(w * h)), recon(img.size());
   for (size_t i = 0; i < img.size(); ++i) {
     const uint8_t b = size > 4 ? data[4 + i % (size - 4)] : data[i % size];

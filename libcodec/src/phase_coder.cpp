@@ -119,12 +119,12 @@ template <int phase> int64_t predict(const int32_t* r, int w, int h, int x, int 
       const int64_t a = at(x, y - 1), b = y + 1 < h ? at(x, y + 1) : a;
       return floor_div(a + b, 2);
     }
-    default: {  // odd-odd: half the mean of its four direct neighbours (phases 1 and 2)
+    default: {  // odd-odd: the mean of its four direct neighbours (phases 1 and 2), rounded half up
       int64_t sum = at(x - 1, y) + at(x, y - 1);
       int n = 2;
       if (x + 1 < w) sum += at(x + 1, y), ++n;
       if (y + 1 < h) sum += at(x, y + 1), ++n;
-      return floor_div(4 * sum + 4 * n, 8 * n);
+      return floor_div(2 * sum + n, 2 * n);
     }
   }
 }
