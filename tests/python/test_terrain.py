@@ -135,7 +135,7 @@ def test_read_equals_the_pyramid_extract_window(tmp_path):
 
 def test_downsample_choice_both_lossless_and_bad_value_rejected(tmp_path):
     grid = np.round(synthetic(520, 600, 3)).astype(np.int16)
-    for choice in ("wavelet", "optimal"):
+    for choice in ("wavelet", "optimal", "point", "auto"):
         path = str(tmp_path / f"{choice}.pyr")
         assert terrain.build(grid, path, lossless=True, downsample=choice)["finest_max_m"] == 0
         p = terrain.open(path)
@@ -145,5 +145,11 @@ def test_downsample_choice_both_lossless_and_bad_value_rejected(tmp_path):
     a, b = terrain.open(str(tmp_path / "wavelet.pyr")), terrain.open(str(tmp_path / "optimal.pyr"))
     w, h = a.levels[0]
     assert not np.array_equal(a.read(0, 0, 0, w, h), b.read(0, 0, 0, w, h))
+    # Point sampling (auto's choice for lossless): every coarse sample is an input sample.
+    for name in ("point", "auto"):
+        c = terrain.open(str(tmp_path / f"{name}.pyr"))
+        k = c.level_count - 1
+        cw, ch = c.levels[0]
+        np.testing.assert_array_equal(c.read(0, 0, 0, cw, ch), grid[:: 2**k, :: 2**k][:ch, :cw].astype(np.float32))
     with pytest.raises(ValueError):
         terrain.build(grid, str(tmp_path / "bad.pyr"), lossless=True, downsample="box")

@@ -79,8 +79,8 @@ TEST_CASE("a constant grid: every residual level is a few bytes of band table", 
 }
 
 // Issue 17's floor: an all-constant 4096^2 grid costs under 0.001 bits per sample at any target (the
-// coarse bands are at least 16 rows, and neither the wavelet D nor the default D that the optimal fit
-// falls back to is stored).
+// coarse bands are at least 16 rows, and neither the wavelet D, point sampling nor the default D that
+// the optimal fit falls back to is stored).
 TEST_CASE("a constant 4096^2 grid costs under 0.001 bits per sample at every target", "[e2e]") {
   iotest::TempDir dir;
   const std::string src = write_constant_grid(dir, "flat4k.raw", 4096, 123.0);
@@ -88,17 +88,21 @@ TEST_CASE("a constant 4096^2 grid costs under 0.001 bits per sample at every tar
       {ErrorMode::Lossless, 0}, {ErrorMode::Rms, 1}, {ErrorMode::Rms, 8}, {ErrorMode::MaxError, 0.5}};
   for (const auto& [mode, metres] : targets) {
     INFO("mode " << int(mode) << " target " << metres);
-    for (const DownsampleChoice d : {DownsampleChoice::Wavelet, DownsampleChoice::Optimal}) {
+    for (const DownsampleChoice d :
+         {DownsampleChoice::Wavelet, DownsampleChoice::Optimal, DownsampleChoice::Point}) {
       const std::string pyr = build_file(src, dir.file("flat4k.pyr"), mode, metres, d);
       auto file = PyramidFile::open(pyr);
       const double bits = 8.0 * double(std::filesystem::file_size(pyr)) / (4096.0 * 4096.0);
       CHECK(bits < 0.001);
-      const bool wavelet = d == DownsampleChoice::Wavelet;
-      CHECK(file->info().filter_provenance ==
-            (wavelet ? FilterProvenance::Wavelet : FilterProvenance::Fallback));
+      const FilterProvenance want = d == DownsampleChoice::Wavelet ? FilterProvenance::Wavelet
+                                    : d == DownsampleChoice::Point ? FilterProvenance::Point
+                                                                   : FilterProvenance::Fallback;
+      const DownsampleFilter filter = d == DownsampleChoice::Wavelet ? DownsampleFilter::wavelet()
+                                      : d == DownsampleChoice::Point ? DownsampleFilter::impulse()
+                                                                     : DownsampleFilter::default_filter();
+      CHECK(file->info().filter_provenance == want);
       CHECK(file->info().filter_size == 0);
-      CHECK(file->downsample_filter().taps ==
-            (wavelet ? DownsampleFilter::wavelet() : DownsampleFilter::default_filter()).taps);
+      CHECK(file->downsample_filter().taps == filter.taps);
       for (const BandView& b : file->bands(0)) CHECK(b.rows >= 16);
     }
   }
