@@ -58,8 +58,17 @@ PtcCoderOptions PtcResidualCoder::level_options(int levels_above_finest) const {
 std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
                                               int32_t* reconstructed, int levels_above_finest,
                                               bool coarsest) {
+  return encode_spliceable(residual, w, h, reconstructed, levels_above_finest, coarsest, nullptr, 0);
+}
+
+std::vector<uint8_t> PtcResidualCoder::encode_spliceable(const int32_t* residual, int64_t w, int64_t h,
+                                                         int32_t* reconstructed, int levels_above_finest,
+                                                         bool coarsest, const uint8_t* into,
+                                                         size_t into_size) {
   codec::EncodeOptions copts = to_codec(level_options(levels_above_finest));
   copts.transform = coarsest ? codec::Transform::Lapped : options_.residual_transform;
+  copts.phase_model_stream = into;
+  copts.phase_model_stream_size = into_size;
   // A fresh zero-filled buffer per band cost 8-14% of the build's CPU in page faults, so each thread
   // keeps one and copies out the bytes. The bound is ~16 bytes per sample and a band's stream ~0.3:
   // a buffer of the bound was most of a wide input's memory (a 4194304-column band of 64 rows, 4 GiB

@@ -1,89 +1,92 @@
-// Phase-mode tiles: polyphase prediction, near-lossless quantisation, binary adaptive range coding.
-// One traversal (code_tile) serves the encoder and the decoder, so their orders, predictions and
-// contexts cannot drift apart.
+// Phase-mode tiles: polyphase prediction, near-lossless quantisation, static token tables and rANS.
+// One traversal (code_tile) serves the statistics pass, the encoder and the decoder, so their orders,
+// predictions and contexts cannot drift apart.
 #include "codec/internal/phase_coder.h"
 
 #include <algorithm>
 #include <bit>
 #include <cstring>
 
-#include "codec/internal/range_coder.h"
+#include "codec/internal/tile_coder.h"
 
 namespace codec::detail {
 namespace {
 
-constexpr int kClasses = 12;       // context classes: bit width of the neighbours' level magnitudes
-constexpr int kLengthModels = 16;  // models for the unary bit length of a magnitude
-constexpr int kMaxLength = 31;     // magnitudes below 2^32
 constexpr int64_t kLimit = int64_t(1) << 30;  // decoded samples beyond +-2^30 mean a damaged payload
+constexpr int kMemberBits = 10;
+static_assert(kFamilySize <= (1 << kMemberBits));
+constexpr uint8_t kPhaseModeFirst = uint8_t(TileMode::Phase);  // modes 2 .. 6: 0 .. 4 state bytes
+constexpr int kMaxStateBytes = 4;
 
-// Zero-flag start probabilities by context class with a bound E > 0: quiet neighbourhoods are mostly
-// zero there. The models restart with every tile, so a good start saves their learning on low-rate
-// tiles (smooth terrain at E = 5: 8-15 % fewer bits; lossless tiles, rarely zero, keep 1/2).
-constexpr uint16_t kZeroStart[kClasses] = {3686, 3072, 2458, 2048, 2048, 2048,
-                                           2048, 2048, 2048, 2048, 2048, 2048};
-
-struct Models {
-  explicit Models(bool bounded) {
-    if (bounded)
-      for (auto& phase : zero)
-        for (int c = 0; c < kClasses; ++c) phase[c].p0 = kZeroStart[c];
+// The statistics pass: counts tokens, codes nothing.
+struct CountIo {
+  static constexpr bool kDecoding = false;
+  PhaseCounts* counts;
+  bool bad = false;
+  bool flag(bool b) { return b; }
+  int64_t level(int context, int64_t q) {
+    int raw = 0;
+    const uint32_t m = uint32_t(q < 0 ? -q : q);
+    ++counts->counts[context][token_of(m, &raw)];
+    return q;
   }
-  BitModel skip_even;
-  BitModel zero[4][kClasses];
-  BitModel sign[4];
-  BitModel length[kClasses][kLengthModels];
-  BitModel below[kLengthModels];
 };
 
-class EncodeIo {
- public:
-  EncodeIo(uint8_t* out, size_t capacity) : rc_(out, capacity) {}
-  uint32_t bit(BitModel& m, uint32_t b) {
-    rc_.encode(m, b);
+struct EncodeIo {
+  static constexpr bool kDecoding = false;
+  const PhaseTables& tables;
+  RansEncoder& rans;
+  bool bad = false;
+  bool flag(bool b) {
+    rans.put_raw(b, 1);
     return b;
   }
-  uint64_t raw(uint64_t value, int nbits) {
-    rc_.encode_raw(uint32_t(value), nbits);
-    return value;
+  int64_t level(int context, int64_t q) {
+    const TokenTable& t = *tables.table[context];
+    const uint32_t m = uint32_t(q < 0 ? -q : q);
+    int raw = 0;
+    const int token = token_of(m, &raw);
+    if (t.freq[token]) {
+      rans.put(t.cum[token], t.freq[token]);
+    } else {
+      rans.put(t.cum[kTokenEscape], t.freq[kTokenEscape]);
+      rans.put_raw(uint32_t(token), kTokenEscapeBits);
+    }
+    if (raw) rans.put_raw(m, raw);
+    if (m) rans.put_raw(q < 0, 1);
+    return q;
   }
-  static constexpr bool kDecoding = false;
-  bool bad = false;
-  RangeEncoder rc_;
 };
 
-class DecodeIo {
- public:
-  DecodeIo(const uint8_t* data, size_t size) : rc_(data, size) {}
-  uint32_t bit(BitModel& m, uint32_t) { return rc_.decode(m); }
-  uint64_t raw(uint64_t, int nbits) { return rc_.decode_raw(nbits); }
+struct DecodeIo {
   static constexpr bool kDecoding = true;
+  const PhaseTables& tables;
+  RansDecoder rans;
   bool bad = false;
-  RangeDecoder rc_;
+  bool flag(bool) { return rans.raw(1) != 0; }
+  int64_t level(int context, int64_t) {
+    const TokenTable& t = *tables.table[context];
+    int token = t.slots[rans.slot()];
+    rans.advance(t.cum[token], t.freq[token]);
+    if (token == 0) return 0;
+    if (token == kTokenEscape) {
+      token = int(rans.raw(kTokenEscapeBits));
+      if (token >= kTokens) {
+        bad = true;
+        return 0;
+      }
+    }
+    uint32_t m = uint32_t(token);
+    if (token >= 16) {
+      int raw = 0;
+      m = token_base(token, &raw);
+      m |= rans.raw(raw);
+    }
+    return rans.raw(1) ? -int64_t(m) : int64_t(m);
+  }
 };
 
 int64_t floor_div(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-
-// One quantised level: zero flag, sign, bit length in unary, the bit below the leading one, raw rest.
-template <class Io> int64_t code_level(Io& io, Models& m, int phase, int ctx, int64_t q) {
-  if (!io.bit(m.zero[phase][ctx], q != 0)) return 0;
-  const bool negative = io.bit(m.sign[phase], q < 0) != 0;
-  const uint64_t v = uint64_t(q < 0 ? -q : q);
-  const int bits = Io::kDecoding ? 0 : int(std::bit_width(v)) - 1;
-  int n = 0;
-  while (io.bit(m.length[ctx][std::min(n, kLengthModels - 1)], n < bits)) {
-    if (++n > kMaxLength) {
-      io.bad = true;
-      return 0;
-    }
-  }
-  uint64_t mag = 1;
-  if (n >= 1) {
-    mag = 2 | io.bit(m.below[std::min(n, kLengthModels - 1)], uint32_t(v >> (n - 1)) & 1);
-    if (n >= 2) mag = (mag << (n - 1)) | io.raw(v & ((uint64_t(1) << (n - 1)) - 1), n - 1);
-  }
-  return negative ? -int64_t(mag) : int64_t(mag);
-}
 
 // The level magnitudes live in a (w + 4) x (h + 4) array with a border of 2 zeros, so the context
 // needs no edge tests: outside the tile counts as 0, like samples not yet coded.
@@ -95,7 +98,7 @@ int context_class(const int32_t* l, ptrdiff_t s) {
   const uint32_t a = uint32_t(l[-s - 1]) + uint32_t(l[-s]) + uint32_t(l[-s + 1]) + uint32_t(l[-1]) +
                      uint32_t(l[1]) + uint32_t(l[s - 1]) + uint32_t(l[s]) + uint32_t(l[s + 1]) +
                      uint32_t(l[-2]) + uint32_t(l[-2 * s]);
-  return std::min(kClasses - 1, int(std::bit_width(a)));
+  return std::min(kPhaseClasses - 1, int(std::bit_width(a)));
 }
 
 // Prediction of (x, y) in `phase` from decoded samples (recon, row stride w).
@@ -132,7 +135,6 @@ template <int phase> int64_t predict(const int32_t* r, int w, int h, int x, int 
 template <class Io>
 bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, int32_t* recon,
                int32_t* levels) {
-  Models m(max_error > 0);
   const int64_t e = max_error, bin = 2 * e + 1;
   const ptrdiff_t ls = w + 2 * kBorder;
   std::memset(levels, 0, size_t(ls) * size_t(h + 2 * kBorder) * sizeof(int32_t));
@@ -147,7 +149,7 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
           break;
         }
   }
-  skip = io.bit(m.skip_even, skip) != 0;
+  skip = io.flag(skip);
   // One loop per phase, so that each has its prediction inlined without a switch.
   const auto run = [&]<int phase>() {
     constexpr int px = phase & 1, py = phase >> 1;
@@ -156,13 +158,13 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
         int32_t* out = &recon[size_t(y) * w + x];
         const int64_t p = predict<phase>(recon, w, h, x, y);
         int32_t* const l = level0 + ptrdiff_t(y) * ls + x;
-        const int ctx = context_class(l, ls);
+        const int context = phase * kPhaseClasses + context_class(l, ls);
         int64_t q = 0;
         if (!Io::kDecoding) {
           const int64_t r = int64_t(src[y * stride + x]) - p;
           q = r >= 0 ? (r + e) / bin : -((-r + e) / bin);
         }
-        q = code_level(io, m, phase, ctx, q);
+        q = io.level(context, q);
         const int64_t v = p + q * bin;
         if (io.bad || v < -kLimit || v > kLimit) return false;
         *out = int32_t(v);
@@ -179,24 +181,121 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
   return run.template operator()<1>() && run.template operator()<2>() && run.template operator()<3>();
 }
 
+size_t levels_size(int w, int h) { return size_t(w + 2 * kBorder) * size_t(h + 2 * kBorder); }
+
 }  // namespace
 
-size_t phase_payload_bound(int w, int h) { return size_t(w) * h * 9 + 16; }
-
-size_t phase_levels_size(int w, int h) { return size_t(w + 2 * kBorder) * size_t(h + 2 * kBorder); }
-
-size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, uint8_t* out,
-                    size_t capacity, int32_t* recon, int32_t* levels) {
-  EncodeIo io(out, capacity);
-  if (!code_tile(io, src, stride, w, h, max_error, recon, levels)) return SIZE_MAX;
-  const size_t n = io.rc_.finish();
-  return io.rc_.overflow() ? SIZE_MAX : n;
+PhaseModel fit_phase_model(const PhaseCounts& counts) {
+  PhaseModel model;
+  for (int c = 0; c < kPhaseContexts; ++c) {
+    const uint32_t* k = counts.counts[c];
+    model.used[c] = std::any_of(k, k + kTokens, [](uint32_t n) { return n != 0; });
+    if (model.used[c]) model.member[c] = uint16_t(best_member(k));
+  }
+  return model;
 }
 
-bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_error, int32_t* recon,
-                  int32_t* levels) {
-  DecodeIo io(data, size);
-  return code_tile(io, nullptr, 0, w, h, max_error, recon, levels) && io.rc_.consistent();
+size_t write_phase_model(const PhaseModel& model, uint8_t* out) {
+  uint64_t acc = 0;
+  int bits = 0;
+  size_t n = 0;
+  const auto put = [&](uint32_t v, int nbits) {
+    acc = (acc << nbits) | v;
+    bits += nbits;
+    while (bits >= 8) out[n++] = uint8_t(acc >> (bits -= 8));
+  };
+  for (int c = 0; c < kPhaseContexts; ++c) put(model.used[c], 1);
+  for (int c = 0; c < kPhaseContexts; ++c)
+    if (model.used[c]) put(model.member[c], kMemberBits);
+  if (bits > 0) out[n++] = uint8_t(acc << (8 - bits));
+  return n;
+}
+
+bool read_phase_model(const uint8_t*& p, const uint8_t* end, PhaseModel* model) {
+  uint64_t acc = 0;
+  int bits = 0;
+  const auto get = [&](int nbits, uint32_t* v) {
+    while (bits < nbits) {
+      if (p == end) return false;
+      acc = (acc << 8) | *p++;
+      bits += 8;
+    }
+    *v = uint32_t(acc >> (bits - nbits)) & ((1u << nbits) - 1);
+    bits -= nbits;
+    return true;
+  };
+  PhaseModel m;
+  uint32_t v = 0;
+  for (int c = 0; c < kPhaseContexts; ++c) {
+    if (!get(1, &v)) return false;
+    m.used[c] = v != 0;
+  }
+  for (int c = 0; c < kPhaseContexts; ++c)
+    if (m.used[c]) {
+      if (!get(kMemberBits, &v) || v >= uint32_t(kFamilySize)) return false;
+      m.member[c] = uint16_t(v);
+    }
+  if (bits > 0 && (acc & ((uint64_t(1) << bits) - 1)) != 0) return false;  // padding must be 0
+  *model = m;
+  return true;
+}
+
+PhaseTables::PhaseTables(const PhaseModel& model) {
+  for (int c = 0; c < kPhaseContexts; ++c) table[c] = &token_table(model.used[c] ? model.member[c] : 0);
+}
+
+size_t phase_payload_bound(int w, int h) {
+  // Escape (12 bits) + token (7) + 31 raw bits + sign per sample, the flag, the state and mode byte.
+  return size_t(w) * h * 7 + 16;
+}
+
+bool is_phase_mode(uint8_t mode) {
+  return mode >= kPhaseModeFirst && mode <= kPhaseModeFirst + kMaxStateBytes;
+}
+
+bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, int32_t* recon,
+                      PhaseWork& work, PhaseCounts* counts) {
+  if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
+  CountIo io{counts};
+  return code_tile(io, src, stride, w, h, max_error, recon, work.levels.data());
+}
+
+size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error,
+                    const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
+                    PhaseWork& work) {
+  if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
+  work.rans.clear();
+  EncodeIo io{tables, work.rans};
+  if (!code_tile(io, src, stride, w, h, max_error, recon, work.levels.data())) return SIZE_MAX;
+  uint32_t state = 0;
+  work.rans.finish(&state, work.words);
+  const int state_bytes = state == 1 ? 0 : (std::bit_width(state) + 7) / 8;
+  const size_t size = 1 + size_t(state_bytes) + 2 * work.words.size();
+  if (size > capacity) return SIZE_MAX;
+  out[0] = uint8_t(kPhaseModeFirst + state_bytes);
+  for (int i = 0; i < state_bytes; ++i) out[1 + i] = uint8_t(state >> (8 * i));
+  uint8_t* p = out + 1 + state_bytes;
+  for (uint16_t word : work.words) {
+    *p++ = uint8_t(word);
+    *p++ = uint8_t(word >> 8);
+  }
+  return size;
+}
+
+bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_error,
+                  const PhaseTables& tables, int32_t* recon, PhaseWork& work) {
+  if (size < 1 || !is_phase_mode(data[0])) return false;
+  const size_t state_bytes = size_t(data[0] - kPhaseModeFirst);
+  if (size < 1 + state_bytes || (size - 1 - state_bytes) % 2 != 0) return false;
+  uint32_t state = 1;
+  if (state_bytes > 0) {
+    state = 0;
+    for (size_t i = 0; i < state_bytes; ++i) state |= uint32_t(data[1 + i]) << (8 * i);
+    if (state >> (8 * (state_bytes - 1)) == 0 || state == 1) return false;  // not the shortest form
+  }
+  if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
+  DecodeIo io{tables, RansDecoder(state, data + 1 + state_bytes, (size - 1 - state_bytes) / 2)};
+  return code_tile(io, nullptr, 0, w, h, max_error, recon, work.levels.data()) && io.rans.finished();
 }
 
 }  // namespace codec::detail

@@ -9,6 +9,7 @@
 
 #include "codec/codec.h"
 #include "codec/crc32c.h"
+#include "codec/internal/phase_coder.h"
 #include "codec/internal/quantizer.h"
 #include "codec/internal/tile_coder.h"
 #include "core/bytes.h"
@@ -45,13 +46,14 @@ namespace {
 constexpr uint8_t kMagic[4] = {'T', 'P', 'T', 'C'};
 constexpr size_t kFixedHeader = 6;  // magic + u16 version; varint fields follow
 // Magic, version and the varints at their longest: sides (6 bytes each), tile size / 16 (2), flags
-// (1), step * 256 (4), E (3) and the payload size (10).
-constexpr size_t kMaxHeaderSize = kFixedHeader + 6 + 6 + 2 + 1 + 4 + 3 + 10;
-constexpr size_t kMaxRecordSize = 5;  // index record of a non-empty tile: size << 1 (< 2^33)
+// (1), step * 256 (4), E (3), the phase model and the payload size (10).
+constexpr size_t kMaxHeaderSize = kFixedHeader + 6 + 6 + 2 + 1 + 4 + 3 + detail::kPhaseModelBytes + 10;
+constexpr uint32_t kPhaseVersion = 7;  // phase tiles with static token tables (6: adaptive binary, retired)
+constexpr size_t kMaxRecordSize = 5;   // index record of a non-empty tile: size << 1 (< 2^33)
 constexpr uint32_t kFlagBoundMaxError = 1;
 constexpr uint32_t kFlagWideFraction = 2;  // lossy streams: kWideFractionBits (else kFineFractionBits)
 constexpr uint32_t kFlagResidual = 4;      // format 5: transform-mode tiles use Transform::Residual
-constexpr uint32_t kFlagPhase = 8;         // format 6 (max-error streams): tiles may use the phase mode
+constexpr uint32_t kFlagPhase = 8;         // format 7 (max-error streams): tiles may use the phase mode
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
@@ -113,6 +115,7 @@ struct StreamFields {
   uint32_t step_q8, max_error;
   bool residual;
   bool phase;
+  std::vector<uint8_t> phase_model;  // serialised PhaseModel (phase streams)
 };
 
 // The second half of encoding, shared with splice_tiles: `body` holds the payloads of the non-empty
@@ -150,7 +153,7 @@ Status finish_stream(const StreamFields& f, const StreamLayout& layout, const ui
 
   uint8_t header[kMaxHeaderSize];
   std::memcpy(header, kMagic, 4);
-  put_u16(header + 4, uint16_t(f.phase ? 6 : f.residual ? 5 : kOldestFormatVersion));
+  put_u16(header + 4, uint16_t(f.phase ? kPhaseVersion : f.residual ? 5 : kOldestFormatVersion));
   uint8_t* h = header + kFixedHeader;
   h = put_varint(h, uint64_t(f.width));
   h = put_varint(h, uint64_t(f.height));
@@ -159,6 +162,11 @@ Status finish_stream(const StreamFields& f, const StreamLayout& layout, const ui
                         (f.residual ? kFlagResidual : 0) | (f.phase ? kFlagPhase : 0));
   h = put_varint(h, f.step_q8);
   if (f.bound_max_error) h = put_varint(h, f.max_error);
+  if (f.phase) {
+    assert(f.phase_model.size() <= size_t(detail::kPhaseModelBytes));
+    std::memcpy(h, f.phase_model.data(), f.phase_model.size());
+    h += f.phase_model.size();
+  }
   h = put_varint(h, payload_end);
   const size_t header_size = size_t(h - header);
   if (dst_capacity < header_size + 4 || dst_capacity - header_size - 4 < pos) return Status::BufferTooSmall;
@@ -204,6 +212,28 @@ size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options)
   return total > SIZE_MAX ? 0 : size_t(total);
 }
 
+namespace {
+
+// The phase model fitted to the tiles of an image: every non-empty tile coded in the phase mode for
+// its token counts (whether or not the tile ends up in that mode).
+detail::PhaseModel phase_model_of(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
+                                  int64_t t, uint32_t max_error, Scratch& scratch) {
+  detail::TileWork& work = scratch.impl().work;
+  auto counts = std::make_unique<detail::PhaseCounts>();
+  for (int64_t ty = 0; ty * t < height; ++ty)
+    for (int64_t tx = 0; tx * t < width; ++tx) {
+      const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+      const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+      if (within(tile_src, src_stride, tw, th, max_error)) continue;
+      if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
+      detail::phase_statistics(tile_src, src_stride, tw, th, max_error, work.phase_recon.data(),
+                               work.phase_work, counts.get());
+    }
+  return detail::fit_phase_model(*counts);
+}
+
+}  // namespace
+
 Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
               const EncodeOptions& options, uint8_t* dst, size_t dst_capacity, size_t* bytes_written,
               Scratch& scratch, int32_t* recon, ptrdiff_t recon_stride) {
@@ -240,6 +270,23 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
   params.phase = options.bound_max_error && options.phase_tiles;
+  detail::PhaseModel model;
+  bool given_model = false;
+  if (params.phase) {
+    HeaderInfo given;
+    if (options.phase_model_stream &&
+        read_header(options.phase_model_stream, options.phase_model_stream_size, &given) == Status::Ok) {
+      given_model = given.phase_tiles;
+      params.phase = given_model;  // spliceable into a stream without phase tiles: none either
+      const uint8_t* p = given.phase_model.data();
+      if (given_model && !detail::read_phase_model(p, p + given.phase_model.size(), &model))
+        return Status::InvalidArgument;  // read_header checked it: cannot happen
+    } else {
+      model = phase_model_of(src, src_stride, width, height, options.tile_size, params.max_error, scratch);
+    }
+  }
+  const detail::PhaseTables tables(model);
+  params.phase_tables = &tables;
   // Tiles within +-empty_limit are empty outright: zeros meet the bound (lossless: 0, max-error: E).
   const int64_t empty_limit = params.max_error;
   const bool probe = !lossless && !options.bound_max_error;
@@ -254,6 +301,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
   if (sizes.size() < tile_count) sizes.resize(tile_count);
   size_t pos = 0;
+  bool any_phase = false;
   for (int64_t ty = 0; ty < layout.tiles_y; ++ty)
     for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
       const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
@@ -270,6 +318,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
         empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
       }
       sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
+      if (!empty) any_phase = any_phase || (params.phase && detail::is_phase_mode(body[pos]));
       if (!empty) pos += size;
       if (recon) {
         int32_t* out = recon + ty * t * recon_stride + tx * t;
@@ -282,15 +331,22 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
         }
       }
     }
-  const StreamFields fields{width,
-                            height,
-                            options.tile_size,
-                            options.bound_max_error,
-                            params.fraction_bits == detail::kWideFractionBits,
-                            step_q8,
-                            params.max_error,
-                            params.lifting,
-                            params.phase};
+  StreamFields fields{width,
+                      height,
+                      options.tile_size,
+                      options.bound_max_error,
+                      params.fraction_bits == detail::kWideFractionBits,
+                      step_q8,
+                      params.max_error,
+                      params.lifting,
+                      any_phase || given_model,
+                      {}};
+  // A stream without phase tiles is written as one that cannot have any (no model, version 5 or 4):
+  // its other tiles do not depend on the flag. One that must splice into a phase stream keeps both.
+  if (fields.phase) {
+    uint8_t bytes[detail::kPhaseModelBytes];
+    fields.phase_model.assign(bytes, bytes + detail::write_phase_model(model, bytes));
+  }
   return finish_stream(fields, layout, sizes.data(), body, pos, dst, dst_capacity, bytes_written);
 }
 
@@ -300,7 +356,9 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if (std::memcmp(data, kMagic, std::min<size_t>(size, 4)) != 0) return Status::Corrupt;
   if (size < kFixedHeader) return Status::Truncated;
   const uint32_t version = get_u16(data + 4);
-  if (version < kOldestFormatVersion || version > kFormatVersion) return Status::UnsupportedVersion;
+  // Version 6 (phase tiles with adaptive binary coding) was superseded by 7 within one release cycle.
+  if (version < kOldestFormatVersion || version > kFormatVersion || version == 6)
+    return Status::UnsupportedVersion;
   const uint8_t* p = data + kFixedHeader;
   const uint8_t* const end = data + size;
   uint64_t w = 0, h = 0, tile16 = 0, flags = 0, step_q8 = 0, max_error = 0, payload = 0;
@@ -308,6 +366,12 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
     if (!get_varint(p, end, field)) return p == end ? Status::Truncated : Status::Corrupt;
   if ((flags & kFlagBoundMaxError) && !get_varint(p, end, &max_error))
     return p == end ? Status::Truncated : Status::Corrupt;
+  const uint8_t* const model_begin = p;
+  if (version >= kPhaseVersion && (flags & kFlagPhase)) {
+    detail::PhaseModel model;
+    if (!detail::read_phase_model(p, end, &model)) return p == end ? Status::Truncated : Status::Corrupt;
+  }
+  const uint8_t* const model_end = p;
   if (!get_varint(p, end, &payload)) return p == end ? Status::Truncated : Status::Corrupt;
   const size_t data_offset = size_t(p - data);
   // At least one index byte and the stream CRC follow the payloads.
@@ -327,14 +391,15 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   StreamLayout layout;
   if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
   // Version 4 knows two flags; version 5 adds the residual transform, and a version-5 stream must use
-  // it (encoders write 4 otherwise); version 6 adds phase tiles, which it must allow, in max-error
+  // it (encoders write 4 otherwise); version 7 adds phase tiles, which it must allow, in max-error
   // streams only (with either transform). So every stream has exactly one valid version.
   const uint64_t known = kFlagBoundMaxError | kFlagWideFraction | (version >= 5 ? kFlagResidual : 0) |
-                         (version >= 6 ? kFlagPhase : 0);
+                         (version >= kPhaseVersion ? kFlagPhase : 0);
   const bool phase = (flags & kFlagPhase) != 0;
   if ((flags & ~known) != 0 || (version == 5) != ((flags & kFlagResidual) != 0 && !phase) ||
-      (version == 6) != phase || (phase && !(flags & kFlagBoundMaxError)) || step_q8 < detail::kStepOne ||
-      step_q8 > uint64_t(kMaxAbsSample) * 256u || max_error > uint64_t(kMaxAbsSample))
+      (version == kPhaseVersion) != phase || (phase && !(flags & kFlagBoundMaxError)) ||
+      step_q8 < detail::kStepOne || step_q8 > uint64_t(kMaxAbsSample) * 256u ||
+      max_error > uint64_t(kMaxAbsSample))
     return Status::Corrupt;
   // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
   // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
@@ -344,6 +409,7 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   info.max_error = uint32_t(max_error);
   info.transform = (flags & kFlagResidual) ? Transform::Residual : Transform::Lapped;
   info.phase_tiles = phase;
+  info.phase_model.assign(model_begin, model_end);
   info.fraction_bits = step_q8 == detail::kStepOne ? 0
                        : wide                      ? detail::kWideFractionBits
                                                    : detail::kFineFractionBits;
@@ -421,6 +487,7 @@ Status Decoder::open(const uint8_t* data, size_t size) {
   index_.clear();
   rows_.clear();
   row_state_.reset();
+  phase_tables_.reset();
   HeaderInfo header;
   Status s = read_header(data, size, &header);
   if (s != Status::Ok) return s;
@@ -434,6 +501,12 @@ Status Decoder::open(const uint8_t* data, size_t size) {
   index_ = std::move(index);
   rows_ = std::move(rows);
   row_state_ = std::make_unique<RowState>(rows_.size());
+  if (header_.phase_tiles) {
+    detail::PhaseModel model;
+    const uint8_t* p = header_.phase_model.data();
+    detail::read_phase_model(p, p + header_.phase_model.size(), &model);  // read_header checked it
+    phase_tables_ = std::make_unique<detail::PhaseTables>(model);
+  }
   if (header_.tiles_y == 1 && !rows_.empty())  // read_header checked the payloads with the stream CRC
     row_state_->checked[0].store(true, std::memory_order_relaxed);
   return Status::Ok;
@@ -480,6 +553,7 @@ Status Decoder::decode_into(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride
   params.bound_max_error = header_.bound_max_error;
   params.max_error = header_.max_error;
   params.phase = header_.phase_tiles;
+  params.phase_tables = phase_tables_.get();
   detail::TileWork& work = scratch.impl().work;
   const int64_t t = header_.tile_size;
   const int64_t tx0 = rect.x0 / t, tx1 = (rect.x0 + rect.width - 1) / t;
@@ -567,7 +641,8 @@ Status open_splice_source(const uint8_t* data, size_t size, SpliceSource* src) {
 bool same_coding(const HeaderInfo& a, const HeaderInfo& b) {
   return a.width == b.width && a.height == b.height && a.tile_size == b.tile_size &&
          a.bound_max_error == b.bound_max_error && a.max_error == b.max_error && a.step == b.step &&
-         a.fraction_bits == b.fraction_bits && a.transform == b.transform && a.phase_tiles == b.phase_tiles;
+         a.fraction_bits == b.fraction_bits && a.transform == b.transform && a.phase_tiles == b.phase_tiles &&
+         a.phase_model == b.phase_model;
 }
 
 }  // namespace
@@ -607,7 +682,8 @@ Status splice_tiles(const uint8_t* old_data, size_t old_size, const uint8_t* fre
                             uint32_t(std::lround(h.step * 256.0)),
                             h.max_error,
                             h.transform == Transform::Residual,
-                            h.phase_tiles};
+                            h.phase_tiles,
+                            h.phase_model};
   out->resize(kMaxHeaderSize + 4 + pos + size_t(layout.index_bound));
   size_t written = 0;
   if ((s = finish_stream(fields, layout, sizes.data(), body, pos, out->data(), out->size(), &written)) !=

@@ -585,7 +585,7 @@ void TileWork::reserve(int pw, int ph, size_t reconstruction_samples, size_t pay
 size_t tile_payload_bound(int width, int height) {
   const size_t padded = size_t(padded_side(width)) * padded_side(height);
   const size_t codes = padded + size_t(width) * height;  // coefficients + corrections
-  return std::max(1 + codes * (kRlgrMaxCodeBits / 8) + 8, 1 + phase_payload_bound(width, height));
+  return std::max(1 + codes * (kRlgrMaxCodeBits / 8) + 8, phase_payload_bound(width, height));
 }
 
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const TileParams& params,
@@ -607,19 +607,17 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
   size_t best = transform > 0 && transform <= spatial ? transform : spatial;
   if (params.phase) {  // format 6: the phase mode when it is smaller still
     const size_t samples = size_t(w) * h;
-    if (work.phase_payload.size() < 1 + phase_payload_bound(w, h))
-      work.phase_payload.resize(1 + phase_payload_bound(w, h));
+    if (work.phase_payload.size() < phase_payload_bound(w, h))
+      work.phase_payload.resize(phase_payload_bound(w, h));
     if (work.phase_recon.size() < samples) work.phase_recon.resize(samples);
-    if (work.phase_levels.size() < phase_levels_size(w, h)) work.phase_levels.resize(phase_levels_size(w, h));
-    work.phase_payload[0] = uint8_t(TileMode::Phase);
     const size_t phase =
-        encode_phase(src, src_stride, w, h, params.max_error, work.phase_payload.data() + 1,
-                     work.phase_payload.size() - 1, work.phase_recon.data(), work.phase_levels.data());
-    if (phase != SIZE_MAX && phase + 1 < best) {
-      if (phase + 1 > capacity) return 0;
-      std::memcpy(out, work.phase_payload.data(), phase + 1);
+        encode_phase(src, src_stride, w, h, params.max_error, *params.phase_tables, work.phase_payload.data(),
+                     work.phase_payload.size(), work.phase_recon.data(), work.phase_work);
+    if (phase != SIZE_MAX && phase < best) {
+      if (phase > capacity) return 0;
+      std::memcpy(out, work.phase_payload.data(), phase);
       std::copy_n(work.phase_recon.begin(), samples, work.reconstruction.begin());
-      return phase + 1;
+      return phase;
     }
   }
   if (best == transform) return transform;
@@ -642,12 +640,11 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   const int pw = padded_side(w), ph = padded_side(h);
   work.reserve(pw, ph, window.add ? size_t(w) : 0, 0);
   const uint8_t mode = head ? payload[0] : uint8_t(TileMode::Transform);
-  if (mode == uint8_t(TileMode::Phase) && params.phase) {
+  if (head && params.phase && is_phase_mode(mode)) {
     const size_t samples = size_t(w) * h;
     if (work.phase_recon.size() < samples) work.phase_recon.resize(samples);
-    if (work.phase_levels.size() < phase_levels_size(w, h)) work.phase_levels.resize(phase_levels_size(w, h));
     int32_t* recon = work.phase_recon.data();
-    if (!decode_phase(payload + 1, size - 1, w, h, params.max_error, recon, work.phase_levels.data()))
+    if (!decode_phase(payload, size, w, h, params.max_error, *params.phase_tables, recon, work.phase_work))
       return TileResult::Corrupt;
     const int n = window.x1 - window.x0;
     for (int y = window.y0; y < window.y1; ++y) {

@@ -272,6 +272,11 @@ Container Container::open(const std::string& path) {
                                        : since_3_1 ? FilterProvenance::Wavelet
                                                    : FilterProvenance::Fallback),
                 "unknown filter provenance " + std::to_string(provenance));
+  // 3.2's point-sampled pyramids hold libcodec format-6 phase tiles, replaced by format 7 in 3.3.
+  if (major == 3 && minor == 2 && provenance == uint32_t(FilterProvenance::Point))
+    parse.fail(Code::UnsupportedVersion,
+               "format version 3.2 with point sampling holds libcodec format-6 streams, which this reader "
+               "no longer decodes: rebuild it with pyramid-build");
   info.filter_provenance = FilterProvenance(provenance);
   info.quantisation.step_units = get_f64(idx + info::kStepUnits);
   info.quantisation.step_metres = get_f64(idx + info::kStepMetres);

@@ -470,7 +470,8 @@ EditStats PyramidEditor::commit(CrashPoint crash) {
         if (any_dirty) {
           std::vector<uint8_t> fresh;
           try {
-            fresh = coder.encode(residual.data(), s.width, band.rows, recon.data(), finest - l, l == 0);
+            fresh = coder.encode_spliceable(residual.data(), s.width, band.rows, recon.data(), finest - l,
+                                            l == 0, band.data, band.size);
           } catch (const std::runtime_error& e) {  // a residual beyond libcodec's range
             throw Error(ErrorCode::InvalidOption, impl_->path + ": level " + std::to_string(l) +
                                                       ": the edit is too large to code: " + e.what());

@@ -1,6 +1,7 @@
-// libcodec format 6 (phase tiles of max-error streams, docs/codec.md "Phase tiles (format 6)"): the
+// libcodec format 7 (phase tiles of max-error streams, docs/codec.md "Phase tiles (format 7)"): the
 // bound at every sample (lossless included), the encoder's reconstruction, region decoding, the
-// version rules and damaged streams, on the residuals of a point-sampled pyramid.
+// version rules, the stream's token model (fitting, reuse for splicing, parsing), the static token
+// tables and rANS, and damaged streams, on the residuals of a point-sampled pyramid.
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -12,6 +13,8 @@
 #include "codec/codec.h"
 #include "codec/crc32c.h"
 #include "codec/internal/phase_coder.h"
+#include "codec/internal/rans.h"
+#include "codec/internal/token_tables.h"
 #include "stream_test_util.h"
 
 namespace {
@@ -95,7 +98,8 @@ TEST_CASE("phase tiles: region decodes equal the full decode", "[codec]") {
   codec_test::check_regions(s, img, recon);
 }
 
-TEST_CASE("format versions: 6 exactly with the phase flag, only in max-error streams", "[codec]") {
+TEST_CASE("format versions: 7 exactly with the phase flag, only in max-error streams; 6 unsupported",
+          "[codec]") {
   // One tile row, so codec_test::reseal works. Header: magic, u16 version, varints width (64), height (16),
   // tile / 16 (2), flags.
   const Image img = point_residual(64, 16, 4.0, 1, 5);
@@ -105,17 +109,24 @@ TEST_CASE("format versions: 6 exactly with the phase flag, only in max-error str
   const auto plain = encode(img, options(1, false), &recon);
   codec::HeaderInfo h;
   REQUIRE(codec::read_header(phase.data(), phase.size(), &h) == codec::Status::Ok);
-  CHECK(h.version == 6);
+  CHECK(h.version == 7);
   CHECK(h.phase_tiles);
+  CHECK(!h.phase_model.empty());
+  CHECK(h.phase_model.size() <= size_t(codec::detail::kPhaseModelBytes));
+  // Format 6 (the first phase tiles, adaptive binary coding) is retired: named, not misread.
+  std::vector<uint8_t> v6 = phase;
+  v6[4] = 6;
+  codec_test::reseal(v6);
+  CHECK(codec::read_header(v6.data(), v6.size(), &h) == codec::Status::UnsupportedVersion);
   REQUIRE(codec::read_header(plain.data(), plain.size(), &h) == codec::Status::Ok);
   CHECK(h.version == 5);
   CHECK(!h.phase_tiles);
   REQUIRE(phase[kFlags] == (1 | 4 | 8));  // max error, residual transform, phase tiles
 
-  std::vector<uint8_t> v6_without_flag = phase;
-  v6_without_flag[kFlags] = 1 | 4;
-  codec_test::reseal(v6_without_flag);
-  CHECK(codec::read_header(v6_without_flag.data(), v6_without_flag.size(), &h) == codec::Status::Corrupt);
+  std::vector<uint8_t> v7_without_flag = phase;
+  v7_without_flag[kFlags] = 1 | 4;
+  codec_test::reseal(v7_without_flag);
+  CHECK(codec::read_header(v7_without_flag.data(), v7_without_flag.size(), &h) == codec::Status::Corrupt);
   std::vector<uint8_t> v5_with_flag = plain;
   v5_with_flag[kFlags] = 1 | 4 | 8;
   codec_test::reseal(v5_with_flag);
@@ -143,17 +154,164 @@ TEST_CASE("phase tiles: every damaged byte is rejected, never a crash", "[codec]
     std::vector<uint8_t> cut(s.begin(), s.begin() + std::ptrdiff_t(n));
     CHECK(decode(cut, img, &out) != codec::Status::Ok);
   }
-  // The phase decoder itself on random payloads (what a forged stream with resealed CRCs reaches):
-  // it returns or rejects, stays in its buffers (ASan), and keeps accepted samples within +-2^30. (An
-  // arithmetic code accepts most byte strings: the stream's CRCs, checked above, catch damage.)
+  // The phase decoder itself on random payloads and models (what a forged stream with resealed CRCs
+  // reaches): it returns or rejects, stays in its buffers (ASan), and keeps accepted samples within
+  // +-2^30. Most random payloads fail the final-state check (the state must return to 1 with every
+  // word read); the stream's CRCs catch damage before a payload gets here.
   std::mt19937 rng(1);
-  std::vector<int32_t> recon_out(32 * 32), levels(codec::detail::phase_levels_size(32, 32));
+  std::vector<int32_t> recon_out(32 * 32);
+  codec::detail::PhaseWork work;
+  int accepted = 0;
   for (int k = 0; k < 2000; ++k) {
-    std::vector<uint8_t> payload(size_t(rng() % 64));
+    codec::detail::PhaseModel model;
+    for (int c = 0; c < codec::detail::kPhaseContexts; ++c) {
+      model.used[c] = rng() & 1;
+      model.member[c] = uint16_t(rng() % codec::detail::kFamilySize);
+    }
+    const codec::detail::PhaseTables tables(model);
+    std::vector<uint8_t> payload(size_t(1 + rng() % 64));
     for (uint8_t& b : payload) b = uint8_t(rng());
-    if (codec::detail::decode_phase(payload.data(), payload.size(), 32, 32, rng() % 4, recon_out.data(),
-                                    levels.data())) {
+    payload[0] = uint8_t(2 + rng() % 5);
+    if (codec::detail::decode_phase(payload.data(), payload.size(), 32, 32, rng() % 4, tables,
+                                    recon_out.data(), work)) {
+      ++accepted;
       for (int32_t v : recon_out) REQUIRE(std::abs(int64_t(v)) <= (int64_t(1) << 30));
     }
   }
+  CHECK(accepted < 200);  // measured: 64 of 2000
+}
+
+TEST_CASE("phase tiles: token tables are complete distributions built by integer arithmetic", "[codec]") {
+  using namespace codec::detail;
+  for (int i = 0; i < kFamilySize; ++i) {
+    const TokenTable& t = token_table(i);
+    REQUIRE(t.cum[kSymbols] == 4096);
+    REQUIRE(t.freq[kTokenEscape] >= 1);
+    REQUIRE(t.freq[0] >= 1);
+    for (int k = 0; k < kSymbols; ++k) REQUIRE(t.cum[k + 1] == t.cum[k] + t.freq[k]);
+    for (uint32_t s = 0; s < 4096; s += 7) {
+      const int k = t.slots[s];
+      REQUIRE((t.cum[k] <= s && s < t.cum[k] + t.freq[k]));
+    }
+  }
+  // Spot values: a change here changes every phase stream's decoding (a new format version).
+  CHECK(token_table(0).freq[0] == 21);
+  CHECK(token_table(kFamilySize - 1).freq[0] == 4086);
+  CHECK(token_table(7 * kMeanLevels + 10).freq[1] == 1034);
+  // Every magnitude up to 2^31 - 1 has a token and raw bits that rebuild it.
+  for (uint32_t m : {0u, 1u, 15u, 16u, 17u, 23u, 24u, 31u, 32u, 1000u, 65535u, (1u << 30) + 5, 0x7fffffffu}) {
+    int raw = 0;
+    const int t = token_of(m, &raw);
+    REQUIRE(t < kTokens);
+    if (t >= 16) {
+      int raw2 = 0;
+      const uint32_t base = token_base(t, &raw2);
+      CHECK(raw2 == raw);
+      CHECK((base | (m & ((1u << raw) - 1))) == m);
+    } else {
+      CHECK(uint32_t(t) == m);
+    }
+  }
+}
+
+TEST_CASE("phase tiles: rANS round trip with raw bits, from state 1", "[codec]") {
+  using namespace codec::detail;
+  std::mt19937 rng(3);
+  for (int n : {0, 1, 2, 10, 1000}) {
+    const TokenTable& t = token_table(int(rng() % kFamilySize));
+    RansEncoder enc;
+    std::vector<std::pair<int, uint32_t>> sent;  // symbol (or -bits for raw), value
+    for (int i = 0; i < n; ++i) {
+      if (rng() % 3 == 0) {
+        const int bits = int(1 + rng() % 31);
+        const uint32_t v = rng() & ((1u << bits) - 1);
+        enc.put_raw(v, bits);
+        sent.push_back({-bits, v});
+      } else {
+        int k = int(rng() % kSymbols);
+        while (t.freq[k] == 0) k = (k + 1) % kSymbols;
+        enc.put(t.cum[k], t.freq[k]);
+        sent.push_back({k, 0});
+      }
+    }
+    uint32_t state = 0;
+    std::vector<uint16_t> words;
+    enc.finish(&state, words);
+    std::vector<uint8_t> bytes;
+    for (uint16_t w : words) bytes.push_back(uint8_t(w)), bytes.push_back(uint8_t(w >> 8));
+    RansDecoder dec(state, bytes.data(), words.size());
+    for (const auto& [k, v] : sent) {
+      if (k < 0) {
+        REQUIRE(dec.raw(-k) == v);
+      } else {
+        const int got = t.slots[dec.slot()];
+        REQUIRE(got == k);
+        dec.advance(t.cum[got], t.freq[got]);
+      }
+    }
+    CHECK(dec.finished());
+  }
+}
+
+TEST_CASE("phase tiles: the stream's model is fitted, reused on request, and parsed strictly", "[codec]") {
+  const Image a = point_residual(128, 64, 3.0, 1, 21), b = point_residual(128, 64, 12.0, 1, 22);
+  std::vector<int32_t> recon_a, recon, out;
+  const auto sa = encode(a, options(1, true), &recon_a);
+  const auto sb = encode(b, options(1, true), &recon);
+  codec::HeaderInfo ha, hb;
+  REQUIRE(codec::read_header(sa.data(), sa.size(), &ha) == codec::Status::Ok);
+  REQUIRE(codec::read_header(sb.data(), sb.size(), &hb) == codec::Status::Ok);
+  CHECK(ha.phase_model != hb.phase_model);  // different scales, different members
+  // Different models cannot be spliced; b coded with a's model can, and decodes like its tiles.
+  std::vector<uint8_t> spliced;
+  const std::vector<uint8_t> half = {1, 0, 1, 0, 1, 0, 1, 0};  // 4 x 2 tiles of 32
+  CHECK(codec::splice_tiles(sa.data(), sa.size(), sb.data(), sb.size(), half, &spliced) ==
+        codec::Status::InvalidArgument);
+  codec::EncodeOptions o = options(1, true);
+  o.phase_model_stream = sa.data();
+  o.phase_model_stream_size = sa.size();
+  std::vector<int32_t> recon_b;
+  const auto sb_with_a = encode(b, o, &recon_b);
+  codec::HeaderInfo h;
+  REQUIRE(codec::read_header(sb_with_a.data(), sb_with_a.size(), &h) == codec::Status::Ok);
+  CHECK(h.phase_model == ha.phase_model);
+  CHECK(sb_with_a.size() >= sb.size());  // the fitted model is the better one
+  REQUIRE(codec::splice_tiles(sa.data(), sa.size(), sb_with_a.data(), sb_with_a.size(), half, &spliced) ==
+          codec::Status::Ok);
+  REQUIRE(decode(spliced, a, &out) == codec::Status::Ok);
+  for (int64_t y = 0; y < 64; ++y)
+    for (int64_t x = 0; x < 128; ++x) {
+      const size_t i = size_t(y * 128 + x);
+      const bool fresh = half[size_t((y / 32) * 4 + x / 32)] != 0;
+      REQUIRE(out[i] == (fresh ? recon_b : recon_a)[i]);
+      REQUIRE(std::llabs(int64_t(out[i]) - (fresh ? b : a).samples[i]) <= 1);
+    }
+  // A garbage model source is ignored (the model is fitted).
+  const uint8_t junk[5] = {1, 2, 3, 4, 5};
+  o.phase_model_stream = junk;
+  o.phase_model_stream_size = sizeof(junk);
+  CHECK(encode(b, o, &recon_b) == sb);
+
+  // Parsing: a member beyond the family or non-zero padding is rejected.
+  using namespace codec::detail;
+  PhaseModel m;
+  m.used[0] = true;
+  m.member[0] = kFamilySize - 1;
+  uint8_t bytes[kPhaseModelBytes];
+  const size_t n = write_phase_model(m, bytes);
+  CHECK(n == 8);  // 48 flag bits + 10 member bits, padded
+  const uint8_t* p = bytes;
+  PhaseModel back;
+  REQUIRE(read_phase_model(p, bytes + n, &back));
+  CHECK(back == m);
+  CHECK(p == bytes + n);
+  bytes[7] |= 1;  // padding
+  p = bytes;
+  CHECK(!read_phase_model(p, bytes + n, &back));
+  m.member[0] = 1023;
+  write_phase_model(m, bytes);
+  p = bytes;
+  CHECK(!read_phase_model(p, bytes + n, &back));
+  p = bytes;
+  CHECK(!read_phase_model(p, bytes + n - 1, &back));
 }

@@ -143,14 +143,18 @@ TEST_CASE("format versions: 5 exactly with the residual flag, lapped streams sta
   v4_with_flag[kFlags] = 4;
   reseal(v4_with_flag);
   CHECK(codec::read_header(v4_with_flag.data(), v4_with_flag.size(), &h) == codec::Status::Corrupt);
-  std::vector<uint8_t> v6 = lifted;  // version 6 needs the phase flag (and a max-error stream)
-  v6[4] = 6;
-  reseal(v6);
-  CHECK(codec::read_header(v6.data(), v6.size(), &h) == codec::Status::Corrupt);
-  std::vector<uint8_t> v7 = lifted;
+  std::vector<uint8_t> v7 = lifted;  // version 7 needs the phase flag (and a max-error stream)
   v7[4] = 7;
   reseal(v7);
-  CHECK(codec::read_header(v7.data(), v7.size(), &h) == codec::Status::UnsupportedVersion);
+  CHECK(codec::read_header(v7.data(), v7.size(), &h) == codec::Status::Corrupt);
+  std::vector<uint8_t> v6 = lifted;  // the retired first phase-tile format
+  v6[4] = 6;
+  reseal(v6);
+  CHECK(codec::read_header(v6.data(), v6.size(), &h) == codec::Status::UnsupportedVersion);
+  std::vector<uint8_t> v8 = lifted;
+  v8[4] = 8;
+  reseal(v8);
+  CHECK(codec::read_header(v8.data(), v8.size(), &h) == codec::Status::UnsupportedVersion);
   std::vector<uint8_t> v3 = lapped;
   v3[4] = 3;
   reseal(v3);

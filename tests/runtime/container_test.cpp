@@ -578,6 +578,29 @@ TEST_CASE("container version rules", "[runtime][container]") {
     put_f64(b, index + 264, 7.0);  // the 2.0 origin field no longer matches
     refused(b, "disagree");
   }
+  SECTION(
+      "3.2 files of point sampling (libcodec format-6 streams) are refused by name; other 3.2 files open") {
+    const size_t provenance_at = size_t(get_le(good, kSbIndexOffset, 8)) + 132;  // info::kFilterProvenance
+    for (uint32_t provenance : {0u, 2u, 3u}) {
+      std::vector<uint8_t> b = good;
+      put_le(b, kSbMinor, 2, 2);
+      put_le(b, provenance_at, provenance, 4);
+      reseal(b);
+      write_bytes(path, b);
+      if (provenance != 3) {
+        CHECK(Container::open(path).minor_version() == 2);
+        continue;
+      }
+      try {
+        Container::open(path);
+        FAIL("a 3.2 point-sampled file accepted");
+      } catch (const Error& e) {
+        CHECK(e.code() == ErrorCode::UnsupportedVersion);
+        CHECK_THAT(e.what(), Catch::Contains(path) && Catch::Contains("3.2") && Catch::Contains("format-6") &&
+                                 Catch::Contains("rebuild"));
+      }
+    }
+  }
   SECTION("a newer minor version of the same major is read") {
     std::vector<uint8_t> b = good;
     put_le(b, kSbMinor, kFormatMinor + 1, 2);
@@ -894,7 +917,7 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
   CHECK(get_le(b, kSbMajor, 2) == 3);
-  CHECK(get_le(b, kSbMinor, 2) == 2);
+  CHECK(get_le(b, kSbMinor, 2) == 3);
   CHECK(get_le(b, index + 0, 4) == 320);  // info size (2.1)
   CHECK(get_le(b, index + 8, 4) == 96);   // level record size
   const uint64_t level2 = index + kInfoBlock + 2 * 96;

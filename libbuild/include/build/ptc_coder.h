@@ -31,7 +31,7 @@ struct PtcCoderOptions {
   codec::Transform residual_transform = codec::Transform::Residual;
   int64_t band_rows = 0;  // 0: 4 tile rows per band
   // Max-error streams (bound_max_error, max_error 0 = lossless) may use libcodec's phase tiles (format
-  // 6): for pyramids whose D is point sampling, where a residual's even phase is within the bound.
+  // 7): for pyramids whose D is point sampling, where a residual's even phase is within the bound.
   bool phase_tiles = false;
 };
 
@@ -45,6 +45,11 @@ class PtcResidualCoder final : public ResidualCoder {
   // beyond libcodec's +-2^20 range).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
                               int levels_above_finest, bool coarsest) override;
+  // The same, coded so that its tiles can be spliced into `into` (into_size bytes, an existing stream
+  // of the same band; codec::EncodeOptions::phase_model_stream): for editors that re-code some tiles.
+  std::vector<uint8_t> encode_spliceable(const int32_t* residual, int64_t w, int64_t h,
+                                         int32_t* reconstructed, int levels_above_finest, bool coarsest,
+                                         const uint8_t* into, size_t into_size);
   // The step and max error a level gets (see screen_level_error).
   PtcCoderOptions level_options(int levels_above_finest) const;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;

@@ -43,13 +43,17 @@
 #include "core/rect.h"
 
 namespace codec {
+namespace detail {
+struct PhaseTables;
+}
 
 inline constexpr int32_t kMaxAbsSample = 1 << 20;  // largest |input sample| the coder accepts
-// Stream format versions: 5 adds the residual transform (EncodeOptions::transform), 6 the phase tiles
-// of max-error streams (EncodeOptions::phase_tiles); an encoder writes the lowest version that holds
-// what a stream uses (4 for lapped streams without phase tiles), so those keep the bytes of earlier
-// releases. Decoders read 4, 5 and 6.
-inline constexpr uint32_t kFormatVersion = 6;
+// Stream format versions: 5 adds the residual transform (EncodeOptions::transform), 7 the phase tiles
+// of max-error streams (EncodeOptions::phase_tiles) with static token tables and rANS; 6 held the
+// first phase tiles (adaptive binary coding, never in a release) and is rejected as unsupported. An
+// encoder writes the lowest version that holds what a stream uses (4 for lapped streams without phase
+// tiles), so those keep the bytes of earlier releases. Decoders read 4, 5 and 7.
+inline constexpr uint32_t kFormatVersion = 7;
 inline constexpr uint32_t kOldestFormatVersion = 4;
 
 // The transform of transform-mode tiles.
@@ -82,10 +86,17 @@ struct EncodeOptions {
   uint32_t tile_size = 64;       // tile side in samples: multiple of 16 in [16, 4096]
   Transform transform = Transform::Lapped;
   // Max-error streams only (E may be 0: lossless): tiles may also be coded by their four polyphase
-  // components, predicted from decoded neighbours (format 6). Made for the residuals of a pyramid whose
+  // components, predicted from decoded neighbours (format 7). Made for the residuals of a pyramid whose
   // coarse levels are the fine levels' even-even samples: their even phase is within +-E and costs no
-  // bits. The encoder picks the smallest mode per tile, so it never costs more than a byte per stream.
+  // bits. The encoder picks the smallest mode per tile; the stream's header names the static token
+  // distribution of each context (about 40 bytes), fitted to all of its tiles.
   bool phase_tiles = false;
+  // Phase tiles: code so that the tiles can be spliced into this stream (phase_model_stream_size
+  // bytes; splice_tiles requires one model): with its token distributions instead of fitted ones
+  // when it has phase tiles, without phase tiles when it has none. Untrusted input: a stream that
+  // does not open (read_header) is ignored.
+  const uint8_t* phase_model_stream = nullptr;
+  size_t phase_model_stream_size = 0;
 };
 
 // Step giving about `target_rms` sample-domain rms error (inverse of predicted_rms); never below 1.
@@ -102,7 +113,8 @@ struct HeaderInfo {
   int64_t tiles_x = 0, tiles_y = 0;  // tiles per row and column (the last ones may be partial)
   double step = 1.0;                 // as recorded (1/256 resolution)
   bool bound_max_error = false;      // a max-error stream
-  bool phase_tiles = false;          // format 6: its tiles may use the phase mode
+  bool phase_tiles = false;          // format 7: its tiles may use the phase mode
+  std::vector<uint8_t> phase_model;  // format 7 phase streams: the token model (docs/codec.md)
   uint32_t max_error = 0;            // its E (0 otherwise)
   int fraction_bits = 0;             // extra sample precision of the transform (0 = lossless)
   size_t index_offset = 0;           // byte offset of the tile index (it follows the payloads)
@@ -227,7 +239,8 @@ class Decoder {
   std::vector<TileEntry> index_;
   std::vector<RowChecksum> rows_;
   struct RowState;
-  std::unique_ptr<RowState> row_state_;  // which rows' CRCs have been verified
+  std::unique_ptr<RowState> row_state_;                      // which rows' CRCs have been verified
+  std::unique_ptr<const detail::PhaseTables> phase_tables_;  // phase streams: the model's tables
 };
 
 // Whole-image and one-shot region decodes (open + decode_region), with their statuses. decode

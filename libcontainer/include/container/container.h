@@ -47,9 +47,11 @@ using codec::crc32c_portable;
 // layout; its band streams may be libcodec format 5 (the residual transform), so 2.x readers must
 // refuse it; this reader reads 2.0-2.2 and 3.x. 3.1 adds filter provenance 2 (D is
 // DownsampleFilter::wavelet(), not stored); 3.0 readers refuse such a file ("unknown filter
-// provenance 2") and read every other 3.1 file.
+// provenance 2") and read every other 3.1 file. 3.2 adds provenance 3 (point sampling), whose band
+// streams are libcodec format 6; 3.3 replaces those by format 7 (phase tiles with static token
+// tables): this reader refuses 3.2 files of provenance 3 (rebuild them) and reads all other 3.x.
 inline constexpr uint16_t kFormatMajor = 3;
-inline constexpr uint16_t kFormatMinor = 2;
+inline constexpr uint16_t kFormatMinor = 3;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields

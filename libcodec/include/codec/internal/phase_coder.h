@@ -1,36 +1,86 @@
-// Phase-mode tiles (format 6): near-lossless coding of an interpolating pyramid's residual by its
-// four polyphase components, with a bound E (0 = lossless). docs/codec.md "Phase tiles (format 6)".
+// Phase-mode tiles (format 7): near-lossless coding of an interpolating pyramid's residual by its
+// four polyphase components, with a bound E (0 = lossless). docs/codec.md "Phase tiles (format 7)".
 //
 // A residual R = T_l - U(T^_{l-1}) of a pyramid whose coarse level is the fine level's even-even
 // samples (D = point sampling) is, at even-even positions, just the coarse level's own error, within
 // +-E: those samples need no bits (the "even phase skipped" flag). The other three phases are coded
 // in order (odd columns of even rows, even columns of odd rows, then odd-odd), each sample predicted
-// from its decoded neighbours, quantised with bins of 2E + 1 and coded by a binary adaptive range
-// coder whose contexts are the magnitudes of the decoded neighbours' levels. Tile origins must sit on
-// even level coordinates for the skipped phase to be the coarse one; any other tile is still coded
-// correctly (its even phase is then coded, not skipped).
+// from its decoded neighbours and quantised with bins of 2E + 1. A level's context is its phase and
+// the magnitude class of the decoded neighbours' levels; each context codes tokens with one static
+// distribution of the stream (token_tables.h), chosen by the encoder from the whole stream's
+// statistics and named in its header (PhaseModel), and the tokens and raw bits go through one rANS
+// state (rans.h). Tile origins must sit on even level coordinates for the skipped phase to be the
+// coarse one; any other tile is still coded correctly (its even phase is then coded, not skipped).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
+
+#include "codec/internal/rans.h"
+#include "codec/internal/token_tables.h"
 
 namespace codec::detail {
 
-// Largest payload (after the mode byte) a phase tile of w x h samples can produce.
+inline constexpr int kPhaseClasses = 12;                  // neighbour-activity classes per phase
+inline constexpr int kPhaseContexts = 4 * kPhaseClasses;  // context = phase * kPhaseClasses + class
+inline constexpr int kPhaseModelBytes = 6 + kPhaseContexts * 10 / 8;  // largest serialised model
+
+// Which member of the token family each context uses (used[c] false: no tile of the stream reached c).
+struct PhaseModel {
+  bool used[kPhaseContexts] = {};
+  uint16_t member[kPhaseContexts] = {};
+  bool operator==(const PhaseModel&) const = default;
+};
+
+// Token counts per context, gathered by phase_statistics over a stream's tiles.
+struct PhaseCounts {
+  uint32_t counts[kPhaseContexts][kTokens] = {};
+};
+
+// The model that codes `counts` in the fewest bits.
+PhaseModel fit_phase_model(const PhaseCounts& counts);
+// Serialised model (the 48-bit used mask, then 10 bits per used context's member, MSB first, padded to
+// a byte): writes at most kPhaseModelBytes to out and returns the size.
+size_t write_phase_model(const PhaseModel& model, uint8_t* out);
+// Parses a model at [p, end): advances p; false when it is truncated or names a member that does not exist.
+bool read_phase_model(const uint8_t*& p, const uint8_t* end, PhaseModel* model);
+
+// A model's tables, resolved for coding (unused contexts get member 0: a payload that reaches them
+// is malformed, and decodes to something the tile's checks reject or to wrong but bounded samples).
+struct PhaseTables {
+  const TokenTable* table[kPhaseContexts] = {};
+  explicit PhaseTables(const PhaseModel& model);
+};
+
+// Working memory of the phase coder (grown as needed).
+struct PhaseWork {
+  std::vector<int32_t> levels;  // context scratch, (w + 4) x (h + 4)
+  RansEncoder rans;
+  std::vector<uint16_t> words;
+};
+
+// Largest payload (mode byte included) a phase tile of w x h samples can produce.
 size_t phase_payload_bound(int w, int h);
-// Samples of the `levels` scratch that encode_phase and decode_phase need for a w x h tile.
-size_t phase_levels_size(int w, int h);
 
-// Codes the w x h samples at src (row stride `stride`) with |error| <= max_error into out[0 .. capacity).
-// Returns the size in bytes (may be 0 for a tile whose levels are all zero and skipped), or SIZE_MAX
-// when it does not fit or a sample cannot be represented. recon (w x h, row stride w) receives the
-// decoder's output; levels (phase_levels_size) is scratch.
-size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, uint8_t* out,
-                    size_t capacity, int32_t* recon, int32_t* levels);
+// Adds the token counts of coding the w x h samples at src (row stride `stride`) with bound max_error
+// to *counts; recon (w x h) is scratch. False when a sample cannot be represented.
+bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, int32_t* recon,
+                      PhaseWork& work, PhaseCounts* counts);
 
-// Decodes a phase payload into recon (w x h, row stride w); levels (phase_levels_size) is scratch. False when
-// the payload is damaged (a sample out of range, an impossible code).
-bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_error, int32_t* recon,
-                  int32_t* levels);
+// Codes the w x h samples at src with |error| <= max_error into out[0 .. capacity), mode byte first.
+// Returns the size in bytes, or SIZE_MAX when it does not fit or a sample cannot be represented.
+// recon (w x h, row stride w) receives the decoder's output.
+size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error,
+                    const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
+                    PhaseWork& work);
+
+// Whether a tile's mode byte is a phase tile's.
+bool is_phase_mode(uint8_t mode);
+
+// Decodes a phase payload (mode byte first) into recon (w x h, row stride w). False when the payload
+// is damaged (a sample out of range, an impossible code, a final state other than 1).
+bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_error,
+                  const PhaseTables& tables, int32_t* recon, PhaseWork& work);
 
 }  // namespace codec::detail

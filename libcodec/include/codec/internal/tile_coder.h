@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "codec/internal/phase_coder.h"
 #include "codec/internal/quantizer.h"
 
 namespace codec::detail {
@@ -14,7 +15,8 @@ namespace codec::detail {
 enum class TileMode : uint8_t {
   Transform = 0,         // lapped transform at the stream's band steps (+ corrections if bounded)
   SpatialQuantized = 1,  // max-error mode only: samples quantised with step 2E+1, coded losslessly
-  Phase = 2,             // format 6 max-error streams: polyphase near-lossless coding (phase_coder.h)
+  Phase = 2,             // format 7 max-error streams: polyphase near-lossless coding (phase_coder.h);
+                         // modes 2 .. 6 are all phase tiles (the mode carries the rANS state's size)
 };
 
 struct TileParams {
@@ -27,7 +29,8 @@ struct TileParams {
   int fraction_bits = 0;  // extra sample precision of transform-mode tiles (0 = lossless)
   bool bound_max_error = false;
   uint32_t max_error = 0;
-  bool phase = false;  // format 6: tiles may use TileMode::Phase (max-error streams only)
+  bool phase = false;  // format 7: tiles may use TileMode::Phase (max-error streams only)
+  const PhaseTables* phase_tables = nullptr;  // the stream's model (set whenever phase is)
 };
 
 // Where the LP and HP values of a padded_width x padded_height tile land, in coding order: tile
@@ -53,7 +56,7 @@ struct TileWork {
   std::vector<uint8_t> second;           // the second transform's payload
   std::vector<uint8_t> phase_payload;    // the phase-mode candidate (mode byte included)
   std::vector<int32_t> phase_recon;      // its reconstruction (width x height)
-  std::vector<int32_t> phase_levels;     // the phase coder's context scratch (phase_levels_size)
+  PhaseWork phase_work;                  // the phase coder's scratch
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
   // window and needs none.
   void reserve(int padded_width, int padded_height, size_t reconstruction_samples, size_t payload_bound);
