@@ -45,15 +45,14 @@ struct EncodeIo {
     const TokenTable& t = *tables.table[context];
     const uint32_t m = uint32_t(q < 0 ? -q : q);
     int raw = 0;
-    const int token = token_of(m, &raw);
-    if (t.freq[token]) {
-      rans.put(t.cum[token], t.freq[token]);
+    const int symbol = symbol_of(token_of(m, &raw), q);
+    if (t.freq[symbol]) {
+      rans.put(t.cum[symbol], t.freq[symbol]);
     } else {
       rans.put(t.cum[kTokenEscape], t.freq[kTokenEscape]);
-      rans.put_raw(uint32_t(token), kTokenEscapeBits);
+      rans.put_raw(uint32_t(symbol), kTokenEscapeBits);
     }
     if (raw) rans.put_raw(m, raw);
-    if (m) rans.put_raw(q < 0, 1);
     return q;
   }
 };
@@ -64,25 +63,32 @@ struct DecodeIo {
   RansDecoder rans;
   bool bad = false;
   bool flag(bool) { return rans.raw(1) != 0; }
-  int64_t level(int context, int64_t) {
+  [[gnu::always_inline]] int64_t level(int context, int64_t) {
     const TokenTable& t = *tables.table[context];
-    int token = t.slots[rans.slot()];
-    rans.advance(t.cum[token], t.freq[token]);
-    if (token == 0) return 0;
-    if (token == kTokenEscape) {
-      token = int(rans.raw(kTokenEscapeBits));
-      if (token >= kTokens) {
+    const uint32_t slot = rans.slot();
+    const int symbol = t.slots[slot];
+    const uint32_t fc = t.freq_cum[symbol];
+    rans.step(fc & 0xffff, slot - (fc >> 16));
+    if (symbol >= kSmallSymbols) return large_level(symbol);
+    const int64_t m = (symbol + 1) >> 1;
+    return symbol & 1 ? m : -m;
+  }
+  // Symbols with raw bits, and the escape.
+  [[gnu::noinline]] int64_t large_level(int symbol) {
+    if (symbol == kTokenEscape) {
+      symbol = int(rans.raw(kTokenEscapeBits));
+      if (symbol >= kTokenEscape) {
         bad = true;
         return 0;
       }
     }
-    uint32_t m = uint32_t(token);
+    const int token = (symbol + 1) >> 1;
+    int64_t m = token;
     if (token >= 16) {
       int raw = 0;
-      m = token_base(token, &raw);
-      m |= rans.raw(raw);
+      m = token_base(token, &raw) | rans.raw(raw);
     }
-    return rans.raw(1) ? -int64_t(m) : int64_t(m);
+    return symbol & 1 ? m : -m;
   }
 };
 
@@ -94,7 +100,7 @@ constexpr int kBorder = 2;
 
 // Activity around the sample at `l` (row stride s): the level magnitudes of the 8 neighbours and the
 // two at distance 2 to the left and above.
-int context_class(const int32_t* l, ptrdiff_t s) {
+[[gnu::always_inline]] inline int context_class(const int32_t* l, ptrdiff_t s) {
   const uint32_t a = uint32_t(l[-s - 1]) + uint32_t(l[-s]) + uint32_t(l[-s + 1]) + uint32_t(l[-1]) +
                      uint32_t(l[1]) + uint32_t(l[s - 1]) + uint32_t(l[s]) + uint32_t(l[s + 1]) +
                      uint32_t(l[-2]) + uint32_t(l[-2 * s]);
@@ -102,7 +108,8 @@ int context_class(const int32_t* l, ptrdiff_t s) {
 }
 
 // Prediction of (x, y) in `phase` from decoded samples (recon, row stride w).
-template <int phase> int64_t predict(const int32_t* r, int w, int h, int x, int y) {
+template <int phase>
+[[gnu::always_inline]] inline int64_t predict(const int32_t* r, int w, int h, int x, int y) {
   const auto at = [&](int xx, int yy) { return int64_t(r[size_t(yy) * w + xx]); };
   switch (phase) {
     case 0: {  // even-even, when coded: MED of its even-even neighbours
@@ -116,18 +123,18 @@ template <int phase> int64_t predict(const int32_t* r, int w, int h, int x, int 
     }
     case 1: {  // odd column, even row: between its left and right neighbours
       const int64_t a = at(x - 1, y), b = x + 1 < w ? at(x + 1, y) : a;
-      return floor_div(a + b, 2);
+      return (a + b) >> 1;  // floor
     }
     case 2: {  // even column, odd row: between the rows above and below
       const int64_t a = at(x, y - 1), b = y + 1 < h ? at(x, y + 1) : a;
-      return floor_div(a + b, 2);
+      return (a + b) >> 1;  // floor
     }
     default: {  // odd-odd: the mean of its four direct neighbours (phases 1 and 2), rounded half up
       int64_t sum = at(x - 1, y) + at(x, y - 1);
       int n = 2;
       if (x + 1 < w) sum += at(x + 1, y), ++n;
       if (y + 1 < h) sum += at(x, y + 1), ++n;
-      return floor_div(2 * sum + n, 2 * n);
+      return n == 4 ? (2 * sum + 4) >> 3 : floor_div(2 * sum + n, 2 * n);  // floor either way
     }
   }
 }

@@ -51,8 +51,9 @@ void fill(TokenTable& t, int member) {
     }
     mass[k] = power_q32(theta, lo - 1) - power_q32(theta, hi - 1);
   }
-  // Token 0 gets its frequency, the escape one slot, every other token its share of the rest
-  // (rounded down: possibly none); the rounding remainder goes to the heaviest token.
+  // Level 0 gets its frequency, the escape one slot, every other token its share of the rest
+  // (rounded down: possibly none), split between its signs (the odd slot to the positive one); the
+  // rounding remainder goes to the heaviest token's positive symbol.
   t.freq[0] = kZeroFreq[z];
   t.freq[kTokenEscape] = 1;
   const uint64_t rest = kOne - kZeroFreq[z] - 1;
@@ -60,16 +61,24 @@ void fill(TokenTable& t, int member) {
   int heaviest = 1;
   for (int k = 1; k < kTokens; ++k) {
     const uint64_t share = uint64_t((u128(mass[k]) * rest) >> 32);
-    t.freq[k] = uint16_t(share);
+    t.freq[2 * k - 1] = uint16_t((share + 1) / 2);
+    t.freq[2 * k] = uint16_t(share / 2);
     used += share;
     if (mass[k] > mass[heaviest]) heaviest = k;
   }
-  t.freq[heaviest] = uint16_t(t.freq[heaviest] + (rest - used));
+  t.freq[2 * heaviest - 1] = uint16_t(t.freq[2 * heaviest - 1] + (rest - used));
   t.cum[0] = 0;
-  for (int k = 0; k < kSymbols; ++k) t.cum[k + 1] = uint16_t(t.cum[k] + t.freq[k]);
+  for (int k = 0; k < kSymbols; ++k) {
+    t.cum[k + 1] = uint16_t(t.cum[k] + t.freq[k]);
+    t.freq_cum[k] = t.freq[k] | uint32_t(t.cum[k]) << 16;
+  }
+  // A token's cost: its two symbols' mean (a fair sign), an escape where a symbol has no slot.
   const double escape_bits = kTokenProbBits + kTokenEscapeBits;
-  for (int k = 0; k < kTokens; ++k)
-    t.cost[k] = float(t.freq[k] ? kTokenProbBits - std::log2(double(t.freq[k])) : escape_bits);
+  const auto bits = [&](int s) {
+    return t.freq[s] ? kTokenProbBits - std::log2(double(t.freq[s])) : escape_bits;
+  };
+  t.cost[0] = float(bits(0));
+  for (int k = 1; k < kTokens; ++k) t.cost[k] = float(0.5 * (bits(2 * k - 1) + bits(2 * k)));
 }
 
 struct Family {

@@ -192,12 +192,14 @@ TEST_CASE("phase tiles: token tables are complete distributions built by integer
     for (uint32_t s = 0; s < 4096; s += 7) {
       const int k = t.slots[s];
       REQUIRE((t.cum[k] <= s && s < t.cum[k] + t.freq[k]));
+      REQUIRE(t.freq_cum[k] == (t.freq[k] | uint32_t(t.cum[k]) << 16));
     }
   }
   // Spot values: a change here changes every phase stream's decoding (a new format version).
   CHECK(token_table(0).freq[0] == 21);
   CHECK(token_table(kFamilySize - 1).freq[0] == 4086);
-  CHECK(token_table(7 * kMeanLevels + 10).freq[1] == 1034);
+  CHECK(token_table(7 * kMeanLevels + 10).freq[1] == 523);  // +1: half of its share, and the remainder
+  CHECK(token_table(7 * kMeanLevels + 10).freq[2] == 511);  // -1: the other half
   // Every magnitude up to 2^31 - 1 has a token and raw bits that rebuild it.
   for (uint32_t m : {0u, 1u, 15u, 16u, 17u, 23u, 24u, 31u, 32u, 1000u, 65535u, (1u << 30) + 5, 0x7fffffffu}) {
     int raw = 0;

@@ -67,8 +67,10 @@ class RansDecoder {
   RansDecoder(uint32_t state, const uint8_t* p, size_t count) : x_(state), p_(p), end_(p + 2 * count) {}
   uint32_t slot() const { return x_ & ((1u << kRansProbBits) - 1); }
   // Consumes the symbol whose slot range holds slot() (cum <= slot < cum + freq).
-  void advance(uint32_t cum, uint32_t freq) {
-    x_ = freq * (x_ >> kRansProbBits) + slot() - cum;
+  void advance(uint32_t cum, uint32_t freq) { step(freq, slot() - cum); }
+  // The same with the symbol's frequency and slot() - cum given.
+  void step(uint32_t freq, uint32_t offset) {
+    x_ = freq * (x_ >> kRansProbBits) + offset;
     renormalise();
   }
   // n (0 .. 32) raw bits, most significant chunk first.
@@ -91,11 +93,14 @@ class RansDecoder {
     renormalise();
     return v;
   }
+  // Without a branch: whether a word is read is as unpredictable as the data.
   void renormalise() {
-    if (x_ < kRansLow && p_ != end_) {
-      x_ = (x_ << 16) | uint32_t(p_[0]) | uint32_t(p_[1]) << 8;
-      p_ += 2;
-    }
+    static constexpr uint8_t kNone[2] = {0, 0};
+    const bool read = x_ < kRansLow && p_ != end_;
+    const uint8_t* q = read ? p_ : kNone;
+    const uint32_t next = (x_ << 16) | uint32_t(q[0]) | uint32_t(q[1]) << 8;
+    x_ = read ? next : x_;
+    p_ += read ? 2 : 0;
   }
   uint32_t x_;
   const uint8_t* p_;
