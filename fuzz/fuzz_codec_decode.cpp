@@ -41,6 +41,12 @@ void fix_checksums(std::vector<uint8_t>& s) {
   for (uint64_t* field : {&w, &h, &tile16, &flags, &step})
     if (!get_varint(s, p, field)) return;
   if ((flags & 1) && !get_varint(s, p, &e)) return;
+  if ((flags & 8) && s.size() >= 8 && s[4] == 7) {  // format 7 phase model: 48 used bits, 10 per used one
+    if (p + 6 > s.size()) return;
+    int used = 0;
+    for (int i = 0; i < 6; ++i) used += __builtin_popcount(s[p + size_t(i)]);
+    p += size_t(48 + 10 * used + 7) / 8;
+  }
   if (!get_varint(s, p, &payload)) return;
   const size_t data_offset = p;
   if (payload > s.size() || s.size() - payload < data_offset + 5 || tile16 == 0 || tile16 > (1u << 20) ||
@@ -95,7 +101,7 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
 
 // A small image from the input bytes, encoded with options the bytes choose: data[1], data[2] the
 // size, data[3] bits 0-1 the tile size, bit 2 the residual transform (format 5), bits 3-5 a lossy
-// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 6: max-error mode with E = the
+// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 7: max-error mode with E = the
 // lossy setting, 0 = lossless). The decoder must reproduce the encoder's reconstruction
 // exactly (the input itself when lossless). Returns the stream.
 std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
