@@ -103,7 +103,7 @@ constexpr int kBorder = 2;
 [[gnu::always_inline]] inline int context_class(const int32_t* l, ptrdiff_t s) {
   const uint32_t a = uint32_t(l[-s - 1]) + uint32_t(l[-s]) + uint32_t(l[-s + 1]) + uint32_t(l[-1]) +
                      uint32_t(l[1]) + uint32_t(l[s - 1]) + uint32_t(l[s]) + uint32_t(l[s + 1]) +
-                     uint32_t(l[-2]) + uint32_t(l[-2 * s]);
+                     uint32_t(l[-2 * s - 2]) + uint32_t(l[-2 * s]) + uint32_t(l[-2 * s + 2]);
   return std::min(kPhaseClasses - 1, int(std::bit_width(a)));
 }
 
