@@ -101,9 +101,9 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
 
 // A small image from the input bytes, encoded with options the bytes choose: data[1], data[2] the
 // size, data[3] bits 0-1 the tile size, bit 2 the residual transform (format 5), bits 3-5 a lossy
-// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 7: max-error mode with E = the
-// lossy setting, 0 = lossless). The decoder must reproduce the encoder's reconstruction
-// exactly (the input itself when lossless). Returns the stream.
+// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 7: with bit 6 or when lossless,
+// max-error mode with E = the lossy setting; else bins of the step). The decoder must reproduce the encoder's
+// reconstruction exactly (the input itself when lossless). Returns the stream.
 std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
   const int64_t w = 1 + data[1] % 40, h = 1 + data[2] % 40;
   codec::EncodeOptions o;
@@ -113,10 +113,12 @@ std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scr
   o.step = lossy ? 1.5 * lossy : 1.0;
   o.bound_max_error = lossy && (data[3] & 64);
   o.max_error = o.bound_max_error ? uint32_t(lossy) : 0;
-  if (data[3] & 128) {
-    o.phase_tiles = true;
-    o.bound_max_error = true;
-    o.max_error = uint32_t(lossy);
+  if (data[3] & 128) {     // phase tiles: max-error (E = the lossy setting) or, with bit 6 clear and a
+    o.phase_tiles = true;  // lossy setting, an rms stream whose bins are the (real-valued) step
+    if (!lossy || (data[3] & 64)) {
+      o.bound_max_error = true;
+      o.max_error = uint32_t(lossy);
+    }
   }
   std::vector<int32_t> img(size_t(w * h)), recon(img.size());
   for (size_t i = 0; i < img.size(); ++i) {

@@ -298,8 +298,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.level_count = o.levels;
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  const bool bounded = o.mode == ErrorMode::MaxError || o.mode == ErrorMode::Lossless;
-  const DownsampleChoice d = resolved_downsample(o);
+  DownsampleChoice d = resolved_downsample(o);  // at an rms target, Auto is settled by the calibration
   if (d == DownsampleChoice::Wavelet || d == DownsampleChoice::Point) {
     bo.use_fixed_filter = true;
     bo.fixed_filter =
@@ -342,6 +341,9 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   PtcCoderOptions co;
   co.tile_size = o.tile_size;
   co.screen_level_error = o.screen_level_error;
+  // Point sampling: every level's residual is coded by phase tiles (the even phase is the coarse
+  // level's error), bounded or with the step as a real-valued bin; the calibration trials too.
+  co.phase_tiles = d == DownsampleChoice::Point;
   const auto t_cal = std::chrono::steady_clock::now();
   switch (o.mode) {
     case ErrorMode::Lossless:
@@ -369,34 +371,66 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       // result is the largest step whose rms is within 2% above the target or below it: smooth or
       // flat terrain, whose rms stays 0 up to a large step and then jumps, must not be given a step
       // that overshoots the target.
-      Trial below{}, above{};  // largest step meeting the target; smallest step missing it
-      bool have_below = false, have_above = false;
-      double step = std::clamp(codec::step_for_target_rms(target), 1.0, kLargestStep);
-      for (int i = 0; i < 10; ++i) {
-        co.step = step;
-        const Trial t = trial_build(window, bo, co, window_filters);
-        out.calibration_log.push_back("step " + std::to_string(t.step) + " units: rms " +
-                                      std::to_string(t.rms * mpu) + " m, " + std::to_string(t.bytes) +
-                                      " bytes");
-        if (progress) progress("calibrating step", (i + 1) / 10.0);
-        if (t.rms <= 1.02 * target) {
-          if (!have_below || t.step > below.step) below = t, have_below = true;
-        } else if (!have_above || t.step < above.step) {
-          above = t, have_above = true;
+      // Returns the chosen trial and whether it meets the target.
+      const auto calibrate = [&](const BuildOptions& cbo, PtcCoderOptions cco,
+                                 std::vector<std::optional<DownsampleFilter>>& filters, const char* label,
+                                 double progress_from) {
+        Trial below{}, above{};  // largest step meeting the target; smallest step missing it
+        bool have_below = false, have_above = false;
+        double step = std::clamp(codec::step_for_target_rms(target), 1.0, kLargestStep);
+        for (int i = 0; i < 10; ++i) {
+          cco.step = step;
+          const Trial t = trial_build(window, cbo, cco, filters);
+          out.calibration_log.push_back(std::string(label) + "step " + std::to_string(t.step) +
+                                        " units: rms " + std::to_string(t.rms * mpu) + " m, " +
+                                        std::to_string(t.bytes) + " bytes");
+          if (progress) progress("calibrating step", progress_from + (i + 1) / 20.0);
+          if (t.rms <= 1.02 * target) {
+            if (!have_below || t.step > below.step) below = t, have_below = true;
+          } else if (!have_above || t.step < above.step) {
+            above = t, have_above = true;
+          }
+          if (std::abs(t.rms / target - 1) < 0.02 || (step <= 1 && t.rms <= target)) break;
+          const double previous = step;
+          if (have_below && have_above) {
+            if (above.step / below.step < 1.03) break;
+            step = std::sqrt(below.step * above.step);
+          } else {
+            const double ratio = t.rms > 0 ? target / t.rms : 4.0;
+            step = std::clamp(step * std::clamp(ratio, 0.5, 4.0), 1.0, kLargestStep);
+          }
+          if (step == previous) break;
         }
-        if (std::abs(t.rms / target - 1) < 0.02 || (step <= 1 && t.rms <= target)) break;
-        const double previous = step;
-        if (have_below && have_above) {
-          if (above.step / below.step < 1.03) break;
-          step = std::sqrt(below.step * above.step);
-        } else {
-          const double ratio = t.rms > 0 ? target / t.rms : 4.0;
-          step = std::clamp(step * std::clamp(ratio, 0.5, 4.0), 1.0, kLargestStep);
-        }
-        if (step == previous) break;
+        return std::pair<Trial, bool>(have_below ? below : above, have_below);
+      };
+      if (o.downsample != DownsampleChoice::Auto) {
+        co.step = calibrate(bo, co, window_filters, "", 0.5).first.step;
+        break;
       }
-      const Trial best = have_below ? below : above;
-      co.step = best.step;
+      // The default D at an rms target: whichever of the wavelet D (its residuals coded by the
+      // transforms) and point sampling (phase tiles with the step as a real-valued bin) the calibration
+      // windows code in fewer bytes at the target. Neither wins everywhere: point sampling is 4-14 %
+      // smaller on rough terrain at 1-2 m and 2-3x larger on flat plains (docs/pyramid.md).
+      const auto [wavelet, wavelet_met] = calibrate(bo, co, window_filters, "D wavelet: ", 0.0);
+      BuildOptions point_bo = bo;
+      point_bo.use_fixed_filter = true;
+      point_bo.fixed_filter = DownsampleFilter::impulse();
+      PtcCoderOptions point_co = co;
+      point_co.phase_tiles = true;
+      std::vector<std::optional<DownsampleFilter>> point_filters;
+      const Trial point = calibrate(point_bo, point_co, point_filters, "D point: ", 0.5).first;
+      // On integer heights a real-valued bin's rms moves in jumps (bins of 3.2 and 3.5 samples round
+      // the same residuals differently): point sampling must come within 5 % of the target, or the
+      // wavelet D's smooth step-rms curve is kept (Provence at 1 m: 0.875 m, -12.5 %).
+      const bool point_close = std::abs(point.rms / target - 1) <= 0.05;
+      if (point_close && (point.bytes < wavelet.bytes || !wavelet_met)) {
+        bo = point_bo;
+        co = point_co;
+        co.step = point.step;
+        d = DownsampleChoice::Point;
+      } else {
+        co.step = wavelet.step;
+      }
       break;
     }
     case ErrorMode::MaxError: {
@@ -433,11 +467,10 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   std::vector<Heightmap>().swap(window);  // calibrated: the build does not need the sample
 
   const auto t_build = std::chrono::steady_clock::now();
-  if (d == DownsampleChoice::Point && bounded) {
-    // Lossless streams become max-error streams with E = 0, which may hold phase tiles.
-    co.phase_tiles = true;
-    if (o.mode == ErrorMode::Lossless) co.bound_max_error = true, co.max_error = 0;
-  }
+  // Lossless point-sampled streams become max-error streams with E = 0 (their phase tiles beside the
+  // other modes: the coarsest level keeps the transform).
+  if (d == DownsampleChoice::Point && o.mode == ErrorMode::Lossless)
+    co.bound_max_error = true, co.max_error = 0;
   PtcResidualCoder coder(co);
   const int rank = o.group ? o.group->rank() : 0;
   std::optional<PyramidFileWriter> writer;

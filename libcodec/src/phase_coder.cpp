@@ -140,9 +140,14 @@ template <int phase>
 }
 
 template <class Io>
-bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, int32_t* recon,
+bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                int32_t* levels) {
-  const int64_t e = max_error, bin = 2 * e + 1;
+  // Bins of bin_q8 / 256 samples: q = sign(r) floor((256 |r| + bin_q8 / 2) / bin_q8), output
+  // p + sign(q) floor((|q| bin_q8 + 128) / 256). With bin_q8 = 256 (2E + 1) that is exactly
+  // floor((|r| + E) / (2E + 1)) and p + q (2E + 1): |error| <= E.
+  // e: the largest error of a quantised sample, which an even sample may have to be skipped: half a
+  // bin, plus the output's rounding when the bin is not a whole number of samples.
+  const int64_t bin = bin_q8, e = bin_q8 % 256 == 0 ? bin_q8 >> 9 : (bin_q8 + 256) >> 9;
   const ptrdiff_t ls = w + 2 * kBorder;
   std::memset(levels, 0, size_t(ls) * size_t(h + 2 * kBorder) * sizeof(int32_t));
   int32_t* const level0 = levels + kBorder * ls + kBorder;  // (0, 0)
@@ -169,10 +174,11 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
         int64_t q = 0;
         if (!Io::kDecoding) {
           const int64_t r = int64_t(src[y * stride + x]) - p;
-          q = r >= 0 ? (r + e) / bin : -((-r + e) / bin);
+          q = r >= 0 ? (256 * r + bin / 2) / bin : -((-256 * r + bin / 2) / bin);
         }
         q = io.level(context, q);
-        const int64_t v = p + q * bin;
+        const int64_t step = ((q < 0 ? -q : q) * bin + 128) >> 8;
+        const int64_t v = q < 0 ? p - step : p + step;
         if (io.bad || v < -kLimit || v > kLimit) return false;
         *out = int32_t(v);
         *l = int32_t(std::min<int64_t>(q < 0 ? -q : q, 1 << 20));
@@ -260,20 +266,20 @@ bool is_phase_mode(uint8_t mode) {
   return mode >= kPhaseModeFirst && mode <= kPhaseModeFirst + kMaxStateBytes;
 }
 
-bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, int32_t* recon,
+bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                       PhaseWork& work, PhaseCounts* counts) {
   if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
   CountIo io{counts};
-  return code_tile(io, src, stride, w, h, max_error, recon, work.levels.data());
+  return code_tile(io, src, stride, w, h, bin_q8, recon, work.levels.data());
 }
 
-size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error,
+size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
                     const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
                     PhaseWork& work) {
   if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
   work.rans.clear();
   EncodeIo io{tables, work.rans};
-  if (!code_tile(io, src, stride, w, h, max_error, recon, work.levels.data())) return SIZE_MAX;
+  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work.levels.data())) return SIZE_MAX;
   uint32_t state = 0;
   work.rans.finish(&state, work.words);
   const int state_bytes = state == 1 ? 0 : (std::bit_width(state) + 7) / 8;
@@ -289,8 +295,8 @@ size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t
   return size;
 }
 
-bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_error,
-                  const PhaseTables& tables, int32_t* recon, PhaseWork& work) {
+bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t bin_q8, const PhaseTables& tables,
+                  int32_t* recon, PhaseWork& work) {
   if (size < 1 || !is_phase_mode(data[0])) return false;
   const size_t state_bytes = size_t(data[0] - kPhaseModeFirst);
   if (size < 1 + state_bytes || (size - 1 - state_bytes) % 2 != 0) return false;
@@ -302,7 +308,7 @@ bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_e
   }
   if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
   DecodeIo io{tables, RansDecoder(state, data + 1 + state_bytes, (size - 1 - state_bytes) / 2)};
-  return code_tile(io, nullptr, 0, w, h, max_error, recon, work.levels.data()) && io.rans.finished();
+  return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work.levels.data()) && io.rans.finished();
 }
 
 }  // namespace codec::detail

@@ -217,17 +217,17 @@ namespace {
 // The phase model fitted to the tiles of an image: every non-empty tile coded in the phase mode for
 // its token counts (whether or not the tile ends up in that mode).
 detail::PhaseModel phase_model_of(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
-                                  int64_t t, uint32_t max_error, Scratch& scratch) {
+                                  int64_t t, uint32_t bin_q8, int64_t empty_limit, Scratch& scratch) {
   detail::TileWork& work = scratch.impl().work;
   auto counts = std::make_unique<detail::PhaseCounts>();
   for (int64_t ty = 0; ty * t < height; ++ty)
     for (int64_t tx = 0; tx * t < width; ++tx) {
       const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
       const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-      if (within(tile_src, src_stride, tw, th, max_error)) continue;
+      if (within(tile_src, src_stride, tw, th, empty_limit)) continue;
       if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
-      detail::phase_statistics(tile_src, src_stride, tw, th, max_error, work.phase_recon.data(),
-                               work.phase_work, counts.get());
+      detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(), work.phase_work,
+                               counts.get());
     }
   return detail::fit_phase_model(*counts);
 }
@@ -269,7 +269,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.lambda = 6.0 / (std::log(2.0) * step * step);
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
-  params.phase = options.bound_max_error && options.phase_tiles;
+  params.phase = options.phase_tiles;
+  params.phase_bin_q8 = options.bound_max_error ? 256 * (2 * params.max_error + 1) : step_q8;
   detail::PhaseModel model;
   bool given_model = false;
   if (params.phase) {
@@ -282,7 +283,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       if (given_model && !detail::read_phase_model(p, p + given.phase_model.size(), &model))
         return Status::InvalidArgument;  // read_header checked it: cannot happen
     } else {
-      model = phase_model_of(src, src_stride, width, height, options.tile_size, params.max_error, scratch);
+      model = phase_model_of(src, src_stride, width, height, options.tile_size, params.phase_bin_q8,
+                             params.max_error, scratch);
     }
   }
   const detail::PhaseTables tables(model);
@@ -397,9 +399,8 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
                          (version >= kPhaseVersion ? kFlagPhase : 0);
   const bool phase = (flags & kFlagPhase) != 0;
   if ((flags & ~known) != 0 || (version == 5) != ((flags & kFlagResidual) != 0 && !phase) ||
-      (version == kPhaseVersion) != phase || (phase && !(flags & kFlagBoundMaxError)) ||
-      step_q8 < detail::kStepOne || step_q8 > uint64_t(kMaxAbsSample) * 256u ||
-      max_error > uint64_t(kMaxAbsSample))
+      (version == kPhaseVersion) != phase || step_q8 < detail::kStepOne ||
+      step_q8 > uint64_t(kMaxAbsSample) * 256u || max_error > uint64_t(kMaxAbsSample))
     return Status::Corrupt;
   // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
   // (A decoder cannot tell whether the encoder's samples were fine-range; either value decodes safely.)
@@ -554,6 +555,8 @@ Status Decoder::decode_into(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride
   params.max_error = header_.max_error;
   params.phase = header_.phase_tiles;
   params.phase_tables = phase_tables_.get();
+  params.phase_bin_q8 = header_.bound_max_error ? 256 * (2 * header_.max_error + 1)
+                                                : uint32_t(std::lround(header_.step * 256.0));
   detail::TileWork& work = scratch.impl().work;
   const int64_t t = header_.tile_size;
   const int64_t tx0 = rect.x0 / t, tx1 = (rect.x0 + rect.width - 1) / t;

@@ -592,6 +592,11 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
                    TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
   work.reserve(padded_side(w), padded_side(h), size_t(w) * h,
                params.bound_max_error || params.lifting ? tile_payload_bound(w, h) : 0);
+  if (params.phase && !params.bound_max_error) {  // every tile a phase tile
+    const size_t size = encode_phase(src, src_stride, w, h, params.phase_bin_q8, *params.phase_tables, out,
+                                     capacity, work.reconstruction.data(), work.phase_work);
+    return size == SIZE_MAX ? 0 : size;
+  }
   if (params.lifting && !params.bound_max_error)
     return encode_either_transform(src, src_stride, w, h, params, work, out, capacity);
   if (!params.bound_max_error)
@@ -605,14 +610,14 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
       params.lifting ? encode_either_transform(src, src_stride, w, h, params, work, out, capacity)
                      : encode_transform(src, src_stride, w, h, params, work, out, capacity, true, false);
   size_t best = transform > 0 && transform <= spatial ? transform : spatial;
-  if (params.phase) {  // format 6: the phase mode when it is smaller still
+  if (params.phase) {  // format 7: the phase mode when it is smaller still
     const size_t samples = size_t(w) * h;
     if (work.phase_payload.size() < phase_payload_bound(w, h))
       work.phase_payload.resize(phase_payload_bound(w, h));
     if (work.phase_recon.size() < samples) work.phase_recon.resize(samples);
-    const size_t phase =
-        encode_phase(src, src_stride, w, h, params.max_error, *params.phase_tables, work.phase_payload.data(),
-                     work.phase_payload.size(), work.phase_recon.data(), work.phase_work);
+    const size_t phase = encode_phase(src, src_stride, w, h, params.phase_bin_q8, *params.phase_tables,
+                                      work.phase_payload.data(), work.phase_payload.size(),
+                                      work.phase_recon.data(), work.phase_work);
     if (phase != SIZE_MAX && phase < best) {
       if (phase > capacity) return 0;
       std::memcpy(out, work.phase_payload.data(), phase);
@@ -640,11 +645,11 @@ TileResult decode_tile(const uint8_t* payload, size_t size, int w, int h, const 
   const int pw = padded_side(w), ph = padded_side(h);
   work.reserve(pw, ph, window.add ? size_t(w) : 0, 0);
   const uint8_t mode = head ? payload[0] : uint8_t(TileMode::Transform);
-  if (head && params.phase && is_phase_mode(mode)) {
+  if (params.phase && (!params.bound_max_error || is_phase_mode(mode))) {
     const size_t samples = size_t(w) * h;
     if (work.phase_recon.size() < samples) work.phase_recon.resize(samples);
     int32_t* recon = work.phase_recon.data();
-    if (!decode_phase(payload, size, w, h, params.max_error, *params.phase_tables, recon, work.phase_work))
+    if (!decode_phase(payload, size, w, h, params.phase_bin_q8, *params.phase_tables, recon, work.phase_work))
       return TileResult::Corrupt;
     const int n = window.x1 - window.x0;
     for (int y = window.y0; y < window.y1; ++y) {

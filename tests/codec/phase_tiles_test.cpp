@@ -91,6 +91,39 @@ TEST_CASE("phase tiles: smaller than the other modes on a point-sampled residual
   }
 }
 
+TEST_CASE("phase tiles in an rms stream: the step is a real-valued bin, every tile a phase tile", "[codec]") {
+  for (double step : {1.0, 2.0, 3.3, 3.5, 6.75}) {
+    const double half = step / 2;
+    const Image img = point_residual(130, 96, 2.0 * step, int(half), uint32_t(step * 100));
+    codec::EncodeOptions o;
+    o.step = step;
+    o.tile_size = 32;
+    o.transform = codec::Transform::Residual;
+    o.phase_tiles = true;
+    std::vector<int32_t> recon, out;
+    const auto s = encode(img, o, &recon);
+    codec::HeaderInfo h;
+    REQUIRE(codec::read_header(s.data(), s.size(), &h) == codec::Status::Ok);
+    CHECK(h.version == 7);
+    CHECK(h.phase_tiles);
+    CHECK(!h.bound_max_error);
+    REQUIRE(decode(s, img, &out) == codec::Status::Ok);
+    CHECK(out == recon);
+    // Every error within half a bin plus the output's rounding; the rms near a uniform quantiser's.
+    double squares = 0;
+    for (size_t i = 0; i < out.size(); ++i) {
+      const double e = double(out[i]) - img.samples[i];
+      REQUIRE(std::abs(e) <= std::floor(half + (step == std::floor(step) ? 0.0 : 0.5)));
+      squares += e * e;
+    }
+    const double rms = std::sqrt(squares / double(out.size()));
+    INFO("step " << step << ": rms " << rms);
+    if (step == 1.0) CHECK(rms == 0.0);
+    if (step >= 2.0) CHECK((rms > 0.2 * step && rms < 0.4 * step));
+    codec_test::check_regions(s, img, recon);
+  }
+}
+
 TEST_CASE("phase tiles: region decodes equal the full decode", "[codec]") {
   const Image img = point_residual(203, 157, 6.0, 2, 11);
   std::vector<int32_t> recon;

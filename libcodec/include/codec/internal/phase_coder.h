@@ -63,15 +63,20 @@ struct PhaseWork {
 // Largest payload (mode byte included) a phase tile of w x h samples can produce.
 size_t phase_payload_bound(int w, int h);
 
-// Adds the token counts of coding the w x h samples at src (row stride `stride`) with bound max_error
+// Bins: bin_q8 / 256 samples wide (>= 256). 256 (2E + 1) bounds every error by E (max-error streams;
+// E = 0: lossless); any other width is a real-valued step (rms streams): errors within about half a bin.
+// The even phase is skipped when each of its samples lies within the quantiser's largest error:
+// +-floor(bin / 2) for a whole-number bin, +-floor(bin / 2 + 1/2) otherwise.
+
+// Adds the token counts of coding the w x h samples at src (row stride `stride`) with bins of bin_q8
 // to *counts; recon (w x h) is scratch. False when a sample cannot be represented.
-bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error, int32_t* recon,
+bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                       PhaseWork& work, PhaseCounts* counts);
 
-// Codes the w x h samples at src with |error| <= max_error into out[0 .. capacity), mode byte first.
+// Codes the w x h samples at src with bins of bin_q8 into out[0 .. capacity), mode byte first.
 // Returns the size in bytes, or SIZE_MAX when it does not fit or a sample cannot be represented.
 // recon (w x h, row stride w) receives the decoder's output.
-size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t max_error,
+size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
                     const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
                     PhaseWork& work);
 
@@ -80,7 +85,7 @@ bool is_phase_mode(uint8_t mode);
 
 // Decodes a phase payload (mode byte first) into recon (w x h, row stride w). False when the payload
 // is damaged (a sample out of range, an impossible code, a final state other than 1).
-bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t max_error,
-                  const PhaseTables& tables, int32_t* recon, PhaseWork& work);
+bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t bin_q8, const PhaseTables& tables,
+                  int32_t* recon, PhaseWork& work);
 
 }  // namespace codec::detail

@@ -29,8 +29,11 @@ struct TileParams {
   int fraction_bits = 0;  // extra sample precision of transform-mode tiles (0 = lossless)
   bool bound_max_error = false;
   uint32_t max_error = 0;
-  bool phase = false;  // format 7: tiles may use TileMode::Phase (max-error streams only)
+  // Format 7: tiles may use TileMode::Phase; in max-error streams beside the other modes, in other
+  // streams every tile is a phase tile.
+  bool phase = false;
   const PhaseTables* phase_tables = nullptr;  // the stream's model (set whenever phase is)
+  uint32_t phase_bin_q8 = 256;                // phase tiles' bin: 256 (2E + 1), or the step * 256
 };
 
 // Where the LP and HP values of a padded_width x padded_height tile land, in coding order: tile
