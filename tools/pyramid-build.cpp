@@ -120,11 +120,12 @@ int run(int argc, char** argv) {
                 });
   parser.option("--downsample", "auto|wavelet|optimal|point",
                 "downsampling filter D of the coarse levels: auto (default) is point for --max-error and "
-                "--lossless, wavelet for --rms and --step; wavelet, the (4,4) lifting wavelet's low pass, "
-                "the dual of the four-point upsampler (smaller files at an rms target, nothing to fit); "
-                "optimal, the paper's per-terrain least-squares 11x11 D fitted on the top rows; point, "
-                "plain subsampling (every level's samples are input samples; with a bound the residuals "
-                "skip their even phase)",
+                "--lossless, wavelet for --step, and for --rms whichever of the two the calibration finds "
+                "smaller at the target; wavelet, the (4,4) lifting wavelet's low pass, the dual of the "
+                "four-point upsampler (smooth or flat terrain, low rates; nothing to fit); optimal, the "
+                "paper's per-terrain least-squares 11x11 D fitted on the top rows; point, plain "
+                "subsampling (every level's samples are input samples; the residuals are coded by phase "
+                "tiles, which skip their even phase)",
                 [&](const std::string& v) {
                   const auto choice = terrain::build::downsample_choice_from_name(v);
                   if (!choice) throw cli::UsageError("--downsample must be auto, wavelet, optimal or point");

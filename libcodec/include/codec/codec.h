@@ -85,10 +85,12 @@ struct EncodeOptions {
   uint32_t max_error = 0;        // E for max-error mode (0 = lossless); at most kMaxAbsSample
   uint32_t tile_size = 64;       // tile side in samples: multiple of 16 in [16, 4096]
   Transform transform = Transform::Lapped;
-  // Max-error streams only (E may be 0: lossless): tiles may also be coded by their four polyphase
-  // components, predicted from decoded neighbours (format 7). Made for the residuals of a pyramid whose
-  // coarse levels are the fine levels' even-even samples: their even phase is within +-E and costs no
-  // bits. The encoder picks the smallest mode per tile; the stream's header names the static token
+  // Tiles coded by their four polyphase components, predicted from decoded neighbours (format 7). Made
+  // for the residuals of a pyramid whose coarse levels are the fine levels' even-even samples: their
+  // even phase is within the coarse level's error and costs no bits. Max-error streams (E may be 0:
+  // lossless): bins of 2E + 1, and the encoder picks the smallest mode per tile. Other streams: every
+  // tile is a phase tile with the step as a real-valued bin (errors within half a bin plus the
+  // rounding of the output, rms about step / sqrt(12)). The stream's header names the static token
   // distribution of each context (about 40 bytes), fitted to all of its tiles.
   bool phase_tiles = false;
   // Phase tiles: code so that the tiles can be spliced into this stream (phase_model_stream_size
