@@ -249,6 +249,7 @@ PYBIND11_MODULE(terrain, m) {
         py::arg("downsample") = "auto",
         "Builds a .pyr from a heightmap file or a 2-D array (integers: exact; floats: NaN = void). One of "
         "rms / max_error / step (metres) or lossless (the default). downsample: the coarse levels' filter, "
-        "'auto' (the default, as pyramid-build: 'point' for max_error and lossless, else 'wavelet'), "
+        "'auto' (the default, as pyramid-build: 'point' for max_error and lossless, 'wavelet' for step, the "
+        "smaller of the two at an rms target), "
         "'wavelet', 'optimal' (the paper's fitted D) or 'point' (subsampling).");
 }

@@ -30,8 +30,9 @@ struct PtcCoderOptions {
   // The coarsest level, coded as values, always uses Lapped.
   codec::Transform residual_transform = codec::Transform::Residual;
   int64_t band_rows = 0;  // 0: 4 tile rows per band
-  // Max-error streams (bound_max_error, max_error 0 = lossless) may use libcodec's phase tiles (format
-  // 7): for pyramids whose D is point sampling, where a residual's even phase is within the bound.
+  // libcodec's phase tiles (format 7), for pyramids whose D is point sampling, where a residual's even
+  // phase is the coarse level's error: beside the other modes in max-error streams (bound_max_error,
+  // max_error 0 = lossless), every tile with the step as a real-valued bin otherwise.
   bool phase_tiles = false;
 };
 
