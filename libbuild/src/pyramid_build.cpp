@@ -374,10 +374,10 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       // Returns the chosen trial and whether it meets the target.
       const auto calibrate = [&](const BuildOptions& cbo, PtcCoderOptions cco,
                                  std::vector<std::optional<DownsampleFilter>>& filters, const char* label,
-                                 double progress_from) {
+                                 double progress_from, double first_step) {
         Trial below{}, above{};  // largest step meeting the target; smallest step missing it
         bool have_below = false, have_above = false;
-        double step = std::clamp(codec::step_for_target_rms(target), 1.0, kLargestStep);
+        double step = std::clamp(first_step, 1.0, kLargestStep);
         for (int i = 0; i < 10; ++i) {
           cco.step = step;
           const Trial t = trial_build(window, cbo, cco, filters);
@@ -404,21 +404,26 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
         return std::pair<Trial, bool>(have_below ? below : above, have_below);
       };
       if (o.downsample != DownsampleChoice::Auto) {
-        co.step = calibrate(bo, co, window_filters, "", 0.5).first.step;
+        co.step = calibrate(bo, co, window_filters, "", 0.5, codec::step_for_target_rms(target)).first.step;
         break;
       }
       // The default D at an rms target: whichever of the wavelet D (its residuals coded by the
       // transforms) and point sampling (phase tiles with the step as a real-valued bin) the calibration
       // windows code in fewer bytes at the target. Neither wins everywhere: point sampling is 4-14 %
       // smaller on rough terrain at 1-2 m and 2-3x larger on flat plains (docs/pyramid.md).
-      const auto [wavelet, wavelet_met] = calibrate(bo, co, window_filters, "D wavelet: ", 0.0);
+      const auto [wavelet, wavelet_met] =
+          calibrate(bo, co, window_filters, "D wavelet: ", 0.0, codec::step_for_target_rms(target));
       BuildOptions point_bo = bo;
       point_bo.use_fixed_filter = true;
       point_bo.fixed_filter = DownsampleFilter::impulse();
       PtcCoderOptions point_co = co;
       point_co.phase_tiles = true;
       std::vector<std::optional<DownsampleFilter>> point_filters;
-      const Trial point = calibrate(point_bo, point_co, point_filters, "D point: ", 0.5).first;
+      // A uniform bin B gives rms B / sqrt(12) where the transform's step S gives 0.315 S
+      // (codec::predicted_rms): start the point sampling's search from the wavelet's step scaled so.
+      const double bin_per_step = codec::predicted_rms(1.0) * std::sqrt(12.0);
+      const Trial point =
+          calibrate(point_bo, point_co, point_filters, "D point: ", 0.5, wavelet.step * bin_per_step).first;
       // On integer heights a real-valued bin's rms moves in jumps (bins of 3.2 and 3.5 samples round
       // the same residuals differently): point sampling must come within 5 % of the target, or the
       // wavelet D's smooth step-rms curve is kept (Provence at 1 m: 0.875 m, -12.5 %).
