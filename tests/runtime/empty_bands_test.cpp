@@ -2,6 +2,8 @@
 // empty codec tiles no payload; region decodes across empty and coded bands equal full decodes, and
 // damaged band tables are rejected.
 #include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <random>
@@ -202,4 +204,41 @@ TEST_CASE("band tables: every damaged byte and every forged structure is rejecte
     else
       CHECK_THROWS_AS(parse_band_table(b.data(), b.size(), height, "t"), Error);
   }
+}
+
+TEST_CASE("rms targets with the default D: the calibration's choice, never larger than the wavelet D's file",
+          "[e2e]") {
+  // Two synthetic terrains nobody tuned on: the generator's ranges doubled with a texture of +-6 m
+  // (rough) and flattened to a tenth (smooth): the default calibrates the wavelet D and point sampling and
+  // keeps the smaller file whose rms is near the target, so it is never larger than the wavelet D's (the
+  // metadata's option string aside), within 10 % of the target, and the file records the D it used.
+  iotest::TempDir dir;
+  Heightmap rough = synthesize_terrain(SynthOptions{.seed = 21, .width = 384, .height = 320});
+  Heightmap smooth = rough;
+  for (double& v : smooth.values) v = std::round(v / 10);
+  std::mt19937 rng(4);  // rough: steeper relief and a few metres of sample-to-sample texture
+  for (double& v : rough.values) v = std::round(2 * v + double(rng() % 13) - 6);
+  const std::string sources[] = {dir.file("rough.raw"), dir.file("smooth.raw")};
+  write_raw(sources[0], rough);
+  write_raw(sources[1], smooth);
+  for (const std::string& src : sources)
+    for (double metres : {1.0, 2.0}) {
+      INFO(src << " rms " << metres);
+      const std::string wavelet = build_file(src, dir.file("w.pyr"), ErrorMode::Rms, metres);
+      const auto wavelet_bytes = std::filesystem::file_size(wavelet);
+      const std::string chosen =
+          build_file(src, dir.file("a.pyr"), ErrorMode::Rms, metres, DownsampleChoice::Auto);
+      CHECK(std::filesystem::file_size(chosen) <= wavelet_bytes + 16);
+      auto file = PyramidFile::open(chosen);
+      const FilterProvenance p = file->info().filter_provenance;
+      CHECK((p == FilterProvenance::Wavelet || p == FilterProvenance::Point));
+      CHECK(file->downsample_filter().is_point() == (p == FilterProvenance::Point));
+      const auto e = level_error_metres(file->info(), file->info().levels.size() - 1);
+      REQUIRE(e.has_value());
+      CHECK(std::abs(e->rms / metres - 1) <= 0.10);
+      std::printf("rms-D %s rms %.0f m: %s, %ju bytes (wavelet D %ju), rms %.3f m\n",
+                  std::filesystem::path(src).filename().c_str(), metres,
+                  p == FilterProvenance::Point ? "point" : "wavelet",
+                  uintmax_t(std::filesystem::file_size(chosen)), uintmax_t(wavelet_bytes), e->rms);
+    }
 }
