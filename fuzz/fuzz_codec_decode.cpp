@@ -15,6 +15,7 @@
 
 #include "codec/codec.h"
 #include "codec/crc32c.h"
+#include "codec/internal/phase_coder.h"
 
 namespace {
 
@@ -41,11 +42,11 @@ void fix_checksums(std::vector<uint8_t>& s) {
   for (uint64_t* field : {&w, &h, &tile16, &flags, &step})
     if (!get_varint(s, p, field)) return;
   if ((flags & 1) && !get_varint(s, p, &e)) return;
-  if ((flags & 8) && s.size() >= 8 && s[4] == 7) {  // format 7 phase model: 48 used bits, 10 per used one
-    if (p + 6 > s.size()) return;
-    int used = 0;
-    for (int i = 0; i < 6; ++i) used += __builtin_popcount(s[p + size_t(i)]);
-    p += size_t(48 + 10 * used + 7) / 8;
+  if ((flags & 8) && s.size() >= 8 && s[4] == 7) {  // format 7: the phase model, as the codec parses it
+    const uint8_t* at = s.data() + p;
+    codec::detail::PhaseModel model;
+    if (!codec::detail::read_phase_model(at, s.data() + s.size(), &model)) return;
+    p = size_t(at - s.data());
   }
   if (!get_varint(s, p, &payload)) return;
   const size_t data_offset = p;

@@ -142,6 +142,13 @@ DownsampleChoice resolved_downsample(const BuildFileOptions& o) {
                                                 : DownsampleChoice::Wavelet;
 }
 
+// A fixed D (wavelet or point sampling) into bo; the others are fitted or the default.
+void use_fixed_filter(BuildOptions& bo, DownsampleChoice d) {
+  if (d != DownsampleChoice::Wavelet && d != DownsampleChoice::Point) return;
+  bo.use_fixed_filter = true;
+  bo.fixed_filter = d == DownsampleChoice::Point ? DownsampleFilter::impulse() : DownsampleFilter::wavelet();
+}
+
 // Whether the step is calibrated by trial builds: at an rms target, and at a max-error target unless
 // D is point sampling. There the phase tiles code nearly every tile and the transform step they leave
 // to the rest changed the 13 shared DEMs' files by -0.03..+0.03 % (max error 1, 2, 5 m; the codec's
@@ -299,11 +306,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
   DownsampleChoice d = resolved_downsample(o);  // at an rms target, Auto is settled by the calibration
-  if (d == DownsampleChoice::Wavelet || d == DownsampleChoice::Point) {
-    bo.use_fixed_filter = true;
-    bo.fixed_filter =
-        d == DownsampleChoice::Point ? DownsampleFilter::impulse() : DownsampleFilter::wavelet();
-  }
+  use_fixed_filter(bo, d);
 
   // Inputs far from zero (1e6 m, int32 millimetres, bathymetry in centimetres) would put the coarsest
   // level, which is coded as values rather than residuals, outside libcodec's +-2^20: centre them on
@@ -414,8 +417,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       const auto [wavelet, wavelet_met] =
           calibrate(bo, co, window_filters, "D wavelet: ", 0.0, codec::step_for_target_rms(target));
       BuildOptions point_bo = bo;
-      point_bo.use_fixed_filter = true;
-      point_bo.fixed_filter = DownsampleFilter::impulse();
+      use_fixed_filter(point_bo, DownsampleChoice::Point);
       PtcCoderOptions point_co = co;
       point_co.phase_tiles = true;
       std::vector<std::optional<DownsampleFilter>> point_filters;

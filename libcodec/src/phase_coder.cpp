@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <bit>
-#include <cstring>
 
 #include "codec/internal/tile_coder.h"
 
@@ -148,16 +147,21 @@ template <int phase>
 
 template <class Io>
 bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
-               int32_t* levels) {
+               std::vector<int32_t>& level_scratch) {
   // Bins of bin_q8 / 256 samples: q = sign(r) floor((256 |r| + bin_q8 / 2) / bin_q8), output
   // p + sign(q) floor((|q| bin_q8 + 128) / 256). With bin_q8 = 256 (2E + 1) that is exactly
   // floor((|r| + E) / (2E + 1)) and p + q (2E + 1): |error| <= E.
   // e: the largest error of a quantised sample, which an even sample may have to be skipped: half a
   // bin, plus the output's rounding when the bin is not a whole number of samples.
-  const int64_t bin = bin_q8, e = bin_q8 % 256 == 0 ? bin_q8 >> 9 : (bin_q8 + 256) >> 9;
+  // Whole-number bins (max-error streams) keep the plain multiply: the general output rounding cost
+  // the decoder a third of its speed (Rainier --max-error 2: 106 -> 68 Ms/s).
+  const int64_t bin = bin_q8, whole_bin = bin_q8 % 256 == 0 ? bin_q8 >> 8 : 0;
+  const int64_t e = whole_bin ? bin_q8 >> 9 : (bin_q8 + 256) >> 9;
   const ptrdiff_t ls = w + 2 * kBorder;
-  std::memset(levels, 0, size_t(ls) * size_t(h + 2 * kBorder) * sizeof(int32_t));
-  int32_t* const level0 = levels + kBorder * ls + kBorder;  // (0, 0)
+  const size_t level_count = size_t(ls) * size_t(h + 2 * kBorder);
+  if (level_scratch.size() < level_count) level_scratch.resize(level_count);
+  std::fill_n(level_scratch.begin(), level_count, 0);
+  int32_t* const level0 = level_scratch.data() + kBorder * ls + kBorder;  // (0, 0)
   bool skip = false;
   if (!Io::kDecoding) {
     skip = true;
@@ -170,14 +174,12 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
   }
   skip = io.flag(skip);
   // One loop per phase, so that each has its prediction inlined without a switch.
-  // Whole-number bins (max-error streams) keep the plain multiply: the general output rounding cost
-  // the decoder a third of its speed (Rainier --max-error 2: 106 -> 68 Ms/s).
-  const int64_t whole_bin = bin_q8 % 256 == 0 ? bin_q8 >> 8 : 0;
   // Real-valued bins: the outputs of levels -15..15 from a table (the rounding, a multiply and the
   // sign cost as much again as the rest of the decoder).
-  int64_t offsets[31];
-  for (int k = -15; k <= 15; ++k)
-    offsets[k + 15] = (k < 0 ? -1 : 1) * ((int64_t(k < 0 ? -k : k) * bin + 128) >> 8);
+  int64_t offsets[31] = {};
+  if (!whole_bin)
+    for (int k = -15; k <= 15; ++k)
+      offsets[k + 15] = (k < 0 ? -1 : 1) * ((int64_t(k < 0 ? -k : k) * bin + 128) >> 8);
   const auto run = [&]<int phase, bool whole>() {
     constexpr int px = phase & 1, py = phase >> 1;
     for (int y = py; y < h; y += 2)
@@ -219,8 +221,6 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
   };
   return whole_bin ? run_all.template operator()<true>() : run_all.template operator()<false>();
 }
-
-size_t levels_size(int w, int h) { return size_t(w + 2 * kBorder) * size_t(h + 2 * kBorder); }
 
 }  // namespace
 
@@ -294,18 +294,16 @@ bool is_phase_mode(uint8_t mode) {
 
 bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                       PhaseWork& work, PhaseCounts* counts) {
-  if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
   CountIo io{counts};
-  return code_tile(io, src, stride, w, h, bin_q8, recon, work.levels.data());
+  return code_tile(io, src, stride, w, h, bin_q8, recon, work.levels);
 }
 
 size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
                     const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
                     PhaseWork& work) {
-  if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
   work.rans.clear();
   EncodeIo io{tables, work.rans};
-  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work.levels.data())) return SIZE_MAX;
+  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work.levels)) return SIZE_MAX;
   uint32_t state = 0;
   work.rans.finish(&state, work.words);
   const int state_bytes = state == 1 ? 0 : (std::bit_width(state) + 7) / 8;
@@ -332,9 +330,8 @@ bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t bin_q
     for (size_t i = 0; i < state_bytes; ++i) state |= uint32_t(data[1 + i]) << (8 * i);
     if (state >> (8 * (state_bytes - 1)) == 0 || state == 1) return false;  // not the shortest form
   }
-  if (work.levels.size() < levels_size(w, h)) work.levels.resize(levels_size(w, h));
   DecodeIo io{tables, RansDecoder(state, data + 1 + state_bytes, (size - 1 - state_bytes) / 2)};
-  return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work.levels.data()) && io.rans.finished();
+  return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work.levels) && io.rans.finished();
 }
 
 }  // namespace codec::detail

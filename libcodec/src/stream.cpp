@@ -103,6 +103,11 @@ bool within(const int32_t* src, ptrdiff_t stride, int w, int h, int64_t limit) {
   return true;
 }
 
+// The phase tiles' bin in 1/256 samples: 2E + 1 in a max-error stream, else the step (rms streams).
+uint32_t phase_bin_q8(bool bound_max_error, uint32_t max_error, uint32_t step_q8) {
+  return bound_max_error ? 256 * (2 * max_error + 1) : step_q8;
+}
+
 bool all_zero(const int32_t* v, size_t n) {
   return std::all_of(v, v + n, [](int32_t x) { return x == 0; });
 }
@@ -270,7 +275,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.bound_max_error = options.bound_max_error;
   params.max_error = options.bound_max_error ? options.max_error : 0;
   params.phase = options.phase_tiles;
-  params.phase_bin_q8 = options.bound_max_error ? 256 * (2 * params.max_error + 1) : step_q8;
+  params.phase_bin_q8 = phase_bin_q8(options.bound_max_error, params.max_error, step_q8);
   detail::PhaseModel model;
   bool given_model = false;
   if (params.phase) {
@@ -555,8 +560,8 @@ Status Decoder::decode_into(const Rect& rect, int32_t* dst, ptrdiff_t dst_stride
   params.max_error = header_.max_error;
   params.phase = header_.phase_tiles;
   params.phase_tables = phase_tables_.get();
-  params.phase_bin_q8 = header_.bound_max_error ? 256 * (2 * header_.max_error + 1)
-                                                : uint32_t(std::lround(header_.step * 256.0));
+  params.phase_bin_q8 =
+      phase_bin_q8(header_.bound_max_error, header_.max_error, uint32_t(std::lround(header_.step * 256.0)));
   detail::TileWork& work = scratch.impl().work;
   const int64_t t = header_.tile_size;
   const int64_t tx0 = rect.x0 / t, tx1 = (rect.x0 + rect.width - 1) / t;

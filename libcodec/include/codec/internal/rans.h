@@ -36,7 +36,6 @@ class RansEncoder {
     }
     if (n > 0) put_raw_chunk(v & ((1u << n) - 1), n);
   }
-  size_t count() const { return symbols_.size(); }
   // Encodes everything: *state gets the final state, words (decode order) are written to `words`.
   void finish(uint32_t* state, std::vector<uint16_t>& words) const {
     words.clear();
