@@ -53,7 +53,7 @@ constexpr size_t kMaxRecordSize = 5;   // index record of a non-empty tile: size
 constexpr uint32_t kFlagBoundMaxError = 1;
 constexpr uint32_t kFlagWideFraction = 2;  // lossy streams: kWideFractionBits (else kFineFractionBits)
 constexpr uint32_t kFlagResidual = 4;      // format 5: transform-mode tiles use Transform::Residual
-constexpr uint32_t kFlagPhase = 8;         // format 7 (max-error streams): tiles may use the phase mode
+constexpr uint32_t kFlagPhase = 8;         // format 7: phase tiles (max-error: beside the others; else all)
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
@@ -398,8 +398,8 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   StreamLayout layout;
   if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
   // Version 4 knows two flags; version 5 adds the residual transform, and a version-5 stream must use
-  // it (encoders write 4 otherwise); version 7 adds phase tiles, which it must allow, in max-error
-  // streams only (with either transform). So every stream has exactly one valid version.
+  // it (encoders write 4 otherwise); version 7 adds phase tiles, which it must allow (in any stream,
+  // with either transform). So every stream has exactly one valid version.
   const uint64_t known = kFlagBoundMaxError | kFlagWideFraction | (version >= 5 ? kFlagResidual : 0) |
                          (version >= kPhaseVersion ? kFlagPhase : 0);
   const bool phase = (flags & kFlagPhase) != 0;

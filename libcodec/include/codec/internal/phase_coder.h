@@ -1,11 +1,12 @@
-// Phase-mode tiles (format 7): near-lossless coding of an interpolating pyramid's residual by its
-// four polyphase components, with a bound E (0 = lossless). docs/codec.md "Phase tiles (format 7)".
+// Phase-mode tiles (format 7): coding of an interpolating pyramid's residual by its four polyphase
+// components, with a bound E (0 = lossless) or a real-valued bin (rms streams). docs/codec.md "Phase
+// tiles (format 7)".
 //
 // A residual R = T_l - U(T^_{l-1}) of a pyramid whose coarse level is the fine level's even-even
 // samples (D = point sampling) is, at even-even positions, just the coarse level's own error, within
-// +-E: those samples need no bits (the "even phase skipped" flag). The other three phases are coded
-// in order (odd columns of even rows, even columns of odd rows, then odd-odd), each sample predicted
-// from its decoded neighbours and quantised with bins of 2E + 1. A level's context is its phase and
+// the quantiser's largest error: those samples need no bits (the "even phase skipped" flag). The other
+// three phases are coded in order (odd columns of even rows, even columns of odd rows, then odd-odd),
+// each sample predicted from its decoded neighbours and quantised with bins of 2E + 1 or of the step. A level's context is its phase and
 // the magnitude class of the decoded neighbours' levels; each context codes tokens with one static
 // distribution of the stream (token_tables.h), chosen by the encoder from the whole stream's
 // statistics and named in its header (PhaseModel), and the tokens and raw bits go through one rANS

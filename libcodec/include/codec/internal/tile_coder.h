@@ -15,7 +15,7 @@ namespace codec::detail {
 enum class TileMode : uint8_t {
   Transform = 0,         // lapped transform at the stream's band steps (+ corrections if bounded)
   SpatialQuantized = 1,  // max-error mode only: samples quantised with step 2E+1, coded losslessly
-  Phase = 2,             // format 7 max-error streams: polyphase near-lossless coding (phase_coder.h);
+  Phase = 2,             // format 7 streams with the phase flag: polyphase coding (phase_coder.h);
                          // modes 2 .. 6 are all phase tiles (the mode carries the rANS state's size)
 };
 
