@@ -6,10 +6,10 @@
 // samples (D = point sampling) is, at even-even positions, just the coarse level's own error, within
 // the quantiser's largest error: those samples need no bits (the "even phase skipped" flag). The other
 // three phases are coded in order (odd columns of even rows, even columns of odd rows, then odd-odd),
-// each sample predicted from its decoded neighbours and quantised with bins of 2E + 1 or of the step. A level's context is its phase and
-// the magnitude class of the decoded neighbours' levels; each context codes tokens with one static
-// distribution of the stream (token_tables.h), chosen by the encoder from the whole stream's
-// statistics and named in its header (PhaseModel), and the tokens and raw bits go through one rANS
+// each sample predicted from its decoded neighbours and quantised with bins of 2E + 1 or of the step. A
+// level's context is its phase and the magnitude class of the decoded neighbours' levels; each context codes
+// tokens with one static distribution of the stream (token_tables.h), chosen by the encoder from the whole
+// stream's statistics and named in its header (PhaseModel), and the tokens and raw bits go through one rANS
 // state (rans.h). Tile origins must sit on even level coordinates for the skipped phase to be the
 // coarse one; any other tile is still coded correctly (its even phase is then coded, not skipped).
 #pragma once
