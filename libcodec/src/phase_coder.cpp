@@ -147,7 +147,7 @@ template <int phase>
 
 template <class Io>
 bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
-               std::vector<int32_t>& level_scratch) {
+               PhaseWork& work) {
   // Bins of bin_q8 / 256 samples: q = sign(r) floor((256 |r| + bin_q8 / 2) / bin_q8), output
   // p + sign(q) floor((|q| bin_q8 + 128) / 256). With bin_q8 = 256 (2E + 1) that is exactly
   // floor((|r| + E) / (2E + 1)) and p + q (2E + 1): |error| <= E.
@@ -159,9 +159,10 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
   const int64_t e = whole_bin ? bin_q8 >> 9 : (bin_q8 + 256) >> 9;
   const ptrdiff_t ls = w + 2 * kBorder;
   const size_t level_count = size_t(ls) * size_t(h + 2 * kBorder);
-  if (level_scratch.size() < level_count) level_scratch.resize(level_count);
-  std::fill_n(level_scratch.begin(), level_count, 0);
-  int32_t* const level0 = level_scratch.data() + kBorder * ls + kBorder;  // (0, 0)
+  std::vector<int32_t>& levels = work.levels;
+  if (levels.size() < level_count) levels.resize(level_count);
+  std::fill_n(levels.begin(), level_count, 0);
+  int32_t* const level0 = levels.data() + kBorder * ls + kBorder;  // (0, 0)
   bool skip = false;
   if (!Io::kDecoding) {
     skip = true;
@@ -173,6 +174,7 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
         }
   }
   skip = io.flag(skip);
+  work.even_phase_coded = !skip;
   // One loop per phase, so that each has its prediction inlined without a switch.
   // Real-valued bins: the outputs of levels -15..15 from a table (the rounding, a multiply and the
   // sign cost as much again as the rest of the decoder).
@@ -295,7 +297,7 @@ bool is_phase_mode(uint8_t mode) {
 bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                       PhaseWork& work, PhaseCounts* counts) {
   CountIo io{counts};
-  return code_tile(io, src, stride, w, h, bin_q8, recon, work.levels);
+  return code_tile(io, src, stride, w, h, bin_q8, recon, work);
 }
 
 size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
@@ -303,7 +305,7 @@ size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t
                     PhaseWork& work) {
   work.rans.clear();
   EncodeIo io{tables, work.rans};
-  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work.levels)) return SIZE_MAX;
+  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work)) return SIZE_MAX;
   uint32_t state = 0;
   work.rans.finish(&state, work.words);
   const int state_bytes = state == 1 ? 0 : (std::bit_width(state) + 7) / 8;
@@ -331,7 +333,7 @@ bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t bin_q
     if (state >> (8 * (state_bytes - 1)) == 0 || state == 1) return false;  // not the shortest form
   }
   DecodeIo io{tables, RansDecoder(state, data + 1 + state_bytes, (size - 1 - state_bytes) / 2)};
-  return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work.levels) && io.rans.finished();
+  return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work) && io.rans.finished();
 }
 
 }  // namespace codec::detail

@@ -59,6 +59,9 @@ struct PhaseWork {
   std::vector<int32_t> levels;  // context scratch, (w + 4) x (h + 4)
   RansEncoder rans;
   std::vector<uint16_t> words;
+  // Whether the last tile coded its even phase: some even sample was beyond the bound, so the tile
+  // is not the residual of a point-sampled pyramid (or is its coarsest level).
+  bool even_phase_coded = false;
 };
 
 // Largest payload (mode byte included) a phase tile of w x h samples can produce.

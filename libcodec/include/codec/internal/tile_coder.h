@@ -57,8 +57,8 @@ struct TileWork {
   std::vector<int32_t> lifting_scratch;  // the residual transform's copies (lifting_scratch_size)
   std::vector<int32_t> candidate;        // the first transform's reconstruction while the second is tried
   std::vector<uint8_t> second;           // the second transform's payload
-  std::vector<uint8_t> phase_payload;    // the phase-mode candidate (mode byte included)
-  std::vector<int32_t> phase_recon;      // its reconstruction (width x height)
+  std::vector<uint8_t> phase_payload;    // a phase tile that codes its even phase, while the others are tried
+  std::vector<int32_t> phase_recon;      // its reconstruction (width x height); the decoder's phase output
   PhaseWork phase_work;                  // the phase coder's scratch
   // reconstruction_samples: the encoder's width x height; the decoder writes into the caller's
   // window and needs none.
