@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
@@ -31,9 +32,55 @@ codec::Scratch& thread_scratch() {
 
 }  // namespace
 
+// What one encode call needs besides the band: libcodec's scratch (its payload buffer grows to a
+// band's stream) and the output buffer.
+struct EncodeScratch {
+  codec::Scratch scratch;
+  std::unique_ptr<uint8_t[]> buffer;
+  size_t capacity = 0;
+  int64_t samples = 0;  // the largest band it coded
+};
+
+// The coder's encode scratch, handed out by band size: a call gets the free one that coded the
+// smallest band at least as large as its own, else the largest free one (which then grows). So the
+// large ones number the large bands coded at once (the builder's bands in flight of the finest
+// level, which its memory plan counts), whatever the thread count. Thread-local buffers grew to a
+// finest band's size on every coding thread, and the builder's rounds start fresh threads whose
+// freed buffers the allocator's per-thread arenas kept: a 32768^2 --lossless or --step 2 build
+// under --memory 1G peaked at 1013-1014 MiB with 16 threads and 1025-1027 MiB with 64 (estimate
+// 972 / 995 MiB; docs/scale.md "The budget").
+struct EncodeScratchPool {
+  std::mutex lock;
+  std::vector<std::unique_ptr<EncodeScratch>> free;
+
+  std::unique_ptr<EncodeScratch> take(int64_t samples) {
+    const std::lock_guard<std::mutex> hold(lock);
+    size_t pick = free.size();
+    for (size_t i = 0; i < free.size(); ++i) {
+      const int64_t s = free[i]->samples;
+      if (pick == free.size()) {
+        pick = i;
+        continue;
+      }
+      const int64_t best = free[pick]->samples;
+      const bool fits = s >= samples, best_fits = best >= samples;
+      if (fits != best_fits ? fits : fits ? s < best : s > best) pick = i;
+    }
+    if (pick == free.size()) return std::make_unique<EncodeScratch>();
+    std::unique_ptr<EncodeScratch> got = std::move(free[pick]);
+    free.erase(free.begin() + ptrdiff_t(pick));
+    return got;
+  }
+  void give(std::unique_ptr<EncodeScratch> s) {
+    const std::lock_guard<std::mutex> hold(lock);
+    free.push_back(std::move(s));
+  }
+};
+
 PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
     : options_(options),
-      band_rows_(options.band_rows > 0 ? options.band_rows : 4 * int64_t(options.tile_size)) {
+      band_rows_(options.band_rows > 0 ? options.band_rows : 4 * int64_t(options.tile_size)),
+      pool_(std::make_shared<EncodeScratchPool>()) {
   if (codec::encode_bound(16, 16, to_codec(options_)) == 0)
     throw std::invalid_argument("residual coder: invalid options (step " + std::to_string(options_.step) +
                                 ", tile size " + std::to_string(options_.tile_size) + ")");
@@ -69,28 +116,33 @@ std::vector<uint8_t> PtcResidualCoder::encode_spliceable(const int32_t* residual
   copts.transform = coarsest ? codec::Transform::Lapped : options_.residual_transform;
   copts.phase_model_stream = into;
   copts.phase_model_stream_size = into_size;
-  // A fresh zero-filled buffer per band cost 8-14% of the build's CPU in page faults, so each thread
-  // keeps one and copies out the bytes. The bound is ~16 bytes per sample and a band's stream ~0.3:
-  // a buffer of the bound was most of a wide input's memory (a 4194304-column band of 64 rows, 4 GiB
-  // per thread). The buffer starts at kGuessBytesPerSample and is not zero-filled (pages the coder
-  // never writes stay unmapped); a stream that does not fit (noise coded losslessly) is coded again
-  // into the bound, with the same result.
+  // A fresh zero-filled buffer per band cost 8-14% of the build's CPU in page faults, so the pool's
+  // buffers are kept and the bytes copied out. The bound is ~16 bytes per sample and a band's stream
+  // ~0.3: a buffer of the bound was most of a wide input's memory (a 4194304-column band of 64 rows,
+  // 4 GiB). The buffer starts at kGuessBytesPerSample and is not zero-filled (pages the coder never
+  // writes stay unmapped); a stream that does not fit (noise coded losslessly) is coded again into
+  // the bound, with the same result.
   constexpr size_t kGuessBytesPerSample = 2;
-  thread_local std::unique_ptr<uint8_t[]> buffer;
-  thread_local size_t capacity = 0;
-  const auto reserve = [](size_t bytes) {
-    if (capacity >= bytes) return;
-    buffer.reset(new uint8_t[bytes]);
-    capacity = bytes;
+  struct Taken {
+    EncodeScratchPool& pool;
+    std::unique_ptr<EncodeScratch> s;
+    ~Taken() { pool.give(std::move(s)); }
+  } taken{*pool_, pool_->take(w * h)};
+  EncodeScratch& es = *taken.s;
+  es.samples = std::max(es.samples, w * h);
+  const auto reserve = [&es](size_t bytes) {
+    if (es.capacity >= bytes) return;
+    es.buffer.reset(new uint8_t[bytes]);
+    es.capacity = bytes;
   };
   const size_t bound = codec::encode_bound(w, h, copts);
   reserve(std::min(bound, (size_t(1) << 16) + kGuessBytesPerSample * size_t(w) * size_t(h)));
   size_t written = 0;
-  codec::Status s = codec::encode(residual, w, w, h, copts, buffer.get(), capacity, &written,
-                                  thread_scratch(), reconstructed, w);
-  if (s == codec::Status::BufferTooSmall && capacity < bound) {
+  codec::Status s = codec::encode(residual, w, w, h, copts, es.buffer.get(), es.capacity, &written,
+                                  es.scratch, reconstructed, w);
+  if (s == codec::Status::BufferTooSmall && es.capacity < bound) {
     reserve(bound);
-    s = codec::encode(residual, w, w, h, copts, buffer.get(), capacity, &written, thread_scratch(),
+    s = codec::encode(residual, w, w, h, copts, es.buffer.get(), es.capacity, &written, es.scratch,
                       reconstructed, w);
   }
   if (s != codec::Status::Ok) {
@@ -102,8 +154,8 @@ std::vector<uint8_t> PtcResidualCoder::encode_spliceable(const int32_t* residual
   }
   codec::HeaderInfo header;
   // An all-empty stream (every tile decodes to zeros) becomes no bytes at all: the band table marks it.
-  if (codec::read_header(buffer.get(), written, &header) == codec::Status::Ok && header.empty()) return {};
-  return std::vector<uint8_t>(buffer.get(), buffer.get() + written);
+  if (codec::read_header(es.buffer.get(), written, &header) == codec::Status::Ok && header.empty()) return {};
+  return std::vector<uint8_t>(es.buffer.get(), es.buffer.get() + written);
 }
 
 bool PtcResidualCoder::decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) {

@@ -80,6 +80,18 @@ TEST_CASE("phase tiles: smaller than the other modes on a point-sampled residual
     const auto without = encode(img, options(e, false), &recon);
     INFO("E " << e << ": " << with.size() << " bytes with phase tiles, " << without.size() << " without");
     CHECK(double(with.size()) < 0.9 * double(without.size()));
+    // Each tile of the residual skips its even phase, so the encoder keeps it a phase tile without
+    // trying the other modes (mode bytes 2..6).
+    codec::Decoder decoder;
+    REQUIRE(decoder.open(with.data(), with.size()) == codec::Status::Ok);
+    size_t phase_tiles = 0;
+    for (const codec::TileEntry& t : decoder.index())
+      if (t.size > 0) {
+        const uint8_t mode = with[size_t(t.offset)];
+        CHECK((mode >= 2 && mode <= 6));
+        ++phase_tiles;
+      }
+    CHECK(phase_tiles == size_t((256 / 32) * (192 / 32)));
     // Data the phase mode does not suit (a smooth ramp, its even phase far outside the bound) keeps
     // the other modes: at most the stream's version costs nothing and every tile picks the smallest.
     Image ramp{256, 64, std::vector<int32_t>(256 * 64)};

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 
 #include "codec/codec.h"
 #include "pyramid/pyramid.h"
@@ -36,12 +37,15 @@ struct PtcCoderOptions {
   bool phase_tiles = false;
 };
 
+struct EncodeScratchPool;  // ptc_coder.cpp
+
 class PtcResidualCoder final : public ResidualCoder {
  public:
   // Throws std::invalid_argument for options libcodec rejects (step < 1, bad tile size).
   explicit PtcResidualCoder(const PtcCoderOptions& options);
   int64_t band_rows() const override { return band_rows_; }
-  // Thread-safe: the builder codes bands of a level in parallel (each thread has its own scratch).
+  // Thread-safe: the builder codes bands in parallel. The coder keeps the encoders' scratch memory
+  // (copies of a coder share it) and hands each call the part that suits its band's size.
   // Throws std::runtime_error naming the libcodec status if a band cannot be coded (e.g. a residual
   // beyond libcodec's +-2^20 range).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
@@ -59,6 +63,7 @@ class PtcResidualCoder final : public ResidualCoder {
  private:
   PtcCoderOptions options_;
   int64_t band_rows_;
+  std::shared_ptr<EncodeScratchPool> pool_;
 };
 
 }  // namespace terrain
