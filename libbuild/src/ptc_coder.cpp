@@ -24,7 +24,8 @@ codec::EncodeOptions to_codec(const PtcCoderOptions& o) {
   return c;
 }
 
-// One scratch per thread: the builder calls encode() from several threads at once.
+// One scratch per thread for decode(), which several threads may call at once (encode() takes its
+// scratch from the coder's pool).
 codec::Scratch& thread_scratch() {
   thread_local codec::Scratch scratch;
   return scratch;
@@ -55,18 +56,16 @@ struct EncodeScratchPool {
 
   std::unique_ptr<EncodeScratch> take(int64_t samples) {
     const std::lock_guard<std::mutex> hold(lock);
-    size_t pick = free.size();
-    for (size_t i = 0; i < free.size(); ++i) {
-      const int64_t s = free[i]->samples;
-      if (pick == free.size()) {
-        pick = i;
-        continue;
-      }
-      const int64_t best = free[pick]->samples;
-      const bool fits = s >= samples, best_fits = best >= samples;
-      if (fits != best_fits ? fits : fits ? s < best : s > best) pick = i;
-    }
-    if (pick == free.size()) return std::make_unique<EncodeScratch>();
+    if (free.empty()) return std::make_unique<EncodeScratch>();
+    // Whether a suits the band better than b: one that fits over one that does not, then the smaller
+    // of two that fit, the larger of two that do not.
+    const auto better = [samples](int64_t a, int64_t b) {
+      const bool a_fits = a >= samples, b_fits = b >= samples;
+      return a_fits != b_fits ? a_fits : a_fits ? a < b : a > b;
+    };
+    size_t pick = 0;
+    for (size_t i = 1; i < free.size(); ++i)
+      if (better(free[i]->samples, free[pick]->samples)) pick = i;
     std::unique_ptr<EncodeScratch> got = std::move(free[pick]);
     free.erase(free.begin() + ptrdiff_t(pick));
     return got;
