@@ -118,6 +118,15 @@ int run(int argc, char** argv) {
                     throw cli::UsageError("--level-error must be absolute or screen");
                   o.screen_level_error = v == "screen";
                 });
+  parser.option(
+      "--coarse-step-ratio", "R|auto",
+      "--step and --rms: level l's step is the finest level's times R^min(m-l, 2), R in (0, 1] (coarse "
+      "levels at least as accurate as the finest; they predict it better on smooth terrain). "
+      "Default auto: 1 for --step (the paper's one absolute step), and for --rms the first of 1, "
+      "0.7, 0.5, 0.35 after which a smaller R no longer makes the calibration sample smaller",
+      [&](const std::string& v) {
+        o.coarse_step_ratio = v == "auto" ? 0.0 : cli::parse_double("--coarse-step-ratio", v, 1e-6, 1);
+      });
   parser.option("--downsample", "auto|wavelet|optimal|point",
                 "downsampling filter D of the coarse levels: auto (default) is point for --max-error and "
                 "--lossless, wavelet for --step, and for --rms whichever of the two the calibration finds "
@@ -164,7 +173,8 @@ int run(int argc, char** argv) {
   std::ostringstream opts;
   opts << "{\"target\":\"" << terrain::container::error_mode_name(o.mode)
        << "\",\"metres\":" << o.target_metres << ",\"levels\":" << o.levels << ",\"tile\":" << o.tile_size
-       << ",\"level_error\":\"" << (o.screen_level_error ? "screen" : "absolute") << "\",\"downsample\":\""
+       << ",\"level_error\":\"" << (o.screen_level_error ? "screen" : "absolute")
+       << "\",\"coarse_step_ratio\":" << o.coarse_step_ratio << ",\"downsample\":\""
        << terrain::build::downsample_choice_name(o.downsample) << "\"}";
 
   std::unique_ptr<cli::Progress> bar;
@@ -197,10 +207,14 @@ int run(int argc, char** argv) {
       std::fprintf(stderr, "pyramid-build: striped build: %d stripes, %d process%s, %d stripes resumed\n",
                    r.stripes, ranks, ranks == 1 ? "" : "es", r.stripes_resumed);
     std::fprintf(stderr,
-                 "pyramid-build: %s: %zu levels, step %.4g m, %llu bytes = %.4f bits/sample, finest rms %.4g "
-                 "m, max %.4g m, %.1f Msamples/s\n",
-                 output.c_str(), lv.size(), r.step_units * mpu, (unsigned long long)r.file_bytes, bits,
-                 lv.back().error_rms * mpu, double(lv.back().error_max_abs) * mpu,
+                 "pyramid-build: %s: %zu levels, step %.4g m%s, %llu bytes = %.4f bits/sample, finest rms "
+                 "%.4g m, max %.4g m, %.1f Msamples/s\n",
+                 output.c_str(), lv.size(), r.step_units * mpu,
+                 r.coarse_step_ratio < 1
+                     ? (" (coarse levels x" + cli::shortest(r.coarse_step_ratio) + " per level)").c_str()
+                     : "",
+                 (unsigned long long)r.file_bytes, bits, lv.back().error_rms * mpu,
+                 double(lv.back().error_max_abs) * mpu,
                  double(r.finest_samples) / 1e6 / std::max(1e-9, r.seconds_build));
   }
   if (!json_path.empty()) {
@@ -212,6 +226,7 @@ int run(int argc, char** argv) {
     j.field("finest_samples", r.finest_samples).field("bits_per_sample", bits);
     j.field("metres_per_unit", mpu).field("step_metres", r.step_units * mpu);
     j.field("level_error", o.screen_level_error ? "screen" : "absolute");
+    j.field("coarse_step_ratio", r.coarse_step_ratio);
     j.field("max_error_bound_metres", o.mode == ErrorMode::MaxError ? double(r.max_error_units) * mpu : -1.0);
     j.field("filter", r.build.filter_report.summary())
         .field("filter_fallback", r.build.filter_report.fallback);

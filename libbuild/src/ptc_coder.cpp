@@ -83,6 +83,9 @@ PtcResidualCoder::PtcResidualCoder(const PtcCoderOptions& options)
   if (codec::encode_bound(16, 16, to_codec(options_)) == 0)
     throw std::invalid_argument("residual coder: invalid options (step " + std::to_string(options_.step) +
                                 ", tile size " + std::to_string(options_.tile_size) + ")");
+  if (!(options_.coarse_step_ratio > 0 && options_.coarse_step_ratio <= 1))
+    throw std::invalid_argument("residual coder: coarse step ratio " +
+                                std::to_string(options_.coarse_step_ratio) + " is outside (0, 1]");
 }
 
 static_assert(kLargestStep == double(codec::kMaxAbsSample),
@@ -91,13 +94,16 @@ static_assert(kLargestStep == double(codec::kMaxAbsSample),
 PtcCoderOptions PtcResidualCoder::level_options(int levels_above_finest) const {
   PtcCoderOptions o = options_;
   // Zero error (lossless, or a max error of 0) is zero in screen space too: every level stays exact.
-  if (!o.screen_level_error || levels_above_finest <= 0 ||
-      (o.bound_max_error ? o.max_error == 0 : o.step <= 1))
-    return o;
-  const double scale = std::ldexp(1.0, std::min(levels_above_finest, 40));
-  o.step = std::min(o.step * scale, kLargestStep);
-  if (o.bound_max_error)
-    o.max_error = uint32_t(std::min(double(o.max_error) * scale, double(codec::kMaxAbsSample)));
+  if (levels_above_finest <= 0 || (o.bound_max_error ? o.max_error == 0 : o.step <= 1)) return o;
+  const int k = std::min(levels_above_finest, 40);
+  const double screen = o.screen_level_error ? std::ldexp(1.0, k) : 1.0;
+  if (o.bound_max_error) {
+    o.step = std::min(o.step * screen, kLargestStep);
+    o.max_error = uint32_t(std::min(double(o.max_error) * screen, double(codec::kMaxAbsSample)));
+  } else {
+    o.step = std::clamp(o.step * std::pow(o.coarse_step_ratio, std::min(k, kCoarseStepRatioLevels)) * screen,
+                        1.0, kLargestStep);
+  }
   return o;
 }
 

@@ -225,6 +225,7 @@ double centring_offset(const std::vector<Heightmap>& windows, double value_scale
 
 struct Trial {
   double step = 1;
+  double coarse_step_ratio = 1;
   double rms = 0;
   int64_t max_abs = 0;
   uint64_t bytes = 0;
@@ -271,7 +272,7 @@ Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const 
   }
   for (const std::exception_ptr& e : errors)
     if (e) std::rethrow_exception(e);
-  Trial t{co.step, 0, 0, 0};
+  Trial t{co.step, co.coarse_step_ratio, 0, 0, 0};
   double squares = 0, samples = 0;
   for (size_t k = 0; k < n; ++k) {
     const BuildResult& r = results[k];
@@ -348,6 +349,12 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   // level's error), bounded or with the step as a real-valued bin; the calibration trials too.
   co.phase_tiles = d == DownsampleChoice::Point;
   const auto t_cal = std::chrono::steady_clock::now();
+  if (!(o.coarse_step_ratio >= 0 && o.coarse_step_ratio <= 1))
+    throw Error(ErrorCode::InvalidOption,
+                "coarse step ratio " + std::to_string(o.coarse_step_ratio) + " is outside (0, 1]");
+  if (o.coarse_step_ratio > 0 && (o.mode == ErrorMode::Lossless || o.mode == ErrorMode::MaxError))
+    throw Error(ErrorCode::InvalidOption,
+                "a coarse step ratio applies to --step and --rms targets, not lossless or max error");
   switch (o.mode) {
     case ErrorMode::Lossless:
       if (!g.integer_valued() && o.quantum_metres <= 0)
@@ -364,22 +371,27 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       if (!(co.step >= 1))
         throw std::invalid_argument("step " + std::to_string(o.target_metres) +
                                     " m is below the input's unit of " + std::to_string(mpu) + " m");
+      co.coarse_step_ratio = o.coarse_step_ratio > 0 ? o.coarse_step_ratio : 1.0;
       break;
     case ErrorMode::Rms: {
       if (!(o.target_metres > 0)) throw std::invalid_argument("rms target must be positive");
       const double target = o.target_metres / mpu;
       if (progress) progress("calibrating step", 0);
-      // rms grows about linearly with the step, so multiplicative corrections converge fast; once a
-      // step above and one below the target are known, bisect (in log step) between them. The
-      // result is the largest step whose rms is within 2% above the target or below it: smooth or
-      // flat terrain, whose rms stays 0 up to a large step and then jumps, must not be given a step
-      // that overshoots the target.
-      // Returns the chosen trial and whether it meets the target.
+      // rms grows with the step as a power law, about linearly at high rates and much more slowly
+      // on smooth terrain at low rates (where much of the finest error is the coarse levels'): each
+      // move follows the slope of log rms against log step measured by the last two trials (`slope`,
+      // carried from call to call; 1 before any), a secant step that takes 3-4 trials where plain
+      // proportional moves took 6-10. Once a step above and one below the target are known, the
+      // moves stay between them (bisecting, in log step, when the secant would leave). The result is
+      // the largest step whose rms is within 2% above the target or below it: smooth or flat terrain,
+      // whose rms stays 0 up to a large step and then jumps, must not be given a step that overshoots
+      // the target. Returns the chosen trial and whether it meets the target.
       const auto calibrate = [&](const BuildOptions& cbo, PtcCoderOptions cco,
                                  std::vector<std::optional<DownsampleFilter>>& filters, const char* label,
-                                 double progress_from, double first_step) {
+                                 double progress_from, double first_step, double& slope) {
         Trial below{}, above{};  // largest step meeting the target; smallest step missing it
         bool have_below = false, have_above = false;
+        Trial previous_trial{};
         double step = std::clamp(first_step, 1.0, kLargestStep);
         for (int i = 0; i < 10; ++i) {
           cco.step = step;
@@ -394,20 +406,54 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
             above = t, have_above = true;
           }
           if (std::abs(t.rms / target - 1) < 0.02 || (step <= 1 && t.rms <= target)) break;
+          if (i > 0 && t.rms > 0 && previous_trial.rms > 0 && t.step != previous_trial.step) {
+            const double s = std::log(t.rms / previous_trial.rms) / std::log(t.step / previous_trial.step);
+            if (std::isfinite(s)) slope = std::clamp(s, 0.25, 2.0);
+          }
+          previous_trial = t;
           const double previous = step;
+          step = t.rms > 0 ? step * std::clamp(std::pow(target / t.rms, 1 / slope), 0.5, 4.0) : 4 * step;
           if (have_below && have_above) {
             if (above.step / below.step < 1.03) break;
-            step = std::sqrt(below.step * above.step);
-          } else {
-            const double ratio = t.rms > 0 ? target / t.rms : 4.0;
-            step = std::clamp(step * std::clamp(ratio, 0.5, 4.0), 1.0, kLargestStep);
+            if (!(step > below.step && step < above.step)) step = std::sqrt(below.step * above.step);
           }
+          step = std::clamp(step, 1.0, kLargestStep);
           if (step == previous) break;
         }
         return std::pair<Trial, bool>(have_below ? below : above, have_below);
       };
+      // The coarse levels' step ratio: the given one, or the first of 1, 0.7, 0.5, 0.35 after which a
+      // smaller one no longer codes the windows in 1 % fewer bytes at the target, each calibrated from
+      // the previous one's step and slope (on flat terrain a smaller ratio lowers the finest level's
+      // rms a lot: Berlin at 2 m took step 9.4 at ratio 1, 19.3 at 0.35). No search beyond ratio 1
+      // when its bytes exceed search_limit (0: none): a family that needs twice the other's bytes
+      // at ratio 1 does not win by the ratio, which saved at most 43 % (docs/pyramid.md).
+      const auto calibrate_ratio = [&](const BuildOptions& cbo, PtcCoderOptions cco,
+                                       std::vector<std::optional<DownsampleFilter>>& filters,
+                                       const std::string& label, double progress_from, double first_step,
+                                       uint64_t search_limit) {
+        double slope = 1;
+        if (o.coarse_step_ratio > 0) {
+          cco.coarse_step_ratio = o.coarse_step_ratio;
+          return calibrate(cbo, cco, filters, label.c_str(), progress_from, first_step, slope);
+        }
+        cco.coarse_step_ratio = 1;
+        auto best = calibrate(cbo, cco, filters, label.c_str(), progress_from, first_step, slope);
+        if (search_limit > 0 && best.first.bytes > search_limit) return best;
+        for (const double r : {0.7, 0.5, 0.35}) {
+          cco.coarse_step_ratio = r;
+          const std::string l = label + "ratio " + std::to_string(r).substr(0, 4) + ": ";
+          const auto t = calibrate(cbo, cco, filters, l.c_str(), progress_from, best.first.step, slope);
+          if (!t.second || (best.second && double(t.first.bytes) >= 0.99 * double(best.first.bytes))) break;
+          best = t;
+        }
+        return best;
+      };
       if (o.downsample != DownsampleChoice::Auto) {
-        co.step = calibrate(bo, co, window_filters, "", 0.5, codec::step_for_target_rms(target)).first.step;
+        const Trial t =
+            calibrate_ratio(bo, co, window_filters, "", 0.5, codec::step_for_target_rms(target), 0).first;
+        co.step = t.step;
+        co.coarse_step_ratio = t.coarse_step_ratio;
         break;
       }
       // The default D at an rms target: whichever of the wavelet D (its residuals coded by the
@@ -415,7 +461,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       // windows code in fewer bytes at the target. Neither wins everywhere: point sampling is 4-14 %
       // smaller on rough terrain at 1-2 m and 2-3x larger on flat plains (docs/pyramid.md).
       const auto [wavelet, wavelet_met] =
-          calibrate(bo, co, window_filters, "D wavelet: ", 0.0, codec::step_for_target_rms(target));
+          calibrate_ratio(bo, co, window_filters, "D wavelet: ", 0.0, codec::step_for_target_rms(target), 0);
       BuildOptions point_bo = bo;
       use_fixed_filter(point_bo, DownsampleChoice::Point);
       PtcCoderOptions point_co = co;
@@ -424,8 +470,9 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       // A uniform bin B gives rms B / sqrt(12) where the transform's step S gives 0.315 S
       // (codec::predicted_rms): start the point sampling's search from the wavelet's step scaled so.
       const double bin_per_step = codec::predicted_rms(1.0) * std::sqrt(12.0);
-      const Trial point =
-          calibrate(point_bo, point_co, point_filters, "D point: ", 0.5, wavelet.step * bin_per_step).first;
+      const Trial point = calibrate_ratio(point_bo, point_co, point_filters, "D point: ", 0.5,
+                                          wavelet.step * bin_per_step, wavelet_met ? 2 * wavelet.bytes : 0)
+                              .first;
       // On integer heights a real-valued bin's rms moves in jumps (bins of 3.2 and 3.5 samples round
       // the same residuals differently): point sampling must come within 5 % of the target, or the
       // wavelet D's smooth step-rms curve is kept (Provence at 1 m: 0.875 m, -12.5 %).
@@ -434,9 +481,11 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
         bo = point_bo;
         co = point_co;
         co.step = point.step;
+        co.coarse_step_ratio = point.coarse_step_ratio;
         d = DownsampleChoice::Point;
       } else {
         co.step = wavelet.step;
+        co.coarse_step_ratio = wavelet.coarse_step_ratio;
       }
       break;
     }
@@ -471,6 +520,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   }
   out.seconds_calibrate = seconds_since(t_cal);
   out.step_units = co.step;
+  out.coarse_step_ratio = co.coarse_step_ratio;
   std::vector<Heightmap>().swap(window);  // calibrated: the build does not need the sample
 
   const auto t_build = std::chrono::steady_clock::now();
@@ -498,8 +548,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
      << g.width << "x" << g.height << " " << sample_type_name(g.sample_type) << " " << g.nodata.value_or(0)
      << "\noptions " << metadata_json_extra << " step " << co.step << " max " << co.max_error << " "
      << co.bound_max_error << " tile " << co.tile_size << " band " << coder.band_rows() << " screen "
-     << co.screen_level_error << " levels " << bo.level_count << " scale " << bo.value_scale << " offset "
-     << bo.value_offset << "\n";
+     << co.screen_level_error << " ratio " << co.coarse_step_ratio << " levels " << bo.level_count
+     << " scale " << bo.value_scale << " offset " << bo.value_offset << "\n";
   const int journal_stripes = read_journal_stripes(so.directory, fp.str());
   const int processes = o.group ? o.group->size() : 1;
   if (o.journal || o.stripes > 0 || processes > 1 || journal_stripes > 0) {
@@ -561,7 +611,8 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
        << sample_type_name(g.sample_type) << "\",\"step_units\":" << co.step
        << ",\"max_error_units\":" << out.max_error_units << ",\"tile_size\":" << co.tile_size
        << ",\"band_rows\":" << coder.band_rows() << ",\"level_error\":\""
-       << (co.screen_level_error ? "screen" : "absolute") << "\""
+       << (co.screen_level_error ? "screen" : "absolute")
+       << "\",\"coarse_step_ratio\":" << co.coarse_step_ratio
        << ",\"filter\":" << json_quote(out.build.filter_report.summary())
        << ",\"options\":" << (metadata_json_extra.empty() ? "{}" : metadata_json_extra) << "}";
   if (!writer) {

@@ -1,9 +1,11 @@
 // The level error schedule (--level-error): absolute (the paper's one step at every level) and
-// screen (level l's step and max error 2^(m-l) times the finest level's). The target always refers
-// to the finest level; screen files are smaller; max error holds per level at its own bound; zero
-// error stays zero at every level.
+// screen (level l's step and max error 2^(m-l) times the finest level's), and the coarse step ratio
+// (--coarse-step-ratio: level l's step R^min(m-l, 2) times the finest's, R <= 1, chosen by the rms
+// calibration unless given). The target always refers to the finest level; max error holds per level
+// at its own bound; zero error stays zero at every level.
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <filesystem>
 
 #include "build/pyramid_build.h"
 #include "container/pyramid_file.h"
@@ -18,13 +20,15 @@ using namespace terrain::build;
 
 namespace {
 
+// ratio: BuildFileOptions::coarse_step_ratio (0: automatic); 1 keeps the paper's one absolute step.
 BuildFileResult build_with(const std::string& src, const std::string& pyr, ErrorMode mode, double metres,
-                           bool screen) {
+                           bool screen, double ratio = 1) {
   BuildFileOptions o;
   o.mode = mode;
   o.target_metres = metres;
   o.threads = 2;
   o.screen_level_error = screen;
+  o.coarse_step_ratio = mode == ErrorMode::Rms || mode == ErrorMode::Step ? ratio : 0;
   return build_pyramid_file(src, {}, pyr, o);
 }
 
@@ -69,5 +73,72 @@ TEST_CASE("level error schedule: screen grows each level's step with its spacing
     const BuildFileResult s = build_with(src, dir.file("l.pyr"), ErrorMode::Lossless, 0, true);
     for (const LevelBuildStats& l : s.build.levels) CHECK(l.error_max_abs == 0);
     for (double step : s.level_step_units) CHECK(step == 1);
+  }
+}
+
+TEST_CASE(
+    "coarse step ratio: coarse levels R^min(m-l, 2) times the finest step, chosen by the rms calibration",
+    "[e2e]") {
+  iotest::TempDir dir;
+  // Smooth terrain (the generator's heights flattened to a fifth), where finer coarse levels pay, and
+  // the generator's own relief, where they need not.
+  Heightmap smooth = synthesize_terrain(SynthOptions{.seed = 9, .width = 640, .height = 576});
+  for (double& v : smooth.values) v = std::round(v / 5);
+  const std::string src = dir.file("smooth.raw");
+  write_raw(src, smooth);
+
+  SECTION("a given ratio: each level's step, at least 1, combined with the screen schedule") {
+    const BuildFileResult r = build_with(src, dir.file("r.pyr"), ErrorMode::Step, 8.0, false, 0.5);
+    const size_t m = r.build.levels.size() - 1;
+    REQUIRE(m >= 2);
+    CHECK(r.coarse_step_ratio == 0.5);
+    for (size_t l = 0; l <= m; ++l)
+      CHECK(r.level_step_units[l] == Approx(std::max(1.0, 8.0 * std::pow(0.5, std::min(int(m - l), 2)))));
+    // Coarse levels at a smaller step are more accurate than at the finest level's.
+    const BuildFileResult a = build_with(src, dir.file("a.pyr"), ErrorMode::Step, 8.0, false, 1);
+    for (size_t l = 0; l < m; ++l) CHECK(r.build.levels[l].error_rms < a.build.levels[l].error_rms);
+    const BuildFileResult s = build_with(src, dir.file("s.pyr"), ErrorMode::Step, 8.0, true, 0.5);
+    for (size_t l = 0; l <= m; ++l)
+      CHECK(s.level_step_units[l] ==
+            Approx(8.0 * std::ldexp(1.0, int(m - l)) * std::pow(0.5, std::min(int(m - l), 2))));
+    auto file = PyramidFile::open(dir.file("r.pyr"));
+    CHECK(file->container().metadata_json().find("\"coarse_step_ratio\":0.5") != std::string::npos);
+  }
+  SECTION("rms: the calibration's ratio is never worse than the paper's, the target still met") {
+    for (double metres : {1.0, 2.0, 4.0}) {
+      INFO("rms " << metres);
+      const BuildFileResult one = build_with(src, dir.file("one.pyr"), ErrorMode::Rms, metres, false, 1);
+      const BuildFileResult chosen = build_with(src, dir.file("auto.pyr"), ErrorMode::Rms, metres, false, 0);
+      const size_t m = chosen.build.levels.size() - 1;
+      CHECK(one.coarse_step_ratio == 1);
+      CHECK(chosen.coarse_step_ratio <= 1);
+      CHECK(chosen.build.levels[m].error_rms * chosen.metres_per_unit == Approx(metres).epsilon(0.1));
+      // The calibration compares the ratios on its sample (here the whole input), 1 % apart at least.
+      CHECK(chosen.file_bytes <= one.file_bytes + 64);
+      std::printf("coarse step ratio, smooth synthetic, rms %.0f m: ratio %.2f, %ju bytes (ratio 1: %ju)\n",
+                  metres, chosen.coarse_step_ratio, uintmax_t(chosen.file_bytes), uintmax_t(one.file_bytes));
+    }
+  }
+  SECTION("out-of-range ratios and ratios with bounded targets are option errors") {
+    for (double bad : {-0.5, 1.5, std::nan("")}) {
+      BuildFileOptions o;
+      o.mode = ErrorMode::Step;
+      o.target_metres = 4;
+      o.coarse_step_ratio = bad;
+      try {
+        build_pyramid_file(src, {}, dir.file("bad.pyr"), o);
+        FAIL("ratio " << bad << " accepted");
+      } catch (const Error& e) {
+        CHECK(e.code() == ErrorCode::InvalidOption);
+      }
+    }
+    for (ErrorMode mode : {ErrorMode::MaxError, ErrorMode::Lossless}) {
+      BuildFileOptions o;
+      o.mode = mode;
+      o.target_metres = mode == ErrorMode::MaxError ? 2 : 0;
+      o.coarse_step_ratio = 0.5;
+      CHECK_THROWS_AS(build_pyramid_file(src, {}, dir.file("bad.pyr"), o), Error);
+    }
+    CHECK_FALSE(std::filesystem::exists(dir.file("bad.pyr")));
   }
 }

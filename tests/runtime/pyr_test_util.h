@@ -11,6 +11,7 @@
 #include <cstring>
 #include <vector>
 
+#include "codec/codec.h"
 #include "codec/crc32c.h"
 
 namespace pyrtest {
@@ -81,13 +82,25 @@ struct LevelAt {
   std::vector<StreamAt> streams;
 };
 
-// Locates a libcodec format-4 stream's header and index (docs/codec.md, "Container").
+// Locates a libcodec stream's header and index (docs/codec.md, "Container").
 inline StreamAt locate_stream(const std::vector<uint8_t>& b, size_t offset, size_t size) {
   StreamAt s;
   s.offset = offset;
   s.size = size;
   const uint8_t *p = b.data() + offset, *end = p + size;
   if (size < 10 || std::memcmp(p, "TPTC", 4) != 0) return s;
+  // libcodec's own parser where the header reads (format 7's phase model lies between E and P);
+  // the plain varints of formats 4-5 otherwise, for streams whose header was forged.
+  codec::HeaderInfo h;
+  if (codec::read_header(p, size, &h) == codec::Status::Ok) {
+    s.width = uint64_t(h.width);
+    s.height = uint64_t(h.height);
+    s.tile = h.tile_size;
+    s.header_end = offset + h.data_offset;
+    s.index_begin = offset + h.index_offset;
+    s.parsed = true;
+    return s;
+  }
   p += 6;
   uint64_t tile16, flags, step, e = 0, payload;
   if (!read_varint(p, end, &s.width) || !read_varint(p, end, &s.height) || !read_varint(p, end, &tile16) ||

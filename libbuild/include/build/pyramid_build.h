@@ -53,6 +53,12 @@ struct BuildFileOptions {
   // times the finest level's, for the same screen-space error at every level. The rms / max-error
   // target and its calibration always refer to the finest level.
   bool screen_level_error = false;
+  // The coarse levels' step over the finest level's, per level (PtcCoderOptions::coarse_step_ratio):
+  // level l's step is the finest's times ratio^min(m - l, 2). In (0, 1], or 0 (default): 1 (the paper's one
+  // absolute step) for a step target, and for an rms target the first of 1, 0.7, 0.5 and 0.35 after
+  // which a smaller ratio no longer codes the calibration sample in fewer bytes. Step and rms targets
+  // only (a max-error or lossless build with a ratio is an InvalidOption error).
+  double coarse_step_ratio = 0;
   DownsampleChoice downsample = DownsampleChoice::Auto;
   // The striped build (build/stripe_build.h): the finest rows cut into stripes, each coded into a part
   // file in OUTPUT.build/ and shared out among the processes of `group`; rank 0 writes the output from
@@ -67,7 +73,8 @@ struct BuildFileOptions {
 struct BuildFileResult {
   BuildResult build;
   double step_units = 1;                 // quantiser step chosen, in level units (the finest level's)
-  std::vector<double> level_step_units;  // each level's step, coarsest first (screen_level_error)
+  double coarse_step_ratio = 1;          // the coarse levels' step ratio used (given or calibrated)
+  std::vector<double> level_step_units;  // each level's step, coarsest first
   double metres_per_unit = 1;
   uint32_t max_error_units = 0;  // max-error mode: the bound in level units
   std::vector<std::string> calibration_log;
