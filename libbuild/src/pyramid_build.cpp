@@ -383,9 +383,10 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       // carried from call to call; 1 before any), a secant step that takes 3-4 trials where plain
       // proportional moves took 6-10. Once a step above and one below the target are known, the
       // moves stay between them (bisecting, in log step, when the secant would leave). The result is
-      // the largest step whose rms is within 2% above the target or below it: smooth or flat terrain,
-      // whose rms stays 0 up to a large step and then jumps, must not be given a step that overshoots
-      // the target. Returns the chosen trial and whether it meets the target.
+      // the largest step whose rms is at most the target (a search ends within 2 % below it): the
+      // target is a bound, as a user reads it, and smooth or flat terrain, whose rms stays 0 up to a
+      // large step and then jumps, must not be given a step that overshoots it. (Accepting 2 % above
+      // put Berlin's --rms 0.5 at 0.507 m.) Returns the chosen trial and whether it meets the target.
       const auto calibrate = [&](const BuildOptions& cbo, PtcCoderOptions cco,
                                  std::vector<std::optional<DownsampleFilter>>& filters, const char* label,
                                  double progress_from, double first_step, double& slope) {
@@ -400,19 +401,20 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                                         " units: rms " + std::to_string(t.rms * mpu) + " m, " +
                                         std::to_string(t.bytes) + " bytes");
           if (progress) progress("calibrating step", progress_from + (i + 1) / 20.0);
-          if (t.rms <= 1.02 * target) {
+          if (t.rms <= target) {
             if (!have_below || t.step > below.step) below = t, have_below = true;
           } else if (!have_above || t.step < above.step) {
             above = t, have_above = true;
           }
-          if (std::abs(t.rms / target - 1) < 0.02 || (step <= 1 && t.rms <= target)) break;
+          if (t.rms <= target && (t.rms >= 0.98 * target || step <= 1)) break;
           if (i > 0 && t.rms > 0 && previous_trial.rms > 0 && t.step != previous_trial.step) {
             const double s = std::log(t.rms / previous_trial.rms) / std::log(t.step / previous_trial.step);
             if (std::isfinite(s)) slope = std::clamp(s, 0.25, 2.0);
           }
           previous_trial = t;
           const double previous = step;
-          step = t.rms > 0 ? step * std::clamp(std::pow(target / t.rms, 1 / slope), 0.5, 4.0) : 4 * step;
+          step =
+              t.rms > 0 ? step * std::clamp(std::pow(0.99 * target / t.rms, 1 / slope), 0.5, 4.0) : 4 * step;
           if (have_below && have_above) {
             if (above.step / below.step < 1.03) break;
             if (!(step > below.step && step < above.step)) step = std::sqrt(below.step * above.step);
@@ -486,6 +488,18 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
       } else {
         co.step = wavelet.step;
         co.coarse_step_ratio = wavelet.coarse_step_ratio;
+      }
+      // A target that only step 1 meets (every level exact) is met by the lossless build, which codes
+      // integer heights in fewer bytes than the transforms at step 1 (Berlin --rms 0.25: 609312 ->
+      // 500824 bytes, the --lossless file's size).
+      if (co.step <= 1 && (g.integer_valued() || o.quantum_metres > 0)) {
+        use_fixed_filter(bo, DownsampleChoice::Point);
+        co.phase_tiles = true;
+        co.step = 1;
+        co.coarse_step_ratio = 1;
+        co.bound_max_error = true;
+        co.max_error = 0;
+        d = DownsampleChoice::Point;
       }
       break;
     }

@@ -142,3 +142,37 @@ TEST_CASE(
     CHECK_FALSE(std::filesystem::exists(dir.file("bad.pyr")));
   }
 }
+
+TEST_CASE(
+    "rms calibration: the target is a bound, and a target only step 1 meets builds the lossless pyramid",
+    "[e2e]") {
+  iotest::TempDir dir;
+  Heightmap terrain = synthesize_terrain(SynthOptions{.seed = 4, .width = 520, .height = 448});
+  for (double& v : terrain.values) v = std::round(v);
+  const std::string src = dir.file("t.raw");
+  write_raw(src, terrain);
+  // The sample is the whole input here (448 rows), so the file's rms is the calibrated one.
+  for (double metres : {0.5, 1.0, 3.0}) {
+    INFO("rms " << metres);
+    const BuildFileResult r = build_with(src, dir.file("r.pyr"), ErrorMode::Rms, metres, false, 0);
+    const double rms = r.build.levels.back().error_rms * r.metres_per_unit;
+    CHECK(rms <= metres);
+    CHECK(rms >= 0.9 * metres);
+  }
+  // Integer heights: 0.05 m is below what any step above 1 gives; the transforms at step 1 would be
+  // exact too, but the lossless build (point sampling, phase tiles) codes them in fewer bytes.
+  const BuildFileResult tiny = build_with(src, dir.file("tiny.pyr"), ErrorMode::Rms, 0.05, false, 0);
+  const BuildFileResult lossless = build_with(src, dir.file("lossless.pyr"), ErrorMode::Lossless, 0, false);
+  CHECK(tiny.step_units == 1);
+  CHECK(tiny.build.levels.back().error_rms == 0);
+  CHECK(tiny.build.levels.back().error_max_abs == 0);
+  // The same levels; only the metadata (the target and options) differs.
+  CHECK(tiny.file_bytes <= lossless.file_bytes + 64);
+  BuildFileOptions wavelet;
+  wavelet.mode = ErrorMode::Rms;
+  wavelet.target_metres = 0.05;
+  wavelet.downsample = DownsampleChoice::Wavelet;  // a D the user names is kept
+  const BuildFileResult named = build_pyramid_file(src, {}, dir.file("named.pyr"), wavelet);
+  CHECK(named.build.levels.back().error_rms == 0);
+  CHECK(named.file_bytes > tiny.file_bytes);
+}
