@@ -476,9 +476,10 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
                                           wavelet.step * bin_per_step, wavelet_met ? 2 * wavelet.bytes : 0)
                               .first;
       // On integer heights a real-valued bin's rms moves in jumps (bins of 3.2 and 3.5 samples round
-      // the same residuals differently): point sampling must come within 5 % of the target, or the
-      // wavelet D's smooth step-rms curve is kept (Provence at 1 m: 0.875 m, -12.5 %).
-      const bool point_close = std::abs(point.rms / target - 1) <= 0.05;
+      // the same residuals differently): point sampling must come within 10 % below the target (the
+      // --rms contract), or the wavelet D's smooth step-rms curve is kept (Provence at 1 m: 0.875 m,
+      // -12.5 %). Within 10 %, fewer bytes at a lower rms is better on both counts.
+      const bool point_close = point.rms <= target && point.rms >= 0.9 * target;
       if (point_close && (point.bytes < wavelet.bytes || !wavelet_met)) {
         bo = point_bo;
         co = point_co;
