@@ -21,12 +21,14 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <numeric>
 #include <sstream>
 #include <stdexcept>
@@ -463,7 +465,14 @@ class StreamingBuilder {
   }
 
   ~StreamingBuilder() {
-    if (round_.worker.joinable()) round_.worker.join();
+    if (round_.worker.joinable()) {
+      {
+        const std::lock_guard<std::mutex> hold(round_.lock);
+        round_.stop = true;
+      }
+      round_.wake.notify_one();
+      round_.worker.join();  // after the round in flight, if any
+    }
   }
   StreamingBuilder(const StreamingBuilder&) = delete;
   StreamingBuilder& operator=(const StreamingBuilder&) = delete;
@@ -819,7 +828,10 @@ class StreamingBuilder {
   // Waits for the round in flight (if any) and commits it.
   void finish_round() {
     if (!round_.active) return;
-    if (round_.worker.joinable()) round_.worker.join();
+    if (opt_.threads > 1) {
+      std::unique_lock<std::mutex> hold(round_.lock);
+      round_.finished.wait(hold, [&] { return round_.done.load(std::memory_order_acquire); });
+    }
     round_.active = false;
     if (round_.error) std::rethrow_exception(std::exchange(round_.error, nullptr));
     for (const Group& g : round_.groups) commit_group(g);
@@ -904,14 +916,33 @@ class StreamingBuilder {
       round_.done.store(true, std::memory_order_release);
       return;
     }
-    round_.worker = std::thread([this] {
+    if (!round_.worker.joinable()) round_.worker = std::thread([this] { round_loop(); });
+    {
+      const std::lock_guard<std::mutex> hold(round_.lock);
+      round_.requested = true;
+    }
+    round_.wake.notify_one();
+  }
+
+  // The rounds' thread, one for the whole build: a thread per round started a fresh pool of
+  // parallel_chunks workers (they are kept per calling thread) for every round, threads - 1 thread
+  // starts a round. Codes each requested round, then waits for the next or for the builder's end.
+  void round_loop() {
+    std::unique_lock<std::mutex> hold(round_.lock);
+    for (;;) {
+      round_.wake.wait(hold, [&] { return round_.requested || round_.stop; });
+      if (!round_.requested) return;
+      round_.requested = false;
+      hold.unlock();
       try {
         code_round();
       } catch (...) {
         round_.error = std::current_exception();
       }
+      hold.lock();
       round_.done.store(true, std::memory_order_release);
-    });
+      round_.finished.notify_all();
+    }
   }
 
   // Codes the round's bands on `threads` workers and delivers them. Touches only the round's
@@ -1077,7 +1108,10 @@ class StreamingBuilder {
   struct Round {
     bool active = false;
     std::atomic<bool> done{false};
-    std::thread worker;
+    std::thread worker;  // round_loop, started with the first round coded in the background
+    std::mutex lock;     // guards requested and stop; done is also set under it (finished's wait)
+    std::condition_variable wake, finished;
+    bool requested = false, stop = false;
     std::exception_ptr error;
     std::vector<Group> groups;
     std::vector<Task> order;
