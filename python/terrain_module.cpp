@@ -178,11 +178,22 @@ Heightmap heightmap_from_array(const py::array& array, double spacing) {
 // Builds `output` from a heightmap file or a 2-D array; returns pyramid-build's figures as a dict.
 py::dict build_file(const py::object& source, const std::string& output, std::optional<double> rms,
                     std::optional<double> max_error, std::optional<double> step, bool lossless,
-                    double spacing, int tile, int threads, const std::string& downsample) {
+                    double spacing, int tile, int threads, const std::string& downsample,
+                    const std::string& level_error, std::optional<double> coarse_step_ratio) {
   build::BuildFileOptions o = build_options(rms, max_error, step, lossless, tile, threads);
   const auto choice = build::downsample_choice_from_name(downsample);
   if (!choice) throw py::value_error("downsample must be 'auto', 'wavelet', 'optimal' or 'point'");
   o.downsample = *choice;
+  if (level_error != "absolute" && level_error != "screen")
+    throw py::value_error("level_error must be 'absolute' or 'screen'");
+  o.screen_level_error = level_error == "screen";
+  // None: automatic (pyramid-build --coarse-step-ratio auto); a value outside (0, 1] is the library's
+  // InvalidOption error, as on the command line.
+  if (coarse_step_ratio) {
+    if (!(*coarse_step_ratio > 0))
+      throw Error(ErrorCode::InvalidOption, "build: coarse_step_ratio must be in (0, 1]");
+    o.coarse_step_ratio = *coarse_step_ratio;
+  }
   std::string input, temp_dir;
   if (py::isinstance<py::str>(source) || py::hasattr(source, "__fspath__")) {
     input = py::str(py::module_::import("os").attr("fspath")(source));
@@ -211,6 +222,10 @@ py::dict build_file(const py::object& source, const std::string& output, std::op
   d["step_metres"] = r.step_units * r.metres_per_unit;
   d["finest_rms_m"] = r.build.levels.back().error_rms * r.metres_per_unit;
   d["finest_max_m"] = double(r.build.levels.back().error_max_abs) * r.metres_per_unit;
+  d["coarse_step_ratio"] = r.coarse_step_ratio;
+  py::list steps;  // coarsest first, metres
+  for (double s : r.level_step_units) steps.append(s * r.metres_per_unit);
+  d["level_step_metres"] = steps;
   return d;
 }
 
@@ -246,10 +261,15 @@ PYBIND11_MODULE(terrain, m) {
   m.def("build", &build_file, py::arg("source"), py::arg("output"), py::kw_only(),
         py::arg("rms") = py::none(), py::arg("max_error") = py::none(), py::arg("step") = py::none(),
         py::arg("lossless") = false, py::arg("spacing") = 1.0, py::arg("tile") = 32, py::arg("threads") = 0,
-        py::arg("downsample") = "auto",
+        py::arg("downsample") = "auto", py::arg("level_error") = "absolute",
+        py::arg("coarse_step_ratio") = py::none(),
         "Builds a .pyr from a heightmap file or a 2-D array (integers: exact; floats: NaN = void). One of "
         "rms / max_error / step (metres) or lossless (the default). downsample: the coarse levels' filter, "
         "'auto' (the default, as pyramid-build: 'point' for max_error and lossless, 'wavelet' for step, the "
         "smaller of the two at an rms target), "
-        "'wavelet', 'optimal' (the paper's fitted D) or 'point' (subsampling).");
+        "'wavelet', 'optimal' (the paper's fitted D) or 'point' (subsampling). level_error: 'absolute' (one "
+        "step at every level, the default) or 'screen' (level l's step 2^(m-l) times the finest's). "
+        "coarse_step_ratio: step and rms targets, the two levels above the finest get the finest step "
+        "times R and R^2, R in (0, 1]; None (the default) is 1 for a step and calibrated for an rms "
+        "target. The dict returned gives the ratio used and every level's step (coarsest first).");
 }

@@ -153,3 +153,26 @@ def test_downsample_choice_both_lossless_and_bad_value_rejected(tmp_path):
         np.testing.assert_array_equal(c.read(0, 0, 0, cw, ch), grid[:: 2**k, :: 2**k][:ch, :cw].astype(np.float32))
     with pytest.raises(ValueError):
         terrain.build(grid, str(tmp_path / "bad.pyr"), lossless=True, downsample="box")
+
+
+def test_level_schedule_options(tmp_path):
+    grid = np.round(synthetic(600, 560, 5)).astype(np.int16)  # 3 levels
+    given = terrain.build(grid, str(tmp_path / "r.pyr"), step=8.0, coarse_step_ratio=0.5)
+    steps = given["level_step_metres"]
+    assert given["coarse_step_ratio"] == 0.5
+    assert steps[-1] == pytest.approx(8.0)
+    assert steps[-2] == pytest.approx(4.0)
+    assert steps[-3] == pytest.approx(2.0)
+    screen = terrain.build(grid, str(tmp_path / "s.pyr"), step=2.0, level_error="screen")
+    assert screen["level_step_metres"][-2] == pytest.approx(4.0)
+    assert screen["coarse_step_ratio"] == 1
+    calibrated = terrain.build(grid, str(tmp_path / "a.pyr"), rms=1.0)
+    assert 0 < calibrated["coarse_step_ratio"] <= 1
+    assert calibrated["finest_rms_m"] <= 1.0
+    with pytest.raises(terrain.Error) as bad:
+        terrain.build(grid, str(tmp_path / "bad.pyr"), step=8.0, coarse_step_ratio=1.5)
+    assert bad.value.code == "invalid option"
+    with pytest.raises(terrain.Error):
+        terrain.build(grid, str(tmp_path / "bad.pyr"), lossless=True, coarse_step_ratio=0.5)
+    with pytest.raises(ValueError):
+        terrain.build(grid, str(tmp_path / "bad.pyr"), step=8.0, level_error="relative")
