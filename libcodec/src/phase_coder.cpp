@@ -31,6 +31,35 @@ struct CountIo {
   }
 };
 
+// The statistics pass that also records each level's symbol for encode_phase_recorded.
+struct RecordIo {
+  static constexpr bool kDecoding = false;
+  PhaseCounts* counts;
+  PhaseRecord& record;
+  bool bad = false;
+  bool flag(bool b) { return b; }
+  int64_t level(int context, int64_t q) {
+    int raw = 0;
+    const uint32_t m = uint32_t(q < 0 ? -q : q);
+    const int token = token_of(m, &raw);
+    ++counts->counts[context][token];
+    record.symbols.push_back(uint16_t(context << 8 | symbol_of(token, q)));
+    if (raw) record.raws.push_back(m);
+    return q;
+  }
+};
+
+// One level's codes (the symbol or the escape, then the raw bits): shared by the encoder and the replay.
+inline void put_level(RansEncoder& rans, const TokenTable& t, int symbol, uint32_t m, int raw) {
+  if (t.freq[symbol]) {
+    rans.put(t.cum[symbol], t.freq[symbol]);
+  } else {
+    rans.put(t.cum[kTokenEscape], t.freq[kTokenEscape]);
+    rans.put_raw(uint32_t(symbol), kTokenEscapeBits);
+  }
+  if (raw) rans.put_raw(m, raw);
+}
+
 struct EncodeIo {
   static constexpr bool kDecoding = false;
   const PhaseTables& tables;
@@ -41,17 +70,10 @@ struct EncodeIo {
     return b;
   }
   int64_t level(int context, int64_t q) {
-    const TokenTable& t = *tables.table[context];
     const uint32_t m = uint32_t(q < 0 ? -q : q);
     int raw = 0;
-    const int symbol = symbol_of(token_of(m, &raw), q);
-    if (t.freq[symbol]) {
-      rans.put(t.cum[symbol], t.freq[symbol]);
-    } else {
-      rans.put(t.cum[kTokenEscape], t.freq[kTokenEscape]);
-      rans.put_raw(uint32_t(symbol), kTokenEscapeBits);
-    }
-    if (raw) rans.put_raw(m, raw);
+    const int symbol = symbol_of(token_of(m, &raw), q);  // sets raw: not in put_level's arguments
+    put_level(rans, *tables.table[context], symbol, m, raw);
     return q;
   }
 };
@@ -300,12 +322,24 @@ bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32
   return code_tile(io, src, stride, w, h, bin_q8, recon, work);
 }
 
-size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
-                    const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
-                    PhaseWork& work) {
-  work.rans.clear();
-  EncodeIo io{tables, work.rans};
-  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work)) return SIZE_MAX;
+bool phase_statistics_recorded(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
+                               int32_t* recon, PhaseWork& work, PhaseCounts* counts, PhaseRecord& record,
+                               size_t tile) {
+  PhaseRecord::Tile& t = record.tiles[tile];
+  t.first_symbol = record.symbols.size();
+  t.first_raw = record.raws.size();
+  RecordIo io{counts, record};
+  const bool ok = code_tile(io, src, stride, w, h, bin_q8, recon, work);
+  t.symbols = uint32_t(record.symbols.size() - t.first_symbol);
+  t.skip = !work.even_phase_coded;
+  t.recorded = ok;
+  return ok;
+}
+
+namespace {
+
+// The payload of the tile whose codes are in work.rans: mode byte, final state, words.
+size_t write_phase_payload(PhaseWork& work, uint8_t* out, size_t capacity) {
   uint32_t state = 0;
   work.rans.finish(&state, work.words);
   const int state_bytes = state == 1 ? 0 : (std::bit_width(state) + 7) / 8;
@@ -319,6 +353,36 @@ size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t
     *p++ = uint8_t(word >> 8);
   }
   return size;
+}
+
+}  // namespace
+
+size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
+                    const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
+                    PhaseWork& work) {
+  work.rans.clear();
+  EncodeIo io{tables, work.rans};
+  if (!code_tile(io, src, stride, w, h, bin_q8, recon, work)) return SIZE_MAX;
+  return write_phase_payload(work, out, capacity);
+}
+
+size_t encode_phase_recorded(const PhaseRecord& record, size_t tile, const PhaseTables& tables, uint8_t* out,
+                             size_t capacity, PhaseWork& work) {
+  const PhaseRecord::Tile& t = record.tiles[tile];
+  work.rans.clear();
+  work.rans.put_raw(t.skip, 1);
+  work.even_phase_coded = !t.skip;
+  const uint32_t* raw_value = record.raws.data() + t.first_raw;
+  const uint16_t* code = record.symbols.data() + t.first_symbol;
+  for (uint32_t i = 0; i < t.symbols; ++i) {
+    const int symbol = code[i] & 0xff;
+    const int token = (symbol + 1) >> 1;
+    int raw = 0;
+    uint32_t m = 0;
+    if (token >= 16) token_base(token, &raw), m = *raw_value++;
+    put_level(work.rans, *tables.table[code[i] >> 8], symbol, m, raw);
+  }
+  return write_phase_payload(work, out, capacity);
 }
 
 bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t bin_q8, const PhaseTables& tables,

@@ -19,6 +19,7 @@ namespace codec {
 
 struct Scratch::Impl {
   detail::TileWork work;
+  detail::PhaseRecord phase_record;  // encoder: the phase statistics pass's levels, replayed
   std::vector<uint32_t> tile_sizes;  // encoder: payload bytes per tile (0 = empty) until the index is written
   std::vector<uint8_t> body;         // encoder: payloads and index, until the header's size is known
   // Decoder: band steps of the last (step, fraction bits) seen; computing them costs about as much as
@@ -220,21 +221,41 @@ size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options)
 namespace {
 
 // The phase model fitted to the tiles of an image: every non-empty tile coded in the phase mode for
-// its token counts (whether or not the tile ends up in that mode).
+// its token counts (whether or not the tile ends up in that mode). With `record` (and recon, which
+// then receives each tile's phase reconstruction) the pass also keeps every tile's levels for the
+// encoder to replay.
 detail::PhaseModel phase_model_of(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
-                                  int64_t t, uint32_t bin_q8, int64_t empty_limit, Scratch& scratch) {
+                                  int64_t t, uint32_t bin_q8, int64_t empty_limit, Scratch& scratch,
+                                  detail::PhaseRecord* record, int32_t* recon, ptrdiff_t recon_stride) {
   detail::TileWork& work = scratch.impl().work;
   auto counts = std::make_unique<detail::PhaseCounts>();
+  const int64_t tiles_x = (width + t - 1) / t;
+  if (record) record->clear(size_t(tiles_x * ((height + t - 1) / t)));
   for (int64_t ty = 0; ty * t < height; ++ty)
     for (int64_t tx = 0; tx * t < width; ++tx) {
       const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
       const int32_t* tile_src = src + ty * t * src_stride + tx * t;
       if (within(tile_src, src_stride, tw, th, empty_limit)) continue;
       if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
-      detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(), work.phase_work,
-                               counts.get());
+      if (!record) {
+        detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
+                                 work.phase_work, counts.get());
+        continue;
+      }
+      if (detail::phase_statistics_recorded(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
+                                            work.phase_work, counts.get(), *record,
+                                            size_t(ty * tiles_x + tx)))
+        for (int y = 0; y < th; ++y)
+          std::copy_n(work.phase_recon.data() + size_t(y) * tw, tw,
+                      recon + (ty * t + y) * recon_stride + tx * t);
     }
   return detail::fit_phase_model(*counts);
+}
+
+// Whether [a, a + an) and [b, b + bn) share memory.
+bool overlap(const int32_t* a, size_t an, const int32_t* b, size_t bn) {
+  const auto pa = reinterpret_cast<uintptr_t>(a), pb = reinterpret_cast<uintptr_t>(b);
+  return pa < pb + bn * sizeof(int32_t) && pb < pa + an * sizeof(int32_t);
 }
 
 }  // namespace
@@ -278,6 +299,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.phase_bin_q8 = phase_bin_q8(options.bound_max_error, params.max_error, step_q8);
   detail::PhaseModel model;
   bool given_model = false;
+  bool replay = false;
   if (params.phase) {
     HeaderInfo given;
     if (options.phase_model_stream &&
@@ -288,8 +310,13 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       if (given_model && !detail::read_phase_model(p, p + given.phase_model.size(), &model))
         return Status::InvalidArgument;  // read_header checked it: cannot happen
     } else {
+      // The replay writes each tile's phase reconstruction into recon during the statistics pass, so
+      // it needs a recon that is not the source (a tile's other modes read the source afterwards).
+      replay = recon && !overlap(src, size_t((height - 1) * src_stride + width), recon,
+                                 size_t((height - 1) * recon_stride + width));
       model = phase_model_of(src, src_stride, width, height, options.tile_size, params.phase_bin_q8,
-                             params.max_error, scratch);
+                             params.max_error, scratch, replay ? &scratch.impl().phase_record : nullptr,
+                             recon, recon_stride);
     }
   }
   const detail::PhaseTables tables(model);
@@ -319,8 +346,13 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
         const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
         const size_t bound = detail::tile_payload_bound(tw, th);
         if (body.size() < pos + bound) body.resize(std::max(pos + bound, body.size() * 2));
+        const size_t tile = size_t(ty * layout.tiles_x + tx);
+        const detail::PhaseRecord& record = scratch.impl().phase_record;
+        detail::PhaseReplay rp;
+        if (replay && record.tiles[tile].recorded)
+          rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
         size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, body.data() + pos,
-                                   body.size() - pos, recon != nullptr || probing);
+                                   body.size() - pos, recon != nullptr || probing, rp.record ? &rp : nullptr);
         if (size == 0) return Status::BufferTooSmall;
         empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
       }

@@ -589,7 +589,8 @@ size_t tile_payload_bound(int width, int height) {
 }
 
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const TileParams& params,
-                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction) {
+                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction,
+                   const PhaseReplay* replay) {
   work.reserve(padded_side(w), padded_side(h), size_t(w) * h,
                params.bound_max_error || params.lifting ? tile_payload_bound(w, h) : 0);
   size_t phase_size = SIZE_MAX;
@@ -599,8 +600,17 @@ size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int w, int h, const
   // lossless, max error 1, 2, 5 m: 1643 bytes over 36 files) and doubled the encoder's time. Tiles
   // that code their even phase (a coarsest level, data that is no such residual) try them too.
   if (params.phase) {
-    const size_t size = encode_phase(src, src_stride, w, h, params.phase_bin_q8, *params.phase_tables, out,
-                                     capacity, work.reconstruction.data(), work.phase_work);
+    size_t size = SIZE_MAX;
+    if (replay) {
+      size = encode_phase_recorded(*replay->record, replay->tile, *params.phase_tables, out, capacity,
+                                   work.phase_work);
+      for (int y = 0; y < h; ++y)
+        std::copy_n(replay->recon + y * replay->recon_stride, w,
+                    work.reconstruction.begin() + ptrdiff_t(y) * w);
+    } else {
+      size = encode_phase(src, src_stride, w, h, params.phase_bin_q8, *params.phase_tables, out, capacity,
+                          work.reconstruction.data(), work.phase_work);
+    }
     if (!params.bound_max_error) return size == SIZE_MAX ? 0 : size;
     if (size != SIZE_MAX && !work.phase_work.even_phase_coded) return size;
     if (size != SIZE_MAX) {  // the candidate to beat, set aside

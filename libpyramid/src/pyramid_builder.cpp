@@ -359,8 +359,9 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
     const double w = double(sizes[size_t(l)].width), h = double(sizes[size_t(l)].height);
     const double S = std::min(h, double(band_rows[size_t(l)]));
     // The bands in flight: U's prediction, R and T^ (int32 each), the validity (finest), the
-    // stream, the coder's buffer and libcodec's body (about 2 bytes a sample each).
-    bytes += double(c) * S * w * (12 + (l == m ? 1 : 0) + 6);
+    // stream, the coder's buffer, libcodec's body and its record of the phase tiles' levels (about
+    // 2 bytes a sample each).
+    bytes += double(c) * S * w * (12 + (l == m ? 1 : 0) + 8);
     if (l < m) {
       // T_l rows not yet coded and T^_l rows the finer level's U still needs, and the copy of
       // those U reads for a group of the finer level.

@@ -67,6 +67,27 @@ struct PhaseWork {
 // Largest payload (mode byte included) a phase tile of w x h samples can produce.
 size_t phase_payload_bound(int w, int h);
 
+// What the statistics pass found in each tile of one image, so that the encoder replays it instead
+// of traversing the tile a second time (prediction, context and quantisation were half the phase
+// encoder's time). The levels do not depend on the model, only their codes do, so the replay codes
+// exactly what a second traversal would.
+struct PhaseRecord {
+  struct Tile {
+    size_t first_symbol = 0, first_raw = 0;
+    uint32_t symbols = 0;
+    bool skip = false;      // the even phase was not coded
+    bool recorded = false;  // false: the pass stopped early (a damaged value); encode it afresh
+  };
+  std::vector<uint16_t> symbols;  // context << 8 | symbol, in coding order
+  std::vector<uint32_t> raws;     // the magnitude of each symbol with raw bits, in order
+  std::vector<Tile> tiles;        // per tile of the image, raster order
+  void clear(size_t tile_count) {
+    symbols.clear();
+    raws.clear();
+    tiles.assign(tile_count, Tile{});
+  }
+};
+
 // Bins: bin_q8 / 256 samples wide (>= 256). 256 (2E + 1) bounds every error by E (max-error streams;
 // E = 0: lossless); any other width is a real-valued step (rms streams): errors within about half a bin.
 // The even phase is skipped when each of its samples lies within the quantiser's largest error:
@@ -76,6 +97,15 @@ size_t phase_payload_bound(int w, int h);
 // to *counts; recon (w x h) is scratch. False when a sample cannot be represented.
 bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                       PhaseWork& work, PhaseCounts* counts);
+// The same, also appending the tile's levels to `record` as tile `tile` (recorded when the pass ends
+// normally).
+bool phase_statistics_recorded(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
+                               int32_t* recon, PhaseWork& work, PhaseCounts* counts, PhaseRecord& record,
+                               size_t tile);
+// Codes a recorded tile with `tables`: the payload encode_phase would produce for it (the caller
+// supplies the reconstruction the statistics pass produced). Returns SIZE_MAX when it does not fit.
+size_t encode_phase_recorded(const PhaseRecord& record, size_t tile, const PhaseTables& tables, uint8_t* out,
+                             size_t capacity, PhaseWork& work);
 
 // Codes the w x h samples at src with bins of bin_q8 into out[0 .. capacity), mode byte first.
 // Returns the size in bytes, or SIZE_MAX when it does not fit or a sample cannot be represented.

@@ -72,8 +72,17 @@ size_t tile_payload_bound(int width, int height);
 // Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
 // the payload size, or 0 when it does not fit. With want_reconstruction, work.reconstruction then
 // holds the decoder's output (row stride = width).
+// A phase tile the statistics pass recorded: replayed instead of coded afresh (phase_coder.h
+// PhaseRecord), with the reconstruction that pass wrote at recon (row stride recon_stride).
+struct PhaseReplay {
+  const PhaseRecord* record = nullptr;
+  size_t tile = 0;
+  const int32_t* recon = nullptr;
+  ptrdiff_t recon_stride = 0;
+};
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height, const TileParams& params,
-                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction);
+                   TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction,
+                   const PhaseReplay* replay = nullptr);
 
 enum class TileResult { Ok, Corrupt };
 // The part of a decoded tile the caller wants: samples [x0, x1) x [y0, y1) of the tile (inside
