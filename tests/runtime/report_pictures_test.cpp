@@ -29,11 +29,9 @@ TEST_CASE("terrain-report --plot and --heatmap draw labelled pictures", "[report
   const std::string in = dir.file("N30E030.hgt"), pyr = dir.file("t.pyr");
   const std::string plot = dir.file("plot.png"), heat = dir.file("heat.png");
   iotest::write_file(in, iotest::hgt_bytes(map));
-  // The paper's one step at every level: max and p99.9 differ there (with finer coarse levels they
-  // can coincide, and the later series covers the earlier).
-  REQUIRE(iotest::run_tool(dir,
-                           {"pyramid-build", {in, "-o", pyr, "--rms", "1", "--coarse-step-ratio", "1", "-q"}})
-              .status == 0);
+  // Also with coarse levels coded more finely (the calibration's coarse step ratio), where max and
+  // p99.9 can coincide: max is drawn wider, so both stay visible.
+  REQUIRE(iotest::run_tool(dir, {"pyramid-build", {in, "-o", pyr, "--rms", "1", "-q"}}).status == 0);
   const auto r =
       iotest::run_tool(dir, {"terrain-report", {in, pyr, "--plot", plot, "--heatmap", heat, "-q"}});
   INFO(r.err);
