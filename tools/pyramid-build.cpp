@@ -79,7 +79,10 @@ int run(int argc, char** argv) {
       "with the same input and options resumes from its completed stripes (docs/scale.md).");
   parser.positional("INPUT", "heightmap to read", &input);
   parser.option("-o,--output", "OUT", "pyramid file to write (required)", &output);
-  parser.option("--rms", "M", "target rms error in metres",
+  parser.option("--rms", "M",
+                "target rms error in metres at the finest level: the largest step whose rms on the "
+                "calibration sample is at most M (within 2 % below it; the whole file lands within 10 %); "
+                "a target that only step 1 meets gives the lossless pyramid",
                 [&](const std::string& v) { set_target(ErrorMode::Rms, "--rms", v); });
   parser.option("--max-error", "M", "guaranteed max |error| in metres",
                 [&](const std::string& v) { set_target(ErrorMode::MaxError, "--max-error", v); });
