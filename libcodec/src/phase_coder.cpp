@@ -17,25 +17,12 @@ static_assert(kFamilySize <= (1 << kMemberBits));
 constexpr uint8_t kPhaseModeFirst = uint8_t(TileMode::Phase);  // modes 2 .. 6: 0 .. 4 state bytes
 constexpr int kMaxStateBytes = 4;
 
-// The statistics pass: counts tokens, codes nothing.
+// The statistics pass: counts tokens, codes nothing; with a record, also keeps each level's symbol
+// (and raw magnitude) for encode_phase_recorded.
 struct CountIo {
   static constexpr bool kDecoding = false;
   PhaseCounts* counts;
-  bool bad = false;
-  bool flag(bool b) { return b; }
-  int64_t level(int context, int64_t q) {
-    int raw = 0;
-    const uint32_t m = uint32_t(q < 0 ? -q : q);
-    ++counts->counts[context][token_of(m, &raw)];
-    return q;
-  }
-};
-
-// The statistics pass that also records each level's symbol for encode_phase_recorded.
-struct RecordIo {
-  static constexpr bool kDecoding = false;
-  PhaseCounts* counts;
-  PhaseRecord& record;
+  PhaseRecord* record;
   bool bad = false;
   bool flag(bool b) { return b; }
   int64_t level(int context, int64_t q) {
@@ -43,8 +30,10 @@ struct RecordIo {
     const uint32_t m = uint32_t(q < 0 ? -q : q);
     const int token = token_of(m, &raw);
     ++counts->counts[context][token];
-    record.symbols.push_back(uint16_t(context << 8 | symbol_of(token, q)));
-    if (raw) record.raws.push_back(m);
+    if (record) {
+      record->symbols.push_back(uint16_t(context << 8 | symbol_of(token, q)));
+      if (raw) record->raws.push_back(m);
+    }
     return q;
   }
 };
@@ -317,20 +306,14 @@ bool is_phase_mode(uint8_t mode) {
 }
 
 bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
-                      PhaseWork& work, PhaseCounts* counts) {
-  CountIo io{counts};
-  return code_tile(io, src, stride, w, h, bin_q8, recon, work);
-}
-
-bool phase_statistics_recorded(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
-                               int32_t* recon, PhaseWork& work, PhaseCounts* counts, PhaseRecord& record,
-                               size_t tile) {
-  PhaseRecord::Tile& t = record.tiles[tile];
-  t.first_symbol = record.symbols.size();
-  t.first_raw = record.raws.size();
-  RecordIo io{counts, record};
+                      PhaseWork& work, PhaseCounts* counts, PhaseRecord* record, size_t tile) {
+  CountIo io{counts, record};
+  if (!record) return code_tile(io, src, stride, w, h, bin_q8, recon, work);
+  PhaseRecord::Tile& t = record->tiles[tile];
+  t.first_symbol = record->symbols.size();
+  t.first_raw = record->raws.size();
   const bool ok = code_tile(io, src, stride, w, h, bin_q8, recon, work);
-  t.symbols = uint32_t(record.symbols.size() - t.first_symbol);
+  t.symbols = uint32_t(record->symbols.size() - t.first_symbol);
   t.skip = !work.even_phase_coded;
   t.recorded = ok;
   return ok;

@@ -237,14 +237,9 @@ detail::PhaseModel phase_model_of(const int32_t* src, ptrdiff_t src_stride, int6
       const int32_t* tile_src = src + ty * t * src_stride + tx * t;
       if (within(tile_src, src_stride, tw, th, empty_limit)) continue;
       if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
-      if (!record) {
-        detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
-                                 work.phase_work, counts.get());
-        continue;
-      }
-      if (detail::phase_statistics_recorded(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
-                                            work.phase_work, counts.get(), *record,
-                                            size_t(ty * tiles_x + tx)))
+      if (detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
+                                   work.phase_work, counts.get(), record, size_t(ty * tiles_x + tx)) &&
+          record)
         for (int y = 0; y < th; ++y)
           std::copy_n(work.phase_recon.data() + size_t(y) * tw, tw,
                       recon + (ty * t + y) * recon_stride + tx * t);

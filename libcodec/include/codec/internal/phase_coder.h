@@ -95,13 +95,10 @@ struct PhaseRecord {
 
 // Adds the token counts of coding the w x h samples at src (row stride `stride`) with bins of bin_q8
 // to *counts; recon (w x h) is scratch. False when a sample cannot be represented.
-bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
-                      PhaseWork& work, PhaseCounts* counts);
-// The same, also appending the tile's levels to `record` as tile `tile` (recorded when the pass ends
+// With `record`, also appends the tile's levels to it as tile `tile` (recorded when the pass ends
 // normally).
-bool phase_statistics_recorded(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8,
-                               int32_t* recon, PhaseWork& work, PhaseCounts* counts, PhaseRecord& record,
-                               size_t tile);
+bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
+                      PhaseWork& work, PhaseCounts* counts, PhaseRecord* record = nullptr, size_t tile = 0);
 // Codes a recorded tile with `tables`: the payload encode_phase would produce for it (the caller
 // supplies the reconstruction the statistics pass produced). Returns SIZE_MAX when it does not fit.
 size_t encode_phase_recorded(const PhaseRecord& record, size_t tile, const PhaseTables& tables, uint8_t* out,

@@ -69,9 +69,6 @@ inline int padded_side(int side) { return (side + 15) & ~15; }
 // Largest payload a tile of width x height can produce (any data, any mode).
 size_t tile_payload_bound(int width, int height);
 
-// Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
-// the payload size, or 0 when it does not fit. With want_reconstruction, work.reconstruction then
-// holds the decoder's output (row stride = width).
 // A phase tile the statistics pass recorded: replayed instead of coded afresh (phase_coder.h
 // PhaseRecord), with the reconstruction that pass wrote at recon (row stride recon_stride).
 struct PhaseReplay {
@@ -80,6 +77,9 @@ struct PhaseReplay {
   const int32_t* recon = nullptr;
   ptrdiff_t recon_stride = 0;
 };
+// Encodes the width x height samples at src (row stride src_stride) into out[0 .. capacity). Returns
+// the payload size, or 0 when it does not fit. With want_reconstruction, work.reconstruction then
+// holds the decoder's output (row stride = width). With replay, a phase tile is coded from its record.
 size_t encode_tile(const int32_t* src, ptrdiff_t src_stride, int width, int height, const TileParams& params,
                    TileWork& work, uint8_t* out, size_t capacity, bool want_reconstruction,
                    const PhaseReplay* replay = nullptr);
