@@ -167,7 +167,8 @@ struct BandWork {
   std::vector<const void*> src;
   std::vector<const std::vector<uint64_t>*> src_mask;
   std::vector<int32_t> t;  // one row of T_l (the band's rows are read from the level, src)
-  std::vector<int32_t> pred, res, rhat;
+  std::vector<int32_t> res, rhat;
+  std::vector<int32_t> pred_row;  // U of one row, where T_l - R does not give it back
   std::vector<uint8_t> valid, bytes;
   UpsampleScratch scratch;
   BandFigures figures;
@@ -358,10 +359,10 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   for (int l = 0; l <= m; ++l) {
     const double w = double(sizes[size_t(l)].width), h = double(sizes[size_t(l)].height);
     const double S = std::min(h, double(band_rows[size_t(l)]));
-    // The bands in flight: U's prediction, R and T^ (int32 each), the validity (finest), the
-    // stream, the coder's buffer, libcodec's body and its record of the phase tiles' levels (about
-    // 2 bytes a sample each).
-    bytes += double(c) * S * w * (12 + (l == m ? 1 : 0) + 8);
+    // The bands in flight: R (U's prediction until R is formed in place) and T^ (int32 each), the
+    // validity (finest), the stream, the coder's buffer, libcodec's body and its record of the phase
+    // tiles' levels (about 2 bytes a sample each).
+    bytes += double(c) * S * w * (8 + (l == m ? 1 : 0) + 8);
     if (l < m) {
       // T_l rows not yet coded and T^_l rows the finer level's U still needs, and the copy of
       // those U reads for a group of the finer level.
@@ -960,7 +961,7 @@ class StreamingBuilder {
         const bool finest = l == finest_;
         BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
         const int64_t n = bw.rows * fw;
-        bw.pred.resize(size_t(n)), bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
+        bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
         bw.valid.resize(finest ? size_t(n) : 0);
         if (finest)
           for (int64_t r = 0; r < bw.rows; ++r)
@@ -1017,10 +1018,17 @@ class StreamingBuilder {
     const GridSize fs = sizes_[size_t(l)];
     const int64_t n = bw.rows * fs.width;
     const bool with_mask = l == finest_;
-    if (l > 0)
-      upsample_region(cwin, fs, Rect{0, bw.y0, fs.width, bw.rows}, bw.pred.data(), fs.width, bw.scratch);
-    else
-      std::fill(bw.pred.begin(), bw.pred.end(), 0);
+    // U's prediction goes into the residual's buffer and R = T_l - U is formed in place: the band
+    // holds no prediction beside R and T^ (4 of its bytes a sample in flight); U is recovered below
+    // as T_l - R, or computed again for a band where that does not give it back (voids, saturation).
+    const Rect band{0, bw.y0, fs.width, bw.rows};
+    const auto predict = [&](const Rect& r, int32_t* out) {
+      if (l > 0)
+        upsample_region(cwin, fs, r, out, fs.width, bw.scratch);
+      else
+        std::fill(out, out + r.height * fs.width, 0);
+    };
+    predict(band, bw.res.data());
     // T_l is read from the level's rows (a copy of the band was a sixth of its bytes in flight).
     const int64_t fw = fs.width;
     const bool narrow = levels_[size_t(l)].narrow();
@@ -1035,37 +1043,46 @@ class StreamingBuilder {
       }
       return bw.t.data();
     };
+    bool exact = true;  // T_l - R == U everywhere
     for (int64_t r = 0; r < bw.rows; ++r) {
       const int32_t* t = t_row(r);
-      for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k)
-        bw.res[size_t(k)] = saturate(int64_t(t[x]) - bw.pred[size_t(k)]);
+      for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k) {
+        const int64_t d = int64_t(t[x]) - bw.res[size_t(k)];
+        bw.res[size_t(k)] = saturate(d);
+        exact &= bw.res[size_t(k)] == d;
+      }
     }
     // Voids are restored from the mask, so their residual carries no information.
-    if (with_mask)
+    const bool any_void =
+        with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
+    if (any_void) {
+      exact = false;
       for (int64_t k = 0; k < n; ++k)
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
+    }
     bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0);
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;
-    const int32_t* t = nullptr;
-    const int32_t* pred = bw.pred.data();
     const int32_t* res = bw.res.data();
     int32_t* rhat = bw.rhat.data();
-    const bool any_void =
-        with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
-    for (int64_t k = 0, x = fw; k < n; ++k, ++x) {
-      if (x == fw) t = t_row(k / fw), x = 0;
-      const int32_t rec = saturate(int64_t(pred[k]) + rhat[k]);
-      if (!any_void || bw.valid[size_t(k)]) {
-        const int64_t r = res[k], e = int64_t(t[x]) - rec;
-        res_sq[k & 3] += double(r) * double(r);
-        err_sq[k & 3] += double(e) * double(e);
-        res_max = std::max(res_max, r < 0 ? -r : r);
-        err_max = std::max(err_max, e < 0 ? -e : e);
-        ++counted;
+    if (!exact) bw.pred_row.resize(size_t(fw));
+    for (int64_t row = 0; row < bw.rows; ++row) {
+      const int32_t* t = t_row(row);
+      if (!exact) predict(Rect{0, bw.y0 + row, fw, 1}, bw.pred_row.data());
+      for (int64_t x = 0, k = row * fw; x < fw; ++x, ++k) {
+        const int32_t pred = exact ? int32_t(int64_t(t[x]) - res[k]) : bw.pred_row[size_t(x)];
+        const int32_t rec = saturate(int64_t(pred) + rhat[k]);
+        if (!any_void || bw.valid[size_t(k)]) {
+          const int64_t r = res[k], e = int64_t(t[x]) - rec;
+          res_sq[k & 3] += double(r) * double(r);
+          err_sq[k & 3] += double(e) * double(e);
+          res_max = std::max(res_max, r < 0 ? -r : r);
+          err_max = std::max(err_max, e < 0 ? -e : e);
+          ++counted;
+        }
+        rhat[k] = rec;  // now T^ of this band
       }
-      rhat[k] = rec;  // now T^ of this band
     }
     bw.figures.res_sq = (res_sq[0] + res_sq[1]) + (res_sq[2] + res_sq[3]);
     bw.figures.err_sq = (err_sq[0] + err_sq[1]) + (err_sq[2] + err_sq[3]);
