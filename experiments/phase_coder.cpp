@@ -111,16 +111,16 @@ class PhaseCoder final : public ResidualCoder {
     double ee_raw = 0, ee_err = 0, n_ee = 0, bytes[4] = {0, 0, 0, 0};
   } stat[4];
 
-  std::vector<uint8_t> encode(const int32_t* r, int64_t w, int64_t h, int32_t* recon, int lvl,
-                              bool coarsest) override {
+  std::vector<uint8_t> encode(const int32_t* r, int64_t w, int64_t h, int32_t* recon, int lvl, bool coarsest,
+                              int /*threads*/) override {
     std::vector<int32_t> plain_recon;
     std::vector<uint8_t> plain;
     if (best_of_both && lvl != coarsest_) {
       plain_recon.resize(size_t(w * h));
-      plain = inner_.encode(r, w, h, plain_recon.data(), lvl, coarsest);
+      plain = inner_.encode(r, w, h, plain_recon.data(), lvl, coarsest, 1);
     }
     if (lvl == coarsest_) {
-      plain = inner_.encode(r, w, h, recon, lvl, coarsest);
+      plain = inner_.encode(r, w, h, recon, lvl, coarsest, 1);
       if (plain.empty()) return plain;
       plain.insert(plain.begin(), 0xFF);
       return plain;
@@ -136,7 +136,7 @@ class PhaseCoder final : public ResidualCoder {
       std::vector<int32_t> in(size_t(pw * ph)), rec(size_t(pw * ph));
       for (int64_t y = 0; y < ph; ++y)
         for (int64_t x = 0; x < pw; ++x) in[size_t(y * pw + x)] = r[(2 * y + py) * w + 2 * x + px];
-      streams[size_t(p)] = inner_.encode(in.data(), pw, ph, rec.data(), lvl, coarsest);
+      streams[size_t(p)] = inner_.encode(in.data(), pw, ph, rec.data(), lvl, coarsest, 1);
       if (streams[size_t(p)].empty()) std::fill(rec.begin(), rec.end(), 0);
       for (int64_t y = 0; y < ph; ++y)
         for (int64_t x = 0; x < pw; ++x)
@@ -165,7 +165,7 @@ class PhaseCoder final : public ResidualCoder {
         pred[size_t(y * ew + x)] = predict(c, f);
         err[size_t(y * ew + x)] = r[(2 * y) * w + 2 * x] - pred[size_t(y * ew + x)];
       }
-    streams[0] = inner_.encode(err.data(), ew, eh, rec.data(), lvl, coarsest);
+    streams[0] = inner_.encode(err.data(), ew, eh, rec.data(), lvl, coarsest, 1);
     if (lvl < 4) {
       double sr = 0, se = 0;
       for (int64_t y = 0; y < eh; ++y)

@@ -108,16 +108,17 @@ PtcCoderOptions PtcResidualCoder::level_options(int levels_above_finest) const {
 }
 
 std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w, int64_t h,
-                                              int32_t* reconstructed, int levels_above_finest,
-                                              bool coarsest) {
-  return encode_spliceable(residual, w, h, reconstructed, levels_above_finest, coarsest, nullptr, 0);
+                                              int32_t* reconstructed, int levels_above_finest, bool coarsest,
+                                              int threads) {
+  return encode_spliceable(residual, w, h, reconstructed, levels_above_finest, coarsest, nullptr, 0, threads);
 }
 
 std::vector<uint8_t> PtcResidualCoder::encode_spliceable(const int32_t* residual, int64_t w, int64_t h,
                                                          int32_t* reconstructed, int levels_above_finest,
-                                                         bool coarsest, const uint8_t* into,
-                                                         size_t into_size) {
+                                                         bool coarsest, const uint8_t* into, size_t into_size,
+                                                         int threads) {
   codec::EncodeOptions copts = to_codec(level_options(levels_above_finest));
+  copts.threads = uint32_t(std::max(1, threads));
   copts.transform = coarsest ? codec::Transform::Lapped : options_.residual_transform;
   copts.phase_model_stream = into;
   copts.phase_model_stream_size = into_size;

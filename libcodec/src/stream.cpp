@@ -6,6 +6,10 @@
 #include <cassert>
 #include <cmath>
 #include <cstring>
+#include <exception>
+#include <memory>
+#include <thread>
+#include <vector>
 
 #include "codec/codec.h"
 #include "codec/crc32c.h"
@@ -17,9 +21,20 @@
 
 namespace codec {
 
+// The encoder's state for one chunk of tile rows (EncodeOptions::threads: chunks are coded at once).
+struct EncodeChunk {
+  detail::TileWork work;
+  detail::PhaseRecord phase_record;  // the phase statistics pass's levels of the chunk's tiles, replayed
+  std::unique_ptr<detail::PhaseCounts> counts;  // its token counts, added up over the chunks in order
+  std::vector<uint8_t> body;                    // its payloads, back to back
+  size_t size = 0;                              // payload bytes in body
+  bool any_phase = false;                       // a tile kept the phase mode
+  Status status = Status::Ok;
+};
+
 struct Scratch::Impl {
   detail::TileWork work;
-  detail::PhaseRecord phase_record;  // encoder: the phase statistics pass's levels, replayed
+  std::vector<std::unique_ptr<EncodeChunk>> chunks;  // encoder: chunk 0 is the calling thread's
   std::vector<uint32_t> tile_sizes;  // encoder: payload bytes per tile (0 = empty) until the index is written
   std::vector<uint8_t> body;         // encoder: payloads and index, until the header's size is known
   // Decoder: band steps of the last (step, fraction bits) seen; computing them costs about as much as
@@ -224,27 +239,54 @@ namespace {
 // its token counts (whether or not the tile ends up in that mode). With `record` (and recon, which
 // then receives each tile's phase reconstruction) the pass also keeps every tile's levels for the
 // encoder to replay.
-detail::PhaseModel phase_model_of(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
-                                  int64_t t, uint32_t bin_q8, int64_t empty_limit, Scratch& scratch,
-                                  detail::PhaseRecord* record, int32_t* recon, ptrdiff_t recon_stride) {
-  detail::TileWork& work = scratch.impl().work;
-  auto counts = std::make_unique<detail::PhaseCounts>();
+// Runs body(c) for c in [0, n): c = 0 on the calling thread, the others on threads it starts and
+// joins. The first exception a call throws is rethrown here after every thread has ended.
+template <class Body> void fork_join(size_t n, Body&& body) {
+  std::vector<std::thread> threads;
+  std::vector<std::exception_ptr> errors(n);
+  const auto run = [&](size_t c) {
+    try {
+      body(c);
+    } catch (...) {
+      errors[c] = std::current_exception();
+    }
+  };
+  threads.reserve(n > 0 ? n - 1 : 0);
+  for (size_t c = 1; c < n; ++c) threads.emplace_back(run, c);
+  run(0);
+  for (std::thread& t : threads) t.join();
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
+}
+
+// Tile rows [first, end) of chunk c of n: an even split, so that every chunk and its bytes are a
+// function of the image alone (the threads change only who codes them).
+int64_t chunk_first_row(int64_t tiles_y, size_t c, size_t n) { return tiles_y * int64_t(c) / int64_t(n); }
+
+// The phase statistics of the non-empty tiles of tile rows [ty0, ty1) into chunk's counts (and, with
+// `record`, its levels into chunk's record and the reconstruction into recon).
+void phase_statistics_of_rows(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
+                              int64_t t, int64_t ty0, int64_t ty1, uint32_t bin_q8, int64_t empty_limit,
+                              EncodeChunk& chunk, bool record, int32_t* recon, ptrdiff_t recon_stride) {
+  detail::TileWork& work = chunk.work;
+  if (!chunk.counts) chunk.counts = std::make_unique<detail::PhaseCounts>();
+  *chunk.counts = detail::PhaseCounts{};
   const int64_t tiles_x = (width + t - 1) / t;
-  if (record) record->clear(size_t(tiles_x * ((height + t - 1) / t)));
-  for (int64_t ty = 0; ty * t < height; ++ty)
+  if (record) chunk.phase_record.clear(size_t(tiles_x * ((height + t - 1) / t)));
+  for (int64_t ty = ty0; ty < ty1; ++ty)
     for (int64_t tx = 0; tx * t < width; ++tx) {
       const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
       const int32_t* tile_src = src + ty * t * src_stride + tx * t;
       if (within(tile_src, src_stride, tw, th, empty_limit)) continue;
       if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
       if (detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
-                                   work.phase_work, counts.get(), record, size_t(ty * tiles_x + tx)) &&
+                                   work.phase_work, chunk.counts.get(),
+                                   record ? &chunk.phase_record : nullptr, size_t(ty * tiles_x + tx)) &&
           record)
         for (int y = 0; y < th; ++y)
           std::copy_n(work.phase_recon.data() + size_t(y) * tw, tw,
                       recon + (ty * t + y) * recon_stride + tx * t);
     }
-  return detail::fit_phase_model(*counts);
 }
 
 // Whether [a, a + an) and [b, b + bn) share memory.
@@ -292,6 +334,17 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.max_error = options.bound_max_error ? options.max_error : 0;
   params.phase = options.phase_tiles;
   params.phase_bin_q8 = phase_bin_q8(options.bound_max_error, params.max_error, step_q8);
+  // Tile rows in chunks coded at once (EncodeOptions::threads); chunk 0 on this thread.
+  const int64_t t = options.tile_size;
+  const size_t chunk_count = size_t(std::clamp<int64_t>(int64_t(options.threads), 1, layout.tiles_y));
+  std::vector<std::unique_ptr<EncodeChunk>>& chunks = scratch.impl().chunks;
+  if (chunks.size() < chunk_count) chunks.resize(chunk_count);
+  for (size_t c = 0; c < chunk_count; ++c)
+    if (!chunks[c]) chunks[c] = std::make_unique<EncodeChunk>();
+  const auto rows_of = [&](size_t c) {
+    return std::pair<int64_t, int64_t>{chunk_first_row(layout.tiles_y, c, chunk_count),
+                                       chunk_first_row(layout.tiles_y, c + 1, chunk_count)};
+  };
   detail::PhaseModel model;
   bool given_model = false;
   bool replay = false;
@@ -309,9 +362,17 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       // it needs a recon that is not the source (a tile's other modes read the source afterwards).
       replay = recon && !overlap(src, size_t((height - 1) * src_stride + width), recon,
                                  size_t((height - 1) * recon_stride + width));
-      model = phase_model_of(src, src_stride, width, height, options.tile_size, params.phase_bin_q8,
-                             params.max_error, scratch, replay ? &scratch.impl().phase_record : nullptr,
-                             recon, recon_stride);
+      fork_join(chunk_count, [&](size_t c) {
+        const auto [ty0, ty1] = rows_of(c);
+        phase_statistics_of_rows(src, src_stride, width, height, t, ty0, ty1, params.phase_bin_q8,
+                                 params.max_error, *chunks[c], replay, recon, recon_stride);
+      });
+      // Counts add up in any order (integers): the model is the one-pass model.
+      detail::PhaseCounts& counts = *chunks[0]->counts;
+      for (size_t c = 1; c < chunk_count; ++c)
+        for (int k = 0; k < detail::kPhaseContexts; ++k)
+          for (int s = 0; s < detail::kTokens; ++s) counts.counts[k][s] += chunks[c]->counts->counts[k][s];
+      model = detail::fit_phase_model(counts);
     }
   }
   const detail::PhaseTables tables(model);
@@ -323,48 +384,71 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
 
   // Payloads first, then the index (its size depends on theirs), into scratch; then the header, which
   // records the payload size, and the body behind it into dst. (The copy costs far less than coding.)
-  detail::TileWork& work = scratch.impl().work;
   std::vector<uint32_t>& sizes = scratch.impl().tile_sizes;
   std::vector<uint8_t>& body = scratch.impl().body;
-  const int64_t t = options.tile_size;
   const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
   if (sizes.size() < tile_count) sizes.resize(tile_count);
-  size_t pos = 0;
-  bool any_phase = false;
-  for (int64_t ty = 0; ty < layout.tiles_y; ++ty)
-    for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
-      const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
-      const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-      bool empty = within(tile_src, src_stride, tw, th, empty_limit);
-      size_t size = 0;
-      if (!empty) {
-        const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
-        const size_t bound = detail::tile_payload_bound(tw, th);
-        if (body.size() < pos + bound) body.resize(std::max(pos + bound, body.size() * 2));
-        const size_t tile = size_t(ty * layout.tiles_x + tx);
-        const detail::PhaseRecord& record = scratch.impl().phase_record;
-        detail::PhaseReplay rp;
-        if (replay && record.tiles[tile].recorded)
-          rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
-        size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, body.data() + pos,
-                                   body.size() - pos, recon != nullptr || probing, rp.record ? &rp : nullptr);
-        if (size == 0) return Status::BufferTooSmall;
-        empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
-      }
-      sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
-      if (!empty) any_phase = any_phase || (params.phase && detail::is_phase_mode(body[pos]));
-      if (!empty) pos += size;
-      if (recon) {
-        int32_t* out = recon + ty * t * recon_stride + tx * t;
-        for (int y = 0; y < th; ++y) {
-          if (empty)
-            std::fill_n(out + y * recon_stride, tw, 0);
-          else
-            std::memcpy(out + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
-                        size_t(tw) * sizeof(int32_t));
+  fork_join(chunk_count, [&](size_t c) {
+    EncodeChunk& chunk = *chunks[c];
+    // Chunk 0 codes into the stream's body (nothing to copy with one chunk).
+    std::vector<uint8_t>& out = c == 0 ? body : chunk.body;
+    detail::TileWork& work = c == 0 ? scratch.impl().work : chunk.work;
+    size_t pos = 0;
+    chunk.any_phase = false;
+    chunk.status = Status::Ok;
+    const auto [ty0, ty1] = rows_of(c);
+    for (int64_t ty = ty0; ty < ty1; ++ty)
+      for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
+        const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+        const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+        bool empty = within(tile_src, src_stride, tw, th, empty_limit);
+        size_t size = 0;
+        if (!empty) {
+          const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
+          const size_t bound = detail::tile_payload_bound(tw, th);
+          if (out.size() < pos + bound) out.resize(std::max(pos + bound, out.size() * 2));
+          const size_t tile = size_t(ty * layout.tiles_x + tx);
+          const detail::PhaseRecord& record = chunk.phase_record;
+          detail::PhaseReplay rp;
+          if (replay && record.tiles[tile].recorded)
+            rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
+          size =
+              detail::encode_tile(tile_src, src_stride, tw, th, params, work, out.data() + pos,
+                                  out.size() - pos, recon != nullptr || probing, rp.record ? &rp : nullptr);
+          if (size == 0) {
+            chunk.status = Status::BufferTooSmall;
+            return;
+          }
+          empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
+        }
+        sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
+        if (!empty) chunk.any_phase = chunk.any_phase || (params.phase && detail::is_phase_mode(out[pos]));
+        if (!empty) pos += size;
+        if (recon) {
+          int32_t* dst_tile = recon + ty * t * recon_stride + tx * t;
+          for (int y = 0; y < th; ++y) {
+            if (empty)
+              std::fill_n(dst_tile + y * recon_stride, tw, 0);
+            else
+              std::memcpy(dst_tile + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
+                          size_t(tw) * sizeof(int32_t));
+          }
         }
       }
+    chunk.size = pos;
+  });
+  size_t pos = 0;
+  bool any_phase = false;
+  for (size_t c = 0; c < chunk_count; ++c) {
+    const EncodeChunk& chunk = *chunks[c];
+    if (chunk.status != Status::Ok) return chunk.status;
+    if (c > 0) {
+      if (body.size() < pos + chunk.size) body.resize(std::max(pos + chunk.size, body.size() * 2));
+      std::memcpy(body.data() + pos, chunk.body.data(), chunk.size);
     }
+    pos += chunk.size;
+    any_phase = any_phase || chunk.any_phase;
+  }
   StreamFields fields{width,
                       height,
                       options.tile_size,

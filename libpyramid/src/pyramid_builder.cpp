@@ -952,6 +952,16 @@ class StreamingBuilder {
   // meanwhile), the level figures and the sink (which the main thread leaves alone meanwhile).
   void code_round() {
     const std::vector<Task>& order = round_.order;
+    // A round of fewer bands than threads (the drain at the end, a tight memory budget) gives each
+    // band a share of the threads in proportion to its samples: the coder codes its tile rows on them
+    // (the bytes do not depend on it). Otherwise every band is coded on one thread.
+    int64_t round_samples = 0;
+    for (const Task& task : order) round_samples += task.samples;
+    const auto band_threads = [&](const Task& task) {
+      if (order.size() >= size_t(opt_.threads) || round_samples == 0) return 1;
+      return int(
+          std::max<int64_t>(1, (int64_t(opt_.threads) * task.samples + round_samples / 2) / round_samples));
+    };
     std::atomic<size_t> next{0};
     detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
       for (size_t i; (i = next.fetch_add(1)) < order.size();) {
@@ -966,7 +976,7 @@ class StreamingBuilder {
         if (finest)
           for (int64_t r = 0; r < bw.rows; ++r)
             MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
-        code_band(l, g.window, bw);
+        code_band(l, g.window, bw, band_threads(order[i]));
       }
     });
     for (const Group& g : round_.groups) deliver_group(g);
@@ -1014,7 +1024,7 @@ class StreamingBuilder {
     }
   }
 
-  void code_band(int l, const CoarseWindow& cwin, BandWork& bw) {
+  void code_band(int l, const CoarseWindow& cwin, BandWork& bw, int threads) {
     const GridSize fs = sizes_[size_t(l)];
     const int64_t n = bw.rows * fs.width;
     const bool with_mask = l == finest_;
@@ -1060,7 +1070,7 @@ class StreamingBuilder {
       for (int64_t k = 0; k < n; ++k)
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
     }
-    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0);
+    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0, threads);
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;

@@ -18,7 +18,7 @@ UniformQuantizerCoder::UniformQuantizerCoder(int32_t step, int64_t band_rows)
 
 std::vector<uint8_t> UniformQuantizerCoder::encode(const int32_t* residual, int64_t w, int64_t h,
                                                    int32_t* reconstructed, int /*levels_above_finest*/,
-                                                   bool /*coarsest*/) {
+                                                   bool /*coarsest*/, int /*threads*/) {
   const int64_t n = w * h;
   std::vector<uint8_t> out(size_t(n) * 5);
   uint8_t* p = out.data();

@@ -84,7 +84,7 @@ TEST_CASE("uniform quantiser: error within step/2, exact at step 1, rejects bad 
   for (int32_t step : {1, 2, 3, 4, 7}) {
     UniformQuantizerCoder coder(step);
     std::vector<int32_t> rec(r.size()), dec(r.size());
-    auto bytes = coder.encode(r.data(), int64_t(r.size()), 1, rec.data(), 0, false);
+    auto bytes = coder.encode(r.data(), int64_t(r.size()), 1, rec.data(), 0, false, 1);
     REQUIRE(coder.decode(bytes.data(), bytes.size(), int64_t(r.size()), 1, dec.data()));
     CHECK(rec == dec);
     for (size_t k = 0; k < r.size(); ++k) {  // the int32 extremes (9, 10) saturate

@@ -60,14 +60,15 @@ class PtcResidualCoder final : public ResidualCoder {
   // Thread-safe: the builder codes bands in parallel. The coder keeps the encoders' scratch memory
   // (copies of a coder share it) and hands each call the part that suits its band's size.
   // Throws std::runtime_error naming the libcodec status if a band cannot be coded (e.g. a residual
-  // beyond libcodec's +-2^20 range).
+  // beyond libcodec's +-2^20 range). threads: libcodec codes the band's tile rows on that many
+  // threads (codec::EncodeOptions::threads; the same bytes).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
-                              int levels_above_finest, bool coarsest) override;
+                              int levels_above_finest, bool coarsest, int threads) override;
   // The same, coded so that its tiles can be spliced into `into` (into_size bytes, an existing stream
   // of the same band; codec::EncodeOptions::phase_model_stream): for editors that re-code some tiles.
   std::vector<uint8_t> encode_spliceable(const int32_t* residual, int64_t w, int64_t h,
                                          int32_t* reconstructed, int levels_above_finest, bool coarsest,
-                                         const uint8_t* into, size_t into_size);
+                                         const uint8_t* into, size_t into_size, int threads = 1);
   // The step and max error a level gets (see screen_level_error and coarse_step_ratio).
   PtcCoderOptions level_options(int levels_above_finest) const;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;

@@ -99,6 +99,12 @@ struct EncodeOptions {
   // does not open (read_header) is ignored.
   const uint8_t* phase_model_stream = nullptr;
   size_t phase_model_stream_size = 0;
+  // Experimental: threads that encode() codes the image's tile rows on, the calling thread included
+  // (1, the default: the calling thread alone; at most one per tile row). The others are started and
+  // joined within the call. The stream and the reconstruction are the same for any value (the rows
+  // are split evenly and joined in order); the Scratch then keeps a coder state and a payload buffer
+  // per thread.
+  uint32_t threads = 1;
 };
 
 // Step giving about `target_rms` sample-domain rms error (inverse of predicted_rms); never below 1.

@@ -25,8 +25,10 @@ class ResidualCoder {
   // error with the level's spacing; decode() never needs it: streams carry their own step).
   // coarsest: the band belongs to level 0, whose "residual" is the level itself (heights, not the
   // small closed-loop residual of the finer levels), so a coder may transform it differently.
+  // threads: how many threads the coder may use for this band, the calling thread included (>= 1);
+  // the bytes and the reconstruction must not depend on it.
   virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
-                                      int levels_above_finest, bool coarsest) = 0;
+                                      int levels_above_finest, bool coarsest, int threads) = 0;
   // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).
   virtual bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) = 0;
 };
@@ -37,9 +39,9 @@ class UniformQuantizerCoder final : public ResidualCoder {
  public:
   explicit UniformQuantizerCoder(int32_t step, int64_t band_rows = 64);
   int64_t band_rows() const override { return band_rows_; }
-  // One step at every level (levels_above_finest is ignored).
+  // One step at every level (levels_above_finest is ignored); one thread.
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
-                              int levels_above_finest, bool coarsest) override;
+                              int levels_above_finest, bool coarsest, int threads) override;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;
   int32_t step() const { return step_; }
 
