@@ -952,16 +952,29 @@ class StreamingBuilder {
   // meanwhile), the level figures and the sink (which the main thread leaves alone meanwhile).
   void code_round() {
     const std::vector<Task>& order = round_.order;
-    // A round of fewer bands than threads (the drain at the end, a tight memory budget) gives each
-    // band a share of the threads in proportion to its samples: the coder codes its tile rows on them
-    // (the bytes do not depend on it). Otherwise every band is coded on one thread.
+    // The round shares the threads out among its bands in proportion to their samples, at least one
+    // each, the largest remainders getting what is left (the bands coded at once by the workers below
+    // leave threads idle when they are fewer than the threads: the drain at the end of the input, a
+    // tight memory budget, a few large bands beside small ones): the coder codes a band's tile rows
+    // on its share, and the bytes do not depend on it.
+    std::vector<int>& share = round_.threads;
+    share.assign(order.size(), 1);
     int64_t round_samples = 0;
     for (const Task& task : order) round_samples += task.samples;
-    const auto band_threads = [&](const Task& task) {
-      if (order.size() >= size_t(opt_.threads) || round_samples == 0) return 1;
-      return int(
-          std::max<int64_t>(1, (int64_t(opt_.threads) * task.samples + round_samples / 2) / round_samples));
-    };
+    if (round_samples > 0) {
+      std::vector<std::pair<double, size_t>> remainder;
+      int given = 0;
+      for (size_t i = 0; i < order.size(); ++i) {
+        const double ideal = double(opt_.threads) * double(order[i].samples) / double(round_samples);
+        share[i] = std::max(1, int(ideal));
+        given += share[i];
+        remainder.push_back({ideal - std::floor(ideal), i});
+      }
+      std::stable_sort(remainder.begin(), remainder.end(),
+                       [](const auto& a, const auto& b) { return a.first > b.first; });
+      for (size_t k = 0; k < remainder.size() && given < opt_.threads; ++k, ++given)
+        ++share[remainder[k].second];
+    }
     std::atomic<size_t> next{0};
     detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
       for (size_t i; (i = next.fetch_add(1)) < order.size();) {
@@ -976,7 +989,7 @@ class StreamingBuilder {
         if (finest)
           for (int64_t r = 0; r < bw.rows; ++r)
             MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
-        code_band(l, g.window, bw, band_threads(order[i]));
+        code_band(l, g.window, bw, share[i]);
       }
     });
     for (const Group& g : round_.groups) deliver_group(g);
@@ -1143,6 +1156,7 @@ class StreamingBuilder {
     std::exception_ptr error;
     std::vector<Group> groups;
     std::vector<Task> order;
+    std::vector<int> threads;  // per task of order: the threads its band is coded on
   } round_;
   BuildResult result_;
 };
