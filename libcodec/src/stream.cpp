@@ -442,7 +442,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   for (size_t c = 0; c < chunk_count; ++c) {
     const EncodeChunk& chunk = *chunks[c];
     if (chunk.status != Status::Ok) return chunk.status;
-    if (c > 0) {
+    if (c > 0 && chunk.size > 0) {
       if (body.size() < pos + chunk.size) body.resize(std::max(pos + chunk.size, body.size() * 2));
       std::memcpy(body.data() + pos, chunk.body.data(), chunk.size);
     }
