@@ -17,6 +17,7 @@
 #include "codec/internal/quantizer.h"
 #include "codec/internal/tile_coder.h"
 #include "core/bytes.h"
+#include "core/fork_join.h"
 #include "core/text.h"
 
 namespace codec {
@@ -239,26 +240,6 @@ namespace {
 // its token counts (whether or not the tile ends up in that mode). With `record` (and recon, which
 // then receives each tile's phase reconstruction) the pass also keeps every tile's levels for the
 // encoder to replay.
-// Runs body(c) for c in [0, n): c = 0 on the calling thread, the others on threads it starts and
-// joins. The first exception a call throws is rethrown here after every thread has ended.
-template <class Body> void fork_join(size_t n, Body&& body) {
-  std::vector<std::thread> threads;
-  std::vector<std::exception_ptr> errors(n);
-  const auto run = [&](size_t c) {
-    try {
-      body(c);
-    } catch (...) {
-      errors[c] = std::current_exception();
-    }
-  };
-  threads.reserve(n > 0 ? n - 1 : 0);
-  for (size_t c = 1; c < n; ++c) threads.emplace_back(run, c);
-  run(0);
-  for (std::thread& t : threads) t.join();
-  for (const std::exception_ptr& e : errors)
-    if (e) std::rethrow_exception(e);
-}
-
 // Tile rows [first, end) of chunk c of n: an even split, so that every chunk and its bytes are a
 // function of the image alone (the threads change only who codes them).
 int64_t chunk_first_row(int64_t tiles_y, size_t c, size_t n) { return tiles_y * int64_t(c) / int64_t(n); }
@@ -362,7 +343,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       // it needs a recon that is not the source (a tile's other modes read the source afterwards).
       replay = recon && !overlap(src, size_t((height - 1) * src_stride + width), recon,
                                  size_t((height - 1) * recon_stride + width));
-      fork_join(chunk_count, [&](size_t c) {
+      terrain::fork_join(chunk_count, [&](size_t c) {
         const auto [ty0, ty1] = rows_of(c);
         phase_statistics_of_rows(src, src_stride, width, height, t, ty0, ty1, params.phase_bin_q8,
                                  params.max_error, *chunks[c], replay, recon, recon_stride);
@@ -388,7 +369,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   std::vector<uint8_t>& body = scratch.impl().body;
   const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
   if (sizes.size() < tile_count) sizes.resize(tile_count);
-  fork_join(chunk_count, [&](size_t c) {
+  terrain::fork_join(chunk_count, [&](size_t c) {
     EncodeChunk& chunk = *chunks[c];
     // Chunk 0 codes into the stream's body (nothing to copy with one chunk).
     std::vector<uint8_t>& out = c == 0 ? body : chunk.body;

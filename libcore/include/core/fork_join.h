@@ -1,0 +1,37 @@
+// A fork-join of n parts for the encoders' own parallelism (libcodec's tile rows, the builder's band
+// rows): part 0 on the calling thread, the others on threads started and joined within the call.
+// Callers split their work so that the result does not depend on n.
+#pragma once
+
+#include <cstddef>
+#include <exception>
+#include <thread>
+#include <vector>
+
+namespace terrain {
+
+// Runs body(c) for c in [0, n) and returns when all have ended; the first exception a part threw
+// (lowest c) is then rethrown. n <= 1 runs on the calling thread alone.
+template <class Body> void fork_join(size_t n, Body&& body) {
+  if (n <= 1) {
+    if (n == 1) body(size_t(0));
+    return;
+  }
+  std::vector<std::exception_ptr> errors(n);
+  const auto run = [&](size_t c) {
+    try {
+      body(c);
+    } catch (...) {
+      errors[c] = std::current_exception();
+    }
+  };
+  std::vector<std::thread> threads;
+  threads.reserve(n - 1);
+  for (size_t c = 1; c < n; ++c) threads.emplace_back(run, c);
+  run(0);
+  for (std::thread& t : threads) t.join();
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
+}
+
+}  // namespace terrain
