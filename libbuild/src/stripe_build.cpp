@@ -364,6 +364,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
     return std::chrono::duration<double>(b - a).count();
   };
   const auto t_stripes = Clock::now();
+  std::vector<std::string> stripe_lines;  // this process's stripes, for the log
   auto t_coded = t_stripes;
   try {
     int mine = 0, done = 0;
@@ -374,11 +375,18 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       if (so.resume && existing.open(path, fp, k, K, levels, info.width, false) && existing.intact()) {
         ++resumed;
       } else {
+        const auto t_stripe = Clock::now();
         PartWriter part(path, fp, k, K, info.width);
         auto reader = open_input();
         BuildResult r = build_pyramid_stripe(*reader, stripe_options,
                                              BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, coder, part);
         part.finish();
+        // Per stripe, for the balance between stripes (an interior one carries two halos).
+        std::ostringstream line;
+        line.precision(3);
+        line << "stripe " << k << " of " << K << ": rows " << stripe_rows(k) << "-" << stripe_rows(k + 1)
+             << " coded in " << seconds(t_stripe, Clock::now()) << " s";
+        stripe_lines.push_back(line.str());
         if (!have_result) {
           result = std::move(r);
           have_result = true;
@@ -449,6 +457,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   timing << "; process 0 coded its stripes in " << seconds(t_stripes, t_coded) << " s, waited "
          << seconds(t_coded, t_assembly) << " s for the others, assembled the output in "
          << seconds(t_assembly, Clock::now()) << " s";
+  result.log.insert(result.log.end(), stripe_lines.begin(), stripe_lines.end());
   result.log.push_back("stripes: " + std::to_string(K) + " over " + std::to_string(ranks) + " process" +
                        (ranks > 1 ? "es" : "") +
                        (resumed ? ", " + std::to_string(resumed) + " resumed" : "") + timing.str());
