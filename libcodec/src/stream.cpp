@@ -236,16 +236,15 @@ size_t encode_bound(int64_t width, int64_t height, const EncodeOptions& options)
 
 namespace {
 
-// The phase model fitted to the tiles of an image: every non-empty tile coded in the phase mode for
-// its token counts (whether or not the tile ends up in that mode). With `record` (and recon, which
-// then receives each tile's phase reconstruction) the pass also keeps every tile's levels for the
-// encoder to replay.
-// Tile rows [first, end) of chunk c of n: an even split, so that every chunk and its bytes are a
-// function of the image alone (the threads change only who codes them).
+// The first tile row of chunk c of n: an even split, so that every chunk and its bytes are a function
+// of the image alone (the threads change only who codes them).
 int64_t chunk_first_row(int64_t tiles_y, size_t c, size_t n) { return tiles_y * int64_t(c) / int64_t(n); }
 
-// The phase statistics of the non-empty tiles of tile rows [ty0, ty1) into chunk's counts (and, with
-// `record`, its levels into chunk's record and the reconstruction into recon).
+// The phase statistics pass over tile rows [ty0, ty1): every non-empty tile coded in the phase mode
+// for its token counts (whether or not the tile ends up in that mode), into the chunk's counts, from
+// which the stream's model is fitted. With `record` (and recon, which then receives each tile's phase
+// reconstruction) the pass also keeps every tile's levels in the chunk's record for the encoder to
+// replay.
 void phase_statistics_of_rows(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
                               int64_t t, int64_t ty0, int64_t ty1, uint32_t bin_q8, int64_t empty_limit,
                               EncodeChunk& chunk, bool record, int32_t* recon, ptrdiff_t recon_stride) {
