@@ -159,7 +159,6 @@ class InputConverter {
   detail::PushPullScratch scratch_;
 };
 
-// Per-band state of the closed loop, reused across band groups.
 // What one thread of a band's share needs for its part of the rows (code_band).
 struct BandPart {
   std::vector<int32_t> t;         // one row of T_l (16-bit levels widened)
@@ -169,6 +168,7 @@ struct BandPart {
   int64_t res_max = 0, err_max = 0, counted = 0;
 };
 
+// Per-band state of the closed loop, reused across band groups.
 struct BandWork {
   int64_t y0 = 0, rows = 0;
   // Its rows of T_l and validity as the level holds them, taken when the round starts: the coder
