@@ -35,7 +35,6 @@
 #include <thread>
 #include <utility>
 
-#include "core/fork_join.h"
 #include "pyramid/internal/filter_downsample.h"
 #include "pyramid/internal/pyramid_fill.h"
 #include "pyramid/internal/pyramid_parallel.h"
@@ -159,15 +158,6 @@ class InputConverter {
   detail::PushPullScratch scratch_;
 };
 
-// What one thread of a band's share needs for its part of the rows (code_band).
-struct BandPart {
-  std::vector<int32_t> t;         // one row of T_l (16-bit levels widened)
-  std::vector<int32_t> pred_row;  // U of one row, where T_l - R does not give it back
-  UpsampleScratch scratch;
-  bool exact = true;  // T_l - R == U in the part (no voids, no saturation)
-  int64_t res_max = 0, err_max = 0, counted = 0;
-};
-
 // Per-band state of the closed loop, reused across band groups.
 struct BandWork {
   int64_t y0 = 0, rows = 0;
@@ -176,10 +166,11 @@ struct BandWork {
   // neither appending nor dropping other rows moves).
   std::vector<const void*> src;
   std::vector<const std::vector<uint64_t>*> src_mask;
+  std::vector<int32_t> t;  // one row of T_l (the band's rows are read from the level, src)
   std::vector<int32_t> res, rhat;
+  std::vector<int32_t> pred_row;  // U of one row, where T_l - R does not give it back
   std::vector<uint8_t> valid, bytes;
-  std::vector<double> row_sums;  // per row: the 4 partial sums of R^2, then of the error^2
-  std::vector<BandPart> parts;   // per part of the rows coded on its own thread (code_band)
+  UpsampleScratch scratch;
   BandFigures figures;
 };
 
@@ -966,8 +957,7 @@ class StreamingBuilder {
     // leave threads idle when they are fewer than the threads: the drain at the end of the input, a
     // tight memory budget, a few large bands beside small ones): the coder codes a band's tile rows
     // on its share, and the bytes do not depend on it.
-    std::vector<int>& share = round_.threads;
-    share.assign(order.size(), 1);
+    std::vector<int> share(order.size(), 1);
     int64_t round_samples = 0;
     for (const Task& task : order) round_samples += task.samples;
     if (round_samples > 0) {
@@ -1048,96 +1038,73 @@ class StreamingBuilder {
 
   void code_band(int l, const CoarseWindow& cwin, BandWork& bw, int threads) {
     const GridSize fs = sizes_[size_t(l)];
-    const int64_t fw = fs.width;
+    const int64_t n = bw.rows * fs.width;
     const bool with_mask = l == finest_;
-    const bool narrow = levels_[size_t(l)].narrow();
-    // The band's rows are split into `threads` parts (its share of the round's threads) for U, R and
-    // the figures, as libcodec splits its tile rows: part c has rows [rows c / n, rows (c + 1) / n).
-    const size_t parts = size_t(std::clamp<int64_t>(threads, 1, bw.rows));
-    if (bw.parts.size() < parts) bw.parts.resize(parts);
-    const auto part_rows = [&](size_t c) {
-      return std::pair<int64_t, int64_t>{bw.rows * int64_t(c) / int64_t(parts),
-                                         bw.rows * int64_t(c + 1) / int64_t(parts)};
-    };
-    // T_l is read from the level's rows (a copy of the band was a sixth of its bytes in flight).
-    const auto t_row = [&](BandPart& part, int64_t r) -> const int32_t* {
-      if (!narrow) return static_cast<const int32_t*>(bw.src[size_t(r)]);
-      const int16_t* in = static_cast<const int16_t*>(bw.src[size_t(r)]);
-      part.t.resize(size_t(fw));
-      std::copy(in, in + fw, part.t.begin());
-      return part.t.data();
-    };
-    const auto predict = [&](BandPart& part, int64_t r0, int64_t rows, int32_t* out) {
+    // U's prediction goes into the residual's buffer and R = T_l - U is formed in place: the band
+    // holds no prediction beside R and T^ (4 of its bytes a sample in flight); U is recovered below
+    // as T_l - R, or computed again for a band where that does not give it back (voids, saturation).
+    const Rect band{0, bw.y0, fs.width, bw.rows};
+    const auto predict = [&](const Rect& r, int32_t* out) {
       if (l > 0)
-        upsample_region(cwin, fs, Rect{0, bw.y0 + r0, fw, rows}, out, fw, part.scratch);
+        upsample_region(cwin, fs, r, out, fs.width, bw.scratch);
       else
-        std::fill(out, out + rows * fw, 0);
+        std::fill(out, out + r.height * fs.width, 0);
     };
+    predict(band, bw.res.data());
+    // T_l is read from the level's rows (a copy of the band was a sixth of its bytes in flight).
+    const int64_t fw = fs.width;
+    const bool narrow = levels_[size_t(l)].narrow();
+    bw.t.resize(size_t(fw));
+    const auto t_row = [&](int64_t r) {
+      if (narrow) {
+        const int16_t* in = static_cast<const int16_t*>(bw.src[size_t(r)]);
+        std::copy(in, in + fw, bw.t.begin());
+      } else {
+        const int32_t* in = static_cast<const int32_t*>(bw.src[size_t(r)]);
+        std::copy(in, in + fw, bw.t.begin());
+      }
+      return bw.t.data();
+    };
+    bool exact = true;  // T_l - R == U everywhere
+    for (int64_t r = 0; r < bw.rows; ++r) {
+      const int32_t* t = t_row(r);
+      for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k) {
+        const int64_t d = int64_t(t[x]) - bw.res[size_t(k)];
+        bw.res[size_t(k)] = saturate(d);
+        exact &= bw.res[size_t(k)] == d;
+      }
+    }
     // Voids are restored from the mask, so their residual carries no information.
     const bool any_void =
         with_mask && std::find(bw.valid.begin(), bw.valid.end(), uint8_t(0)) != bw.valid.end();
-    // U's prediction goes into the residual's buffer and R = T_l - U is formed in place: the band
-    // holds no prediction beside R and T^ (4 of its bytes a sample in flight); U is recovered below
-    // as T_l - R, or computed again for a part where that does not give it back (voids, saturation).
-    fork_join(parts, [&](size_t c) {
-      BandPart& part = bw.parts[c];
-      const auto [r0, r1] = part_rows(c);
-      predict(part, r0, r1 - r0, bw.res.data() + r0 * fw);
-      part.exact = !any_void;  // T_l - R == U everywhere in the part
-      for (int64_t r = r0; r < r1; ++r) {
-        const int32_t* t = t_row(part, r);
-        for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k) {
-          const int64_t d = int64_t(t[x]) - bw.res[size_t(k)];
-          bw.res[size_t(k)] = saturate(d);
-          part.exact &= bw.res[size_t(k)] == d;
-        }
-      }
-      if (any_void)
-        for (int64_t k = r0 * fw; k < r1 * fw; ++k)
-          if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
-    });
-    bw.bytes = coder_.encode(bw.res.data(), fw, bw.rows, bw.rhat.data(), finest_ - l, l == 0, threads);
-    // Four partial sums per row in a fixed order, the rows added top to bottom: deterministic for any
-    // split, and no single floating-point add chain.
-    bw.row_sums.assign(size_t(bw.rows) * 8, 0.0);
-    fork_join(parts, [&](size_t c) {
-      BandPart& part = bw.parts[c];
-      const auto [r0, r1] = part_rows(c);
-      const int32_t* res = bw.res.data();
-      int32_t* rhat = bw.rhat.data();
-      if (!part.exact) part.pred_row.resize(size_t(fw));
-      part.res_max = part.err_max = part.counted = 0;
-      for (int64_t row = r0; row < r1; ++row) {
-        const int32_t* t = t_row(part, row);
-        if (!part.exact) predict(part, row, 1, part.pred_row.data());
-        double* res_sq = bw.row_sums.data() + row * 8;
-        double* err_sq = res_sq + 4;
-        for (int64_t x = 0, k = row * fw; x < fw; ++x, ++k) {
-          const int32_t pred = part.exact ? int32_t(int64_t(t[x]) - res[k]) : part.pred_row[size_t(x)];
-          const int32_t rec = saturate(int64_t(pred) + rhat[k]);
-          if (!any_void || bw.valid[size_t(k)]) {
-            const int64_t r = res[k], e = int64_t(t[x]) - rec;
-            res_sq[k & 3] += double(r) * double(r);
-            err_sq[k & 3] += double(e) * double(e);
-            part.res_max = std::max(part.res_max, r < 0 ? -r : r);
-            part.err_max = std::max(part.err_max, e < 0 ? -e : e);
-            ++part.counted;
-          }
-          rhat[k] = rec;  // now T^ of this band
-        }
-      }
-    });
+    if (any_void) {
+      exact = false;
+      for (int64_t k = 0; k < n; ++k)
+        if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
+    }
+    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0, threads);
+    // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
-    for (int64_t row = 0; row < bw.rows; ++row)
-      for (int j = 0; j < 4; ++j) {
-        res_sq[j] += bw.row_sums[size_t(row * 8 + j)];
-        err_sq[j] += bw.row_sums[size_t(row * 8 + 4 + j)];
-      }
     int64_t res_max = 0, err_max = 0, counted = 0;
-    for (size_t c = 0; c < parts; ++c) {
-      res_max = std::max(res_max, bw.parts[c].res_max);
-      err_max = std::max(err_max, bw.parts[c].err_max);
-      counted += bw.parts[c].counted;
+    const int32_t* res = bw.res.data();
+    int32_t* rhat = bw.rhat.data();
+    if (!exact) bw.pred_row.resize(size_t(fw));
+    for (int64_t row = 0; row < bw.rows; ++row) {
+      const int32_t* t = t_row(row);
+      if (!exact) predict(Rect{0, bw.y0 + row, fw, 1}, bw.pred_row.data());
+      for (int64_t x = 0, k = row * fw; x < fw; ++x, ++k) {
+        const int32_t pred = exact ? int32_t(int64_t(t[x]) - res[k]) : bw.pred_row[size_t(x)];
+        const int32_t rec = saturate(int64_t(pred) + rhat[k]);
+        if (!any_void || bw.valid[size_t(k)]) {
+          const int64_t r = res[k], e = int64_t(t[x]) - rec;
+          res_sq[k & 3] += double(r) * double(r);
+          err_sq[k & 3] += double(e) * double(e);
+          res_max = std::max(res_max, r < 0 ? -r : r);
+          err_max = std::max(err_max, e < 0 ? -e : e);
+          ++counted;
+        }
+        rhat[k] = rec;  // now T^ of this band
+      }
     }
     bw.figures.res_sq = (res_sq[0] + res_sq[1]) + (res_sq[2] + res_sq[3]);
     bw.figures.err_sq = (err_sq[0] + err_sq[1]) + (err_sq[2] + err_sq[3]);
@@ -1188,7 +1155,6 @@ class StreamingBuilder {
     std::exception_ptr error;
     std::vector<Group> groups;
     std::vector<Task> order;
-    std::vector<int> threads;  // per task of order: the threads its band is coded on
   } round_;
   BuildResult result_;
 };

@@ -1,5 +1,5 @@
-// A fork-join of n parts for the encoders' own parallelism (libcodec's tile rows, the builder's band
-// rows): part 0 on the calling thread, the others on threads started and joined within the call.
+// A fork-join of n parts for an encoder's own parallelism (libcodec's tile rows, EncodeOptions::threads):
+// part 0 on the calling thread, the others on threads started and joined within the call.
 // Callers split their work so that the result does not depend on n.
 #pragma once
 
