@@ -34,7 +34,7 @@ struct EncodeChunk {
 };
 
 struct Scratch::Impl {
-  detail::TileWork work;
+  detail::TileWork work;                             // decoder (the encoder's are its chunks')
   std::vector<std::unique_ptr<EncodeChunk>> chunks;  // encoder: chunk 0 is the calling thread's
   std::vector<uint32_t> tile_sizes;  // encoder: payload bytes per tile (0 = empty) until the index is written
   std::vector<uint8_t> body;         // encoder: payloads and index, until the header's size is known
@@ -372,7 +372,7 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
     EncodeChunk& chunk = *chunks[c];
     // Chunk 0 codes into the stream's body (nothing to copy with one chunk).
     std::vector<uint8_t>& out = c == 0 ? body : chunk.body;
-    detail::TileWork& work = c == 0 ? scratch.impl().work : chunk.work;
+    detail::TileWork& work = chunk.work;
     size_t pos = 0;
     chunk.any_phase = false;
     chunk.status = Status::Ok;
