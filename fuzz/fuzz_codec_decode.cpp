@@ -102,7 +102,7 @@ void decode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {
 
 // A small image from the input bytes, encoded with options the bytes choose: data[1], data[2] the
 // size, data[3] bits 0-1 the tile size, bit 2 the residual transform (format 5), bits 3-5 a lossy
-// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 7: with bit 6 or when lossless,
+// step (0: lossless), bit 6 max-error mode, bit 7 phase tiles (format 8: with bit 6 or when lossless,
 // max-error mode with E = the lossy setting; else bins of the step). The decoder must reproduce the encoder's
 // reconstruction exactly (the input itself when lossless). Returns the stream.
 std::vector<uint8_t> encode_checked(const uint8_t* data, size_t size, codec::Scratch& scratch) {

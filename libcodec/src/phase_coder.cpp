@@ -14,8 +14,10 @@ namespace {
 constexpr int64_t kLimit = int64_t(1) << 30;  // decoded samples beyond +-2^30 mean a damaged payload
 constexpr int kMemberBits = 10;
 static_assert(kFamilySize <= (1 << kMemberBits));
-constexpr uint8_t kPhaseModeFirst = uint8_t(TileMode::Phase);  // modes 2 .. 6: 0 .. 4 state bytes
+// Mode byte 2 + k0 + 5 k1: the final states in k0 and k1 (0 .. 4) bytes; k1 = 0 with one lane.
+constexpr uint8_t kPhaseModeFirst = uint8_t(TileMode::Phase);
 constexpr int kMaxStateBytes = 4;
+constexpr uint8_t kPhaseModeLast = kPhaseModeFirst + (kMaxStateBytes + 1) * (kMaxStateBytes + 1) - 1;
 
 // The statistics pass: counts tokens, codes nothing; with a record, also keeps each level's symbol
 // (and raw magnitude) for encode_phase_recorded.
@@ -51,54 +53,64 @@ inline void put_level(RansEncoder& rans, const TokenTable& t, int symbol, uint32
 
 struct EncodeIo {
   static constexpr bool kDecoding = false;
-  const PhaseTables& tables;
-  RansEncoder& rans;
+  const PhaseTables* tables;
+  RansEncoder* rans;
   bool bad = false;
   bool flag(bool b) {
-    rans.put_raw(b, 1);
+    rans->put_raw(b, 1);
     return b;
   }
   int64_t level(int context, int64_t q) {
     const uint32_t m = uint32_t(q < 0 ? -q : q);
     int raw = 0;
     const int symbol = symbol_of(token_of(m, &raw), q);  // sets raw: not in put_level's arguments
-    put_level(rans, *tables.table[context], symbol, m, raw);
+    put_level(*rans, *tables->table[context], symbol, m, raw);
     return q;
   }
 };
 
-struct DecodeIo {
+// The decoder's levels with raw bits, and the escape: apart from the hot path, and by value, so that
+// the caller's rANS state can live in registers (an escaping address kept it in memory).
+template <int kLanes> struct LargeLevel {
+  RansDecoder<kLanes> rans;
+  int64_t level;
+  bool bad;
+};
+template <int kLanes> [[gnu::noinline]] LargeLevel<kLanes> large_level(RansDecoder<kLanes> rans, int symbol) {
+  if (symbol == kTokenEscape) {
+    symbol = int(rans.raw(kTokenEscapeBits));
+    if (symbol >= kTokenEscape) return {rans, 0, true};
+  }
+  const int token = (symbol + 1) >> 1;
+  int64_t m = token;
+  if (token >= 16) {
+    int raw = 0;
+    m = token_base(token, &raw) | rans.raw(raw);
+  }
+  return {rans, symbol & 1 ? m : -m, false};
+}
+
+template <int kLanes> struct DecodeIo {
   static constexpr bool kDecoding = true;
-  const PhaseTables& tables;
-  RansDecoder rans;
+  const PhaseTables* tables;
+  RansDecoder<kLanes> rans;
   bool bad = false;
   bool flag(bool) { return rans.raw(1) != 0; }
   [[gnu::always_inline]] int64_t level(int context, int64_t) {
-    const TokenTable& t = *tables.table[context];
+    const TokenTable& t = *tables->table[context];
     const uint32_t slot = rans.slot();
     const int symbol = t.slots[slot];
     const uint32_t fc = t.freq_cum[symbol];
     rans.step(fc & 0xffff, slot - (fc >> 16));
-    if (symbol >= kSmallSymbols) return large_level(symbol);
-    const int64_t m = (symbol + 1) >> 1;
-    return symbol & 1 ? m : -m;
-  }
-  // Symbols with raw bits, and the escape.
-  [[gnu::noinline]] int64_t large_level(int symbol) {
-    if (symbol == kTokenEscape) {
-      symbol = int(rans.raw(kTokenEscapeBits));
-      if (symbol >= kTokenEscape) {
-        bad = true;
-        return 0;
-      }
+    if (symbol >= kSmallSymbols) {
+      const LargeLevel<kLanes> large = large_level(rans, symbol);
+      rans = large.rans;
+      bad = bad || large.bad;
+      return large.level;
     }
-    const int token = (symbol + 1) >> 1;
-    int64_t m = token;
-    if (token >= 16) {
-      int raw = 0;
-      m = token_base(token, &raw) | rans.raw(raw);
-    }
-    return symbol & 1 ? m : -m;
+    // Odd symbols are positive, even ones negative: negated without a branch (the sign is random).
+    const int64_t m = (symbol + 1) >> 1, negative = (symbol & 1) - 1;
+    return (m ^ negative) - negative;
   }
 };
 
@@ -121,7 +133,9 @@ template <int phase> [[gnu::always_inline]] inline int context_class(const int32
   if constexpr (phase == 2) a += at(-s - 1) + at(-s + 1) + at(s - 1) + at(s + 1) + at(-s) + at(s);  // 1 and 0
   if constexpr (phase == 3)
     a += at(-s - 1) + at(-s) + at(-s + 1) + at(-1) + at(1) + at(s - 1) + at(s) + at(s + 1);  // 0, 1 and 2
-  return std::min(kPhaseClasses - 1, int(std::bit_width(a)));
+  // bit_width(a) as the top bit of 2a + 1 (a < 2^24), which is never 0: bit_width itself compiled to
+  // a branch on a == 0, as unpredictable as the terrain.
+  return std::min(kPhaseClasses - 1, 31 - std::countl_zero(2 * a + 1));
 }
 
 // Prediction of (x, y) in `phase` from decoded samples (recon, row stride w).
@@ -193,8 +207,10 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
   if (!whole_bin)
     for (int k = -15; k <= 15; ++k)
       offsets[k + 15] = (k < 0 ? -1 : 1) * ((int64_t(k < 0 ? -k : k) * bin + 128) >> 8);
+  // Each phase works on a copy of io, which the compiler keeps in registers, and hands it back after.
   const auto run = [&]<int phase, bool whole>() {
     constexpr int px = phase & 1, py = phase >> 1;
+    Io local = io;
     for (int y = py; y < h; y += 2)
       for (int x = px; x < w; x += 2) {
         int32_t* out = &recon[size_t(y) * w + x];
@@ -206,7 +222,7 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
           const int64_t r = int64_t(src[y * stride + x]) - p;
           q = r >= 0 ? (256 * r + bin / 2) / bin : -((-256 * r + bin / 2) / bin);
         }
-        q = io.level(context, q);
+        q = local.level(context, q);
         int64_t v = 0;
         if constexpr (whole) {
           v = p + q * whole_bin;
@@ -216,10 +232,11 @@ bool code_tile(Io& io, const int32_t* src, ptrdiff_t stride, int w, int h, uint3
           const int64_t step = ((q < 0 ? -q : q) * bin + 128) >> 8;
           v = q < 0 ? p - step : p + step;
         }
-        if (io.bad || v < -kLimit || v > kLimit) return false;
+        if (local.bad || v < -kLimit || v > kLimit) return false;
         *out = int32_t(v);
         *l = int32_t(std::min<int64_t>(q < 0 ? -q : q, 1 << 20));
       }
+    io = local;
     return true;
   };
   const auto run_all = [&]<bool whole>() {
@@ -292,7 +309,7 @@ bool read_phase_model(const uint8_t*& p, const uint8_t* end, PhaseModel* model) 
   return true;
 }
 
-PhaseTables::PhaseTables(const PhaseModel& model) {
+PhaseTables::PhaseTables(const PhaseModel& model) : lanes(model.lanes) {
   for (int c = 0; c < kPhaseContexts; ++c) table[c] = &token_table(model.used[c] ? model.member[c] : 0);
 }
 
@@ -301,9 +318,7 @@ size_t phase_payload_bound(int w, int h) {
   return size_t(w) * h * 7 + 16;
 }
 
-bool is_phase_mode(uint8_t mode) {
-  return mode >= kPhaseModeFirst && mode <= kPhaseModeFirst + kMaxStateBytes;
-}
+bool is_phase_mode(uint8_t mode) { return mode >= kPhaseModeFirst && mode <= kPhaseModeLast; }
 
 bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t bin_q8, int32_t* recon,
                       PhaseWork& work, PhaseCounts* counts, PhaseRecord* record, size_t tile) {
@@ -321,16 +336,18 @@ bool phase_statistics(const int32_t* src, ptrdiff_t stride, int w, int h, uint32
 
 namespace {
 
-// The payload of the tile whose codes are in work.rans: mode byte, final state, words.
-size_t write_phase_payload(PhaseWork& work, uint8_t* out, size_t capacity) {
-  uint32_t state = 0;
-  work.rans.finish(&state, work.words);
-  const int state_bytes = state == 1 ? 0 : (std::bit_width(state) + 7) / 8;
-  const size_t size = 1 + size_t(state_bytes) + 2 * work.words.size();
+// The payload of the tile whose codes are in work.rans: mode byte, final states, words.
+size_t write_phase_payload(int lanes, PhaseWork& work, uint8_t* out, size_t capacity) {
+  uint32_t states[2] = {1, 1};
+  work.rans.finish(lanes, states, work.words);
+  int bytes[2] = {};
+  for (int k = 0; k < 2; ++k) bytes[k] = states[k] == 1 ? 0 : (std::bit_width(states[k]) + 7) / 8;
+  const size_t size = 1 + size_t(bytes[0] + bytes[1]) + 2 * work.words.size();
   if (size > capacity) return SIZE_MAX;
-  out[0] = uint8_t(kPhaseModeFirst + state_bytes);
-  for (int i = 0; i < state_bytes; ++i) out[1 + i] = uint8_t(state >> (8 * i));
-  uint8_t* p = out + 1 + state_bytes;
+  out[0] = uint8_t(kPhaseModeFirst + bytes[0] + (kMaxStateBytes + 1) * bytes[1]);
+  uint8_t* p = out + 1;
+  for (int k = 0; k < 2; ++k)
+    for (int i = 0; i < bytes[k]; ++i) *p++ = uint8_t(states[k] >> (8 * i));
   for (uint16_t word : work.words) {
     *p++ = uint8_t(word);
     *p++ = uint8_t(word >> 8);
@@ -344,9 +361,9 @@ size_t encode_phase(const int32_t* src, ptrdiff_t stride, int w, int h, uint32_t
                     const PhaseTables& tables, uint8_t* out, size_t capacity, int32_t* recon,
                     PhaseWork& work) {
   work.rans.clear();
-  EncodeIo io{tables, work.rans};
+  EncodeIo io{&tables, &work.rans};
   if (!code_tile(io, src, stride, w, h, bin_q8, recon, work)) return SIZE_MAX;
-  return write_phase_payload(work, out, capacity);
+  return write_phase_payload(tables.lanes, work, out, capacity);
 }
 
 size_t encode_phase_recorded(const PhaseRecord& record, size_t tile, const PhaseTables& tables, uint8_t* out,
@@ -365,21 +382,32 @@ size_t encode_phase_recorded(const PhaseRecord& record, size_t tile, const Phase
     if (token >= 16) token_base(token, &raw), m = *raw_value++;
     put_level(work.rans, *tables.table[code[i] >> 8], symbol, m, raw);
   }
-  return write_phase_payload(work, out, capacity);
+  return write_phase_payload(tables.lanes, work, out, capacity);
 }
 
 bool decode_phase(const uint8_t* data, size_t size, int w, int h, uint32_t bin_q8, const PhaseTables& tables,
                   int32_t* recon, PhaseWork& work) {
   if (size < 1 || !is_phase_mode(data[0])) return false;
-  const size_t state_bytes = size_t(data[0] - kPhaseModeFirst);
-  if (size < 1 + state_bytes || (size - 1 - state_bytes) % 2 != 0) return false;
-  uint32_t state = 1;
-  if (state_bytes > 0) {
-    state = 0;
-    for (size_t i = 0; i < state_bytes; ++i) state |= uint32_t(data[1 + i]) << (8 * i);
-    if (state >> (8 * (state_bytes - 1)) == 0 || state == 1) return false;  // not the shortest form
+  const int mode = data[0] - kPhaseModeFirst;
+  const size_t bytes[2] = {size_t(mode % (kMaxStateBytes + 1)), size_t(mode / (kMaxStateBytes + 1))};
+  if ((tables.lanes == 1 && bytes[1] != 0) || size < 1 + bytes[0] + bytes[1] ||
+      (size - 1 - bytes[0] - bytes[1]) % 2 != 0)
+    return false;
+  uint32_t states[2] = {1, 1};
+  const uint8_t* p = data + 1;
+  for (int k = 0; k < 2; ++k) {
+    if (bytes[k] == 0) continue;
+    uint32_t state = 0;
+    for (size_t i = 0; i < bytes[k]; ++i) state |= uint32_t(*p++) << (8 * i);
+    if (state >> (8 * (bytes[k] - 1)) == 0 || state == 1) return false;  // not the shortest form
+    states[k] = state;
   }
-  DecodeIo io{tables, RansDecoder(state, data + 1 + state_bytes, (size - 1 - state_bytes) / 2)};
+  const size_t words = (size - size_t(p - data)) / 2;
+  if (tables.lanes == 2) {
+    DecodeIo<2> io{&tables, RansDecoder<2>(states, p, words)};
+    return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work) && io.rans.finished();
+  }
+  DecodeIo<1> io{&tables, RansDecoder<1>(states, p, words)};
   return code_tile(io, nullptr, 0, w, h, bin_q8, recon, work) && io.rans.finished();
 }
 

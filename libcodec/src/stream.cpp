@@ -66,11 +66,12 @@ constexpr size_t kFixedHeader = 6;  // magic + u16 version; varint fields follow
 // (1), step * 256 (4), E (3), the phase model and the payload size (10).
 constexpr size_t kMaxHeaderSize = kFixedHeader + 6 + 6 + 2 + 1 + 4 + 3 + detail::kPhaseModelBytes + 10;
 constexpr uint32_t kPhaseVersion = 7;  // phase tiles with static token tables (6: adaptive binary, retired)
-constexpr size_t kMaxRecordSize = 5;   // index record of a non-empty tile: size << 1 (< 2^33)
+constexpr uint32_t kPhaseLanesVersion = 8;  // the same with two interleaved rANS states per tile
+constexpr size_t kMaxRecordSize = 5;        // index record of a non-empty tile: size << 1 (< 2^33)
 constexpr uint32_t kFlagBoundMaxError = 1;
 constexpr uint32_t kFlagWideFraction = 2;  // lossy streams: kWideFractionBits (else kFineFractionBits)
 constexpr uint32_t kFlagResidual = 4;      // format 5: transform-mode tiles use Transform::Residual
-constexpr uint32_t kFlagPhase = 8;         // format 7: phase tiles (max-error: beside the others; else all)
+constexpr uint32_t kFlagPhase = 8;  // formats 7, 8: phase tiles (max-error: beside the others; else all)
 constexpr int64_t kMaxSide = int64_t(1) << 40;
 constexpr uint32_t kMinTile = 16, kMaxTile = 4096;
 constexpr double kRmsPerStep = 0.31457;  // sqrt(1/12 + 1/64)
@@ -88,6 +89,10 @@ using terrain::bytes::put_varint;
 bool get_varint(const uint8_t*& p, const uint8_t* end, uint64_t* v) {
   return terrain::bytes::get_varint(p, end, v);
 }
+
+bool is_phase_version(uint32_t version) { return version == kPhaseVersion || version == kPhaseLanesVersion; }
+// rANS states per phase tile in a stream of that version.
+int phase_lanes(uint32_t version) { return version == kPhaseLanesVersion ? 2 : 1; }
 
 bool valid_tile_size(uint32_t t) { return t >= kMinTile && t <= kMaxTile && t % 16 == 0; }
 
@@ -138,6 +143,7 @@ struct StreamFields {
   bool residual;
   bool phase;
   std::vector<uint8_t> phase_model;  // serialised PhaseModel (phase streams)
+  int phase_lanes;                   // its rANS states per tile: 2 (format 8) or 1 (format 7)
 };
 
 // The second half of encoding, shared with splice_tiles: `body` holds the payloads of the non-empty
@@ -175,7 +181,10 @@ Status finish_stream(const StreamFields& f, const StreamLayout& layout, const ui
 
   uint8_t header[kMaxHeaderSize];
   std::memcpy(header, kMagic, 4);
-  put_u16(header + 4, uint16_t(f.phase ? kPhaseVersion : f.residual ? 5 : kOldestFormatVersion));
+  const uint32_t version = !f.phase             ? (f.residual ? 5 : kOldestFormatVersion)
+                           : f.phase_lanes == 2 ? kPhaseLanesVersion
+                                                : kPhaseVersion;
+  put_u16(header + 4, uint16_t(version));
   uint8_t* h = header + kFixedHeader;
   h = put_varint(h, uint64_t(f.width));
   h = put_varint(h, uint64_t(f.height));
@@ -336,7 +345,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       params.phase = given_model;  // spliceable into a stream without phase tiles: none either
       const uint8_t* p = given.phase_model.data();
       if (given_model && !detail::read_phase_model(p, p + given.phase_model.size(), &model))
-        return Status::InvalidArgument;  // read_header checked it: cannot happen
+        return Status::InvalidArgument;          // read_header checked it: cannot happen
+      model.lanes = phase_lanes(given.version);  // a format-7 stream's tiles keep one state
     } else {
       // The replay writes each tile's phase reconstruction into recon during the statistics pass, so
       // it needs a recon that is not the source (a tile's other modes read the source afterwards).
@@ -438,7 +448,8 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
                       params.max_error,
                       params.lifting,
                       any_phase || given_model,
-                      {}};
+                      {},
+                      model.lanes};
   // A stream without phase tiles is written as one that cannot have any (no model, version 5 or 4):
   // its other tiles do not depend on the flag. One that must splice into a phase stream keeps both.
   if (fields.phase) {
@@ -455,6 +466,7 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if (size < kFixedHeader) return Status::Truncated;
   const uint32_t version = get_u16(data + 4);
   // Version 6 (phase tiles with adaptive binary coding) was superseded by 7 within one release cycle.
+  // 7 (one rANS state per phase tile) is still read: pyramid files of container 3.3 hold it.
   if (version < kOldestFormatVersion || version > kFormatVersion || version == 6)
     return Status::UnsupportedVersion;
   const uint8_t* p = data + kFixedHeader;
@@ -465,7 +477,7 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   if ((flags & kFlagBoundMaxError) && !get_varint(p, end, &max_error))
     return p == end ? Status::Truncated : Status::Corrupt;
   const uint8_t* const model_begin = p;
-  if (version >= kPhaseVersion && (flags & kFlagPhase)) {
+  if (is_phase_version(version) && (flags & kFlagPhase)) {
     detail::PhaseModel model;
     if (!detail::read_phase_model(p, end, &model)) return p == end ? Status::Truncated : Status::Corrupt;
   }
@@ -489,13 +501,14 @@ Status read_header(const uint8_t* data, size_t size, HeaderInfo* header) {
   StreamLayout layout;
   if (!layout_for(info.width, info.height, info.tile_size, &layout)) return Status::Corrupt;
   // Version 4 knows two flags; version 5 adds the residual transform, and a version-5 stream must use
-  // it (encoders write 4 otherwise); version 7 adds phase tiles, which it must allow (in any stream,
-  // with either transform). So every stream has exactly one valid version.
+  // it (encoders write 4 otherwise); versions 7 and 8 add phase tiles (one or two rANS states), which
+  // they must allow (in any stream, with either transform). So every stream has exactly one valid
+  // version, but for phase streams, whose version says how their tiles are coded.
   const uint64_t known = kFlagBoundMaxError | kFlagWideFraction | (version >= 5 ? kFlagResidual : 0) |
-                         (version >= kPhaseVersion ? kFlagPhase : 0);
+                         (is_phase_version(version) ? kFlagPhase : 0);
   const bool phase = (flags & kFlagPhase) != 0;
   if ((flags & ~known) != 0 || (version == 5) != ((flags & kFlagResidual) != 0 && !phase) ||
-      (version == kPhaseVersion) != phase || step_q8 < detail::kStepOne ||
+      is_phase_version(version) != phase || step_q8 < detail::kStepOne ||
       step_q8 > uint64_t(kMaxAbsSample) * 256u || max_error > uint64_t(kMaxAbsSample))
     return Status::Corrupt;
   // Lossless streams (step 1) have 0 fraction bits, lossy ones kFineFractionBits or kWideFractionBits.
@@ -602,6 +615,7 @@ Status Decoder::open(const uint8_t* data, size_t size) {
     detail::PhaseModel model;
     const uint8_t* p = header_.phase_model.data();
     detail::read_phase_model(p, p + header_.phase_model.size(), &model);  // read_header checked it
+    model.lanes = phase_lanes(header_.version);
     phase_tables_ = std::make_unique<detail::PhaseTables>(model);
   }
   if (header_.tiles_y == 1 && !rows_.empty())  // read_header checked the payloads with the stream CRC
@@ -741,7 +755,7 @@ bool same_coding(const HeaderInfo& a, const HeaderInfo& b) {
   return a.width == b.width && a.height == b.height && a.tile_size == b.tile_size &&
          a.bound_max_error == b.bound_max_error && a.max_error == b.max_error && a.step == b.step &&
          a.fraction_bits == b.fraction_bits && a.transform == b.transform && a.phase_tiles == b.phase_tiles &&
-         a.phase_model == b.phase_model;
+         a.phase_model == b.phase_model && a.version == b.version;
 }
 
 }  // namespace
@@ -782,7 +796,8 @@ Status splice_tiles(const uint8_t* old_data, size_t old_size, const uint8_t* fre
                             h.max_error,
                             h.transform == Transform::Residual,
                             h.phase_tiles,
-                            h.phase_model};
+                            h.phase_model,
+                            phase_lanes(h.version)};
   out->resize(kMaxHeaderSize + 4 + pos + size_t(layout.index_bound));
   size_t written = 0;
   if ((s = finish_stream(fields, layout, sizes.data(), body, pos, out->data(), out->size(), &written)) !=

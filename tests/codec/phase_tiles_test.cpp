@@ -81,14 +81,14 @@ TEST_CASE("phase tiles: smaller than the other modes on a point-sampled residual
     INFO("E " << e << ": " << with.size() << " bytes with phase tiles, " << without.size() << " without");
     CHECK(double(with.size()) < 0.9 * double(without.size()));
     // Each tile of the residual skips its even phase, so the encoder keeps it a phase tile without
-    // trying the other modes (mode bytes 2..6).
+    // trying the other modes (mode bytes 2..26: 2 + the two final states' byte counts k0 + 5 k1).
     codec::Decoder decoder;
     REQUIRE(decoder.open(with.data(), with.size()) == codec::Status::Ok);
     size_t phase_tiles = 0;
     for (const codec::TileEntry& t : decoder.index())
       if (t.size > 0) {
         const uint8_t mode = with[size_t(t.offset)];
-        CHECK((mode >= 2 && mode <= 6));
+        CHECK((mode >= 2 && mode <= 26));
         ++phase_tiles;
       }
     CHECK(phase_tiles == size_t((256 / 32) * (192 / 32)));
@@ -116,7 +116,7 @@ TEST_CASE("phase tiles in an rms stream: the step is a real-valued bin, every ti
     const auto s = encode(img, o, &recon);
     codec::HeaderInfo h;
     REQUIRE(codec::read_header(s.data(), s.size(), &h) == codec::Status::Ok);
-    CHECK(h.version == 7);
+    CHECK(h.version == 8);
     CHECK(h.phase_tiles);
     CHECK(!h.bound_max_error);
     REQUIRE(decode(s, img, &out) == codec::Status::Ok);
@@ -154,7 +154,7 @@ TEST_CASE("format versions: 7 exactly with the phase flag, only in max-error str
   const auto plain = encode(img, options(1, false), &recon);
   codec::HeaderInfo h;
   REQUIRE(codec::read_header(phase.data(), phase.size(), &h) == codec::Status::Ok);
-  CHECK(h.version == 7);
+  CHECK(h.version == 8);
   CHECK(h.phase_tiles);
   CHECK(!h.phase_model.empty());
   CHECK(h.phase_model.size() <= size_t(codec::detail::kPhaseModelBytes));
@@ -261,43 +261,72 @@ TEST_CASE("phase tiles: token tables are complete distributions built by integer
   }
 }
 
-TEST_CASE("phase tiles: rANS round trip with raw bits, from state 1", "[codec]") {
+TEST_CASE("phase tiles: rANS round trip with raw bits, from state 1, on one and two lanes", "[codec]") {
   using namespace codec::detail;
   std::mt19937 rng(3);
-  for (int n : {0, 1, 2, 10, 1000}) {
-    const TokenTable& t = token_table(int(rng() % kFamilySize));
-    RansEncoder enc;
-    std::vector<std::pair<int, uint32_t>> sent;  // symbol (or -bits for raw), value
-    for (int i = 0; i < n; ++i) {
-      if (rng() % 3 == 0) {
-        const int bits = int(1 + rng() % 31);
-        const uint32_t v = rng() & ((1u << bits) - 1);
-        enc.put_raw(v, bits);
-        sent.push_back({-bits, v});
-      } else {
-        int k = int(rng() % kSymbols);
-        while (t.freq[k] == 0) k = (k + 1) % kSymbols;
-        enc.put(t.cum[k], t.freq[k]);
-        sent.push_back({k, 0});
-      }
-    }
-    uint32_t state = 0;
+  const auto round_trip = [](int lanes, const RansEncoder& enc,
+                             const std::vector<std::pair<int, uint32_t>>& sent, const TokenTable& t,
+                             uint32_t* states) {
     std::vector<uint16_t> words;
-    enc.finish(&state, words);
+    enc.finish(lanes, states, words);
     std::vector<uint8_t> bytes;
     for (uint16_t w : words) bytes.push_back(uint8_t(w)), bytes.push_back(uint8_t(w >> 8));
-    RansDecoder dec(state, bytes.data(), words.size());
-    for (const auto& [k, v] : sent) {
-      if (k < 0) {
-        REQUIRE(dec.raw(-k) == v);
-      } else {
-        const int got = t.slots[dec.slot()];
-        REQUIRE(got == k);
-        dec.advance(t.cum[got], t.freq[got]);
+    const auto check = [&](auto dec) {
+      for (const auto& [k, v] : sent) {
+        if (k < 0) {
+          REQUIRE(dec.raw(-k) == v);
+        } else {
+          const int got = t.slots[dec.slot()];
+          REQUIRE(got == k);
+          dec.advance(t.cum[got], t.freq[got]);
+        }
       }
+      CHECK(dec.finished());
+    };
+    if (lanes == 2)
+      check(RansDecoder<2>(states, bytes.data(), words.size()));
+    else
+      check(RansDecoder<1>(states, bytes.data(), words.size()));
+  };
+  for (int lanes : {1, 2})
+    for (int n : {0, 1, 2, 3, 10, 1000}) {
+      const TokenTable& t = token_table(int(rng() % kFamilySize));
+      RansEncoder enc;
+      std::vector<std::pair<int, uint32_t>> sent;  // symbol (or -bits for raw), value
+      for (int i = 0; i < n; ++i) {
+        if (rng() % 3 == 0) {
+          const int bits = int(1 + rng() % 31);
+          const uint32_t v = rng() & ((1u << bits) - 1);
+          enc.put_raw(v, bits);
+          sent.push_back({-bits, v});
+        } else {
+          int k = int(rng() % kSymbols);
+          while (t.freq[k] == 0) k = (k + 1) % kSymbols;
+          enc.put(t.cum[k], t.freq[k]);
+          sent.push_back({k, 0});
+        }
+      }
+      uint32_t states[2] = {};
+      round_trip(lanes, enc, sent, t, states);
     }
-    CHECK(dec.finished());
+  // Lane 0 gets symbols that cost almost nothing, lane 1 twelve raw bits each: lane 1 emits words
+  // while lane 0 is still growing from 1, so the encoder must start both lanes at 2^16 instead.
+  const TokenTable& t = token_table(kFamilySize - 1);
+  int likely = 0;
+  for (int k = 0; k < kSymbols; ++k)
+    if (t.freq[k] > t.freq[likely]) likely = k;
+  RansEncoder enc;
+  std::vector<std::pair<int, uint32_t>> sent;
+  for (int i = 0; i < 40; ++i) {
+    enc.put(t.cum[likely], t.freq[likely]);
+    sent.push_back({likely, 0});
+    enc.put_raw(uint32_t(i * 97 % 4096), kRansMaxRawBits);
+    sent.push_back({-kRansMaxRawBits, uint32_t(i * 97 % 4096)});
   }
+  uint32_t states[2] = {};
+  round_trip(2, enc, sent, t, states);
+  CHECK(states[0] >= kRansLow);  // the fallback
+  round_trip(1, enc, sent, t, states);
 }
 
 TEST_CASE("phase tiles: the stream's model is fitted, reused on request, and parsed strictly", "[codec]") {

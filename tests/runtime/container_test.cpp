@@ -917,7 +917,7 @@ TEST_CASE("container bytes follow docs/format.md", "[runtime][container]") {
   CHECK(std::vector<uint8_t>(b.begin() + long(mask), b.begin() + long(mask) + 5) ==
         std::vector<uint8_t>{3, 1, 36, 2, 36});
   CHECK(get_le(b, kSbMajor, 2) == 3);
-  CHECK(get_le(b, kSbMinor, 2) == 3);
+  CHECK(get_le(b, kSbMinor, 2) == 4);
   CHECK(get_le(b, index + 0, 4) == 320);  // info size (2.1)
   CHECK(get_le(b, index + 8, 4) == 96);   // level record size
   const uint64_t level2 = index + kInfoBlock + 2 * 96;

@@ -12,6 +12,7 @@
 #include "container/pyramid_file.h"
 #include "edit/pyramid_edit.h"
 #include "io/io_test_util.h"
+#include "level_decode_util.h"
 #include "readers/terrain_generator.h"
 #include "runtime/height_source.h"
 #include "runtime/region_decoder.h"
@@ -57,15 +58,7 @@ void build_file(const iotest::TempDir& dir, const std::string& out, ErrorMode mo
 }
 
 std::vector<std::vector<int32_t>> decode_all(const std::string& path) {
-  const auto f = PyramidFile::open(path);
-  runtime::RegionDecoder d(f, 0);
-  std::vector<std::vector<int32_t>> out;
-  for (int l = 0; l < f->level_count(); ++l) {
-    const GridSize s = f->level_size(l);
-    out.emplace_back(size_t(s.width * s.height));
-    d.decode_units(l, Rect{0, 0, s.width, s.height}, out.back().data(), s.width);
-  }
-  return out;
+  return pyrtest::decode_all_levels(path);
 }
 
 // Largest |decoded - T_l(edited input)| per level, in level units (the reference uses the file's D).

@@ -91,8 +91,8 @@ TEST_CASE("georeference: a UTM GeoTIFF keeps EPSG 32610 and its geotransform thr
   CHECK_THAT(probe.out, Catch::Contains("\"crs_epsg\": 32610"));
   CHECK_THAT(probe.out, Catch::Contains("\"origin_x\": 500015"));
   const std::string info = round_trip(dir, tif, "utm");
-  CHECK_THAT(info, Catch::Contains("\"format_version\": \"3.3\""));
-  // round_trip builds losslessly: the default D is then point sampling (provenance 3, .pyr 3.3).
+  CHECK_THAT(info, Catch::Contains("\"format_version\": \"3.4\""));
+  // round_trip builds losslessly: the default D is then point sampling (provenance 3, .pyr 3.4).
   CHECK_THAT(info, Catch::Contains("\"downsample_filter\": \"point\""));
   CHECK_THAT(info, Catch::Contains("\"crs_epsg\": 32610"));
   CHECK_THAT(squeezed(info), Catch::Contains(kUtmGeotransform));

@@ -50,8 +50,10 @@ using codec::crc32c_portable;
 // provenance 2") and read every other 3.1 file. 3.2 adds provenance 3 (point sampling), whose band
 // streams are libcodec format 6; 3.3 replaces those by format 7 (phase tiles with static token
 // tables): this reader refuses 3.2 files of provenance 3 (rebuild them) and reads all other 3.x.
+// 3.4's phase streams are format 8 (two interleaved rANS states per tile), which 3.3 readers refuse
+// at the first such band; this reader reads 3.3's format 7 as well.
 inline constexpr uint16_t kFormatMajor = 3;
-inline constexpr uint16_t kFormatMinor = 3;
+inline constexpr uint16_t kFormatMinor = 4;
 inline constexpr uint32_t kMaxLevels = 64;
 inline constexpr uint32_t kMaxFilterSize = 63;
 inline constexpr size_t kMaxUnitsLength = 31;  // units strings are stored in 32-byte fields

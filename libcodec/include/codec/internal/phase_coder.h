@@ -31,6 +31,7 @@ inline constexpr int kPhaseModelBytes = 6 + kPhaseContexts * 10 / 8;  // largest
 struct PhaseModel {
   bool used[kPhaseContexts] = {};
   uint16_t member[kPhaseContexts] = {};
+  int lanes = 2;  // rANS states per tile: 2 in format 8, 1 in format 7 (the stream's version, not serialised)
   bool operator==(const PhaseModel&) const = default;
 };
 
@@ -51,6 +52,7 @@ bool read_phase_model(const uint8_t*& p, const uint8_t* end, PhaseModel* model);
 // is malformed, and decodes to something the tile's checks reject or to wrong but bounded samples).
 struct PhaseTables {
   const TokenTable* table[kPhaseContexts] = {};
+  int lanes = 2;
   explicit PhaseTables(const PhaseModel& model);
 };
 

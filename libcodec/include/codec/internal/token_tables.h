@@ -1,6 +1,6 @@
 // Static token distributions of the phase tiles (format 7): a fixed two-parameter family, so that a
 // stream names one member per context in a few bits instead of storing histograms, and a decoder
-// builds no table of its own. docs/codec.md "Phase tiles (format 7)".
+// builds no table of its own. docs/codec.md "Phase tiles (formats 7 and 8)".
 //
 // A quantised level q is coded as one symbol: 0, or the token t of |q| (kTokens tokens: magnitudes
 // below 16 directly, larger ones by their bit length and the bit below the leading one, the n - 1
