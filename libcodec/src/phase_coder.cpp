@@ -69,8 +69,12 @@ struct EncodeIo {
   }
 };
 
-// The decoder's levels with raw bits, and the escape: apart from the hot path, and by value, so that
-// the caller's rANS state can live in registers (an escaping address kept it in memory).
+// Symbols below this have at most kRansMaxRawBits raw bits (tokens up to 35).
+constexpr int kOneChunkSymbols = 71;
+static_assert(kOneChunkSymbols < kTokenEscape);
+
+// The decoder's levels with more raw bits, and the escape: apart from the hot path, and by value, so
+// that the caller's rANS state can live in registers (an escaping address kept it in memory).
 template <int kLanes> struct LargeLevel {
   RansDecoder<kLanes> rans;
   int64_t level;
@@ -102,14 +106,21 @@ template <int kLanes> struct DecodeIo {
     const int symbol = t.slots[slot];
     const uint32_t fc = t.freq_cum[symbol];
     rans.step(fc & 0xffff, slot - (fc >> 16));
+    int64_t m = (symbol + 1) >> 1;  // the token
     if (symbol >= kSmallSymbols) {
-      const LargeLevel<kLanes> large = large_level(rans, symbol);
-      rans = large.rans;
-      bad = bad || large.bad;
-      return large.level;
+      if (symbol >= kOneChunkSymbols) {
+        const LargeLevel<kLanes> large = large_level(rans, symbol);
+        rans = large.rans;
+        bad = bad || large.bad;
+        return large.level;
+      }
+      // At most 12 raw bits (one rANS step): inline, as lossless levels of rough terrain often are.
+      int raw = 0;
+      const uint32_t base = token_base(int(m), &raw);
+      m = base | rans.raw(raw);
     }
     // Odd symbols are positive, even ones negative: negated without a branch (the sign is random).
-    const int64_t m = (symbol + 1) >> 1, negative = (symbol & 1) - 1;
+    const int64_t negative = (symbol & 1) - 1;
     return (m ^ negative) - negative;
   }
 };

@@ -12,8 +12,9 @@
 // decodes do not wait for each other (one state's decode is a chain of dependent loads and a
 // multiply). The shared word stream stays in step with "read while words remain" only if no state is
 // still below 2^16 (growing from 1) at a position where a word remains to be read; the encoder checks
-// that and otherwise codes the tile again with both states starting at 2^16, which the decoder needs
-// no flag for (its reads are the same rule; it accepts a final state of 1 or 2^16).
+// that and otherwise codes the tile again with one lane, then the other, then both starting at 2^16,
+// which the decoder needs no flag for (its reads are the same rule; it accepts a final state of 1 or
+// 2^16).
 #pragma once
 
 #include <cstddef>
@@ -47,7 +48,10 @@ class RansEncoder {
   // Encodes everything on `lanes` (1 or 2) states: states[0 .. lanes) get the final states, the words
   // (decode order) go to `words`.
   void finish(int lanes, uint32_t* states, std::vector<uint16_t>& words) const {
-    if (!finish_from(1, lanes, states, words)) finish_from(kRansLow, lanes, states, words);
+    // The first that works: a lane from 2^16 costs 16 bits, so the growing lane alone first.
+    static constexpr uint32_t kStarts[4][2] = {{1, 1}, {kRansLow, 1}, {1, kRansLow}, {kRansLow, kRansLow}};
+    for (const uint32_t* start : kStarts)
+      if (finish_from(start, lanes, states, words)) return;
   }
 
  private:
@@ -55,12 +59,12 @@ class RansEncoder {
     const uint32_t freq = 1u << (kRansProbBits - n);
     symbols_.push_back({uint16_t(v * freq), uint16_t(freq)});
   }
-  // Codes backwards from every state at `start`; false when the decoder's "read while words remain"
-  // would go wrong: a state still below 2^16 where a word (of the other lane) remains. One lane, or
-  // start 2^16, never fails.
-  bool finish_from(uint32_t start, int lanes, uint32_t* states, std::vector<uint16_t>& words) const {
+  // Codes backwards from lane k's state at start[k]; false when the decoder's "read while words
+  // remain" would go wrong: a state still below 2^16 where a word (of the other lane) remains. One
+  // lane, or both from 2^16, never fails.
+  bool finish_from(const uint32_t* start, int lanes, uint32_t* states, std::vector<uint16_t>& words) const {
     words.clear();
-    uint32_t x[2] = {start, start};
+    uint32_t x[2] = {start[0], start[1]};
     bool emitted = false;  // a word lies at or after this position in decode order
     for (size_t i = symbols_.size(); i-- > 0;) {
       const RansSymbol s = symbols_[i];
