@@ -101,10 +101,9 @@ template <int kLanes> struct DecodeIo {
   bool bad = false;
   bool flag(bool) { return rans.raw(1) != 0; }
   [[gnu::always_inline]] int64_t level(int context, int64_t) {
-    const TokenTable& t = *tables->table[context];
     const uint32_t slot = rans.slot();
-    const int symbol = t.slots[slot];
-    const uint32_t fc = t.freq_cum[symbol];
+    const int symbol = tables->slots[context][slot];
+    const uint32_t fc = tables->freq_cum[context][symbol];
     rans.step(fc & 0xffff, slot - (fc >> 16));
     int64_t m = (symbol + 1) >> 1;  // the token
     if (symbol >= kSmallSymbols) {
@@ -321,7 +320,11 @@ bool read_phase_model(const uint8_t*& p, const uint8_t* end, PhaseModel* model) 
 }
 
 PhaseTables::PhaseTables(const PhaseModel& model) : lanes(model.lanes) {
-  for (int c = 0; c < kPhaseContexts; ++c) table[c] = &token_table(model.used[c] ? model.member[c] : 0);
+  for (int c = 0; c < kPhaseContexts; ++c) {
+    table[c] = &token_table(model.used[c] ? model.member[c] : 0);
+    slots[c] = table[c]->slots;
+    freq_cum[c] = table[c]->freq_cum;
+  }
 }
 
 size_t phase_payload_bound(int w, int h) {

@@ -52,6 +52,9 @@ bool read_phase_model(const uint8_t*& p, const uint8_t* end, PhaseModel* model);
 // is malformed, and decodes to something the tile's checks reject or to wrong but bounded samples).
 struct PhaseTables {
   const TokenTable* table[kPhaseContexts] = {};
+  // The decoder's two lookups per symbol, one load from the context away instead of two.
+  const uint8_t* slots[kPhaseContexts] = {};
+  const uint32_t* freq_cum[kPhaseContexts] = {};
   int lanes = 2;
   explicit PhaseTables(const PhaseModel& model);
 };
