@@ -91,8 +91,9 @@ bool get_varint(const uint8_t*& p, const uint8_t* end, uint64_t* v) {
 }
 
 bool is_phase_version(uint32_t version) { return version == kPhaseVersion || version == kPhaseLanesVersion; }
-// rANS states per phase tile in a stream of that version.
+// rANS states per phase tile in a stream of that version, and the version of a phase stream with that many.
 int phase_lanes(uint32_t version) { return version == kPhaseLanesVersion ? 2 : 1; }
+uint32_t phase_version(int lanes) { return lanes == 2 ? kPhaseLanesVersion : kPhaseVersion; }
 
 bool valid_tile_size(uint32_t t) { return t >= kMinTile && t <= kMaxTile && t % 16 == 0; }
 
@@ -181,10 +182,9 @@ Status finish_stream(const StreamFields& f, const StreamLayout& layout, const ui
 
   uint8_t header[kMaxHeaderSize];
   std::memcpy(header, kMagic, 4);
-  const uint32_t version = !f.phase             ? (f.residual ? 5 : kOldestFormatVersion)
-                           : f.phase_lanes == 2 ? kPhaseLanesVersion
-                                                : kPhaseVersion;
-  put_u16(header + 4, uint16_t(version));
+  put_u16(header + 4, uint16_t(f.phase      ? phase_version(f.phase_lanes)
+                               : f.residual ? 5
+                                            : kOldestFormatVersion));
   uint8_t* h = header + kFixedHeader;
   h = put_varint(h, uint64_t(f.width));
   h = put_varint(h, uint64_t(f.height));

@@ -57,9 +57,7 @@ void build_file(const iotest::TempDir& dir, const std::string& out, ErrorMode mo
   build::build_pyramid_file(dir.file("t.raw"), ReadOptions{}, out, bo);
 }
 
-std::vector<std::vector<int32_t>> decode_all(const std::string& path) {
-  return pyrtest::decode_all_levels(path);
-}
+using pyrtest::decode_all;
 
 // Largest |decoded - T_l(edited input)| per level, in level units (the reference uses the file's D).
 std::vector<double> max_error_against(const std::string& pyr, const std::string& input) {

@@ -31,9 +31,7 @@ Heightmap source() {  // what the 3.3 files were built from
   return synthesize_terrain(so);
 }
 
-std::vector<std::vector<int32_t>> decode_all(const std::string& path) {
-  return pyrtest::decode_all_levels(path);
-}
+using pyrtest::decode_all;
 
 // The libcodec format versions of a file's band streams, how many of each (index = version).
 std::vector<int> stream_versions(const std::string& path) {

@@ -11,7 +11,7 @@
 namespace pyrtest {
 
 // Level 0 (coarsest) first, each row-major at its level's width.
-inline std::vector<std::vector<int32_t>> decode_all_levels(const std::string& path) {
+inline std::vector<std::vector<int32_t>> decode_all(const std::string& path) {
   const auto f = terrain::container::PyramidFile::open(path);
   terrain::runtime::RegionDecoder d(f, 0);
   std::vector<std::vector<int32_t>> out;

@@ -50,7 +50,7 @@ struct PhaseTables;
 inline constexpr int32_t kMaxAbsSample = 1 << 20;  // largest |input sample| the coder accepts
 // Stream format versions: 5 adds the residual transform (EncodeOptions::transform), 7 the phase tiles
 // (EncodeOptions::phase_tiles) with static token tables and one rANS state per tile, 8 the same with
-// two interleaved states (decoded about 1.2-1.7x faster); 6 held the first phase tiles (adaptive
+// two interleaved states (decoded about 1.1-1.8x faster); 6 held the first phase tiles (adaptive
 // binary coding, never in a release) and is rejected as unsupported. An encoder writes the lowest
 // version that holds what a stream uses (4 for lapped streams without phase tiles, 8 for phase
 // streams, 7 only for tiles spliced into a format-7 stream), so those keep the bytes of earlier

@@ -1,5 +1,6 @@
 // rANS for the phase tiles: 32-bit states, 12-bit frequencies, 16-bit renormalisation; one state
-// (format 7) or two interleaved lanes sharing one word stream (format 8). docs/codec.md "Phase tiles".
+// (format 7) or two interleaved lanes sharing one word stream (format 8). docs/codec.md "Phase tiles (formats
+// 7 and 8)".
 //
 // The encoder starts each state from 1, not from the usual lower bound 2^16: while a state is small
 // it emits nothing, so a tile's first symbols cost no flush, and the final states are stored in as few
