@@ -42,7 +42,8 @@ void fix_checksums(std::vector<uint8_t>& s) {
   for (uint64_t* field : {&w, &h, &tile16, &flags, &step})
     if (!get_varint(s, p, field)) return;
   if ((flags & 1) && !get_varint(s, p, &e)) return;
-  if ((flags & 8) && s.size() >= 8 && s[4] == 7) {  // format 7: the phase model, as the codec parses it
+  if ((flags & 8) && s.size() >= 8 &&
+      (s[4] == 7 || s[4] == 8)) {  // phase formats: the model, as the codec parses it
     const uint8_t* at = s.data() + p;
     codec::detail::PhaseModel model;
     if (!codec::detail::read_phase_model(at, s.data() + s.size(), &model)) return;

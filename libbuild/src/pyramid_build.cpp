@@ -114,9 +114,11 @@ std::vector<Heightmap> read_calibration_windows(const std::string& input, const 
   int64_t y = 0;  // rows read so far
   for (int64_t k = 0; k < bands; ++k) {
     const int64_t top = bands == 1 ? 0 : k * (g.height - bh) / (bands - 1);
-    for (; y < top; ++y)
-      if (reader->read_rows(1, row.data(), valid.data()) != 1)
-        throw Error(ErrorCode::Truncated, input + ": ended while reading the calibration windows");
+    // Seeks where the format allows: reading the rows between the windows was a serial pass down
+    // the whole input before the build (0.4 s of a 2.6 s 16384^2 build at 16 threads).
+    if (y < top && reader->skip_rows(top - y) != top - y)
+      throw Error(ErrorCode::Truncated, input + ": ended while reading the calibration windows");
+    y = top;
     Heightmap& map = windows[size_t(k)];
     map.info = g;
     map.info.width = cw;
@@ -332,8 +334,9 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   }
   out.memory = plan_build_memory(g, bo, band_rows, striped_plan);
 
-  // The sample is read only when something needs it (needs_calibration_sample): reading it is a
-  // serial pass down the whole input (the windows are spread to its bottom) before the build.
+  // The sample is read only when something needs it (needs_calibration_sample): the windows are
+  // spread to the input's bottom, which the raw, .hgt, .bil and .flt readers seek to, and which
+  // costs the other formats (compressed or images) a serial pass down the whole input.
   std::vector<Heightmap> window;
   if (needs_calibration_sample(g, bo.value_scale, o))
     window = read_calibration_windows(input, read_options, o);

@@ -1,7 +1,9 @@
 // Format detection (file name first, then magic bytes) and the format-independent entry points.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <vector>
 
 #include "core/text.h"
 #include "readers/internal/io_internal.h"
@@ -84,6 +86,21 @@ GridInfo probe(const std::string& path, const ReadOptions& options) {
       return checked(io::probe_raw_layout(path, options).info, path);
   }
   return {};
+}
+
+int64_t BandReader::skip_rows(int64_t rows) {
+  const int64_t w = info().width;
+  // In chunks of about 1 MiB of doubles, so that skipping costs no more memory than reading.
+  const int64_t chunk = std::clamp<int64_t>((int64_t(1) << 17) / std::max<int64_t>(w, 1), 1, 256);
+  std::vector<double> values(size_t(std::min(chunk, std::max<int64_t>(rows, 0)) * w));
+  std::vector<uint8_t> valid(values.size());
+  int64_t skipped = 0;
+  while (skipped < rows) {
+    const int64_t n = read_rows(std::min(chunk, rows - skipped), values.data(), valid.data());
+    if (n <= 0) break;
+    skipped += n;
+  }
+  return skipped;
 }
 
 std::unique_ptr<BandReader> open_band_reader(const std::string& path, const ReadOptions& options) {

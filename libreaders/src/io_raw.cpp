@@ -1,5 +1,6 @@
 // Fixed-layout sample streams (raw grids, and the .hgt / .bil / .flt payloads), the raw JSON sidecar,
 // and the raw writer.
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -77,6 +78,30 @@ class RawStreamReader final : public BandReader {
       decode_row(buffer_.data() + size_t(r) * row_bytes_, rows_read_ + r, values + r * w, valid + r * w);
     rows_read_ += n;
     if (layout_.gzip && rows_read_ == layout_.info.height) check_gz_end();
+    return n;
+  }
+
+  // A gzip stream has no random access: inflate and discard (BandReader's). Else seek, once the file
+  // is known to hold the rows (a shorter one fails as a read of them would).
+  int64_t skip_rows(int64_t rows) override {
+    if (layout_.gzip) return BandReader::skip_rows(rows);
+    const int64_t n = std::min(rows, layout_.info.height - rows_read_);
+    if (n <= 0) return 0;
+    const uint64_t end = layout_.data_offset + uint64_t(rows_read_ + n) * row_bytes_;
+    struct stat st {};
+    if (::fstat(::fileno(file_.get()), &st) != 0) fail(ErrorCode::NotFound, path_, "cannot stat");
+    if (uint64_t(st.st_size) < end)
+      fail(ErrorCode::Truncated, path_,
+           "data ends in row " +
+               std::to_string(uint64_t(st.st_size) > layout_.data_offset
+                                  ? (uint64_t(st.st_size) - layout_.data_offset) / row_bytes_
+                                  : 0) +
+               " of " + std::to_string(layout_.info.height) + " (" + std::to_string(layout_.info.width) +
+               "x" + std::to_string(layout_.info.height) + " " + sample_type_name(layout_.info.sample_type) +
+               ")");
+    if (fseeko(file_.get(), off_t(uint64_t(n) * row_bytes_), SEEK_CUR) != 0)
+      fail(ErrorCode::NotFound, path_, std::string("cannot seek: ") + std::strerror(errno));
+    rows_read_ += n;
     return n;
   }
 

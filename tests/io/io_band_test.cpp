@@ -2,8 +2,10 @@
 // for .hgt, .hgt.gz (made here with zlib), PNG and raw input.
 #include <zlib.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cstring>
+#include <filesystem>
 
 #include "io_test_util.h"
 #include "readers/heightmap.h"
@@ -39,6 +41,28 @@ void check_bands_match(const std::string& path, const terrain::ReadOptions& opti
     CHECK(same);
     CHECK(row == h);
     CHECK(reader->read_rows(band, values.data(), valid.data()) == 0);  // stays at the end
+  }
+  // skip_rows (a seek on raw and .hgt, reading and discarding on the others) lands where reading
+  // would have: skip 0, a few rows, most of the grid, then read; skipping past the end stops there.
+  for (int64_t skip : {int64_t(0), int64_t(3), h - 2}) {
+    INFO(path << " skip " << skip);
+    auto reader = terrain::open_band_reader(path, options);
+    std::vector<double> values(static_cast<size_t>(w));
+    std::vector<uint8_t> valid(values.size());
+    REQUIRE(reader->read_rows(1, values.data(), valid.data()) == 1);
+    const int64_t skipped = reader->skip_rows(skip);
+    CHECK(skipped == std::min(skip, h - 1));
+    CHECK(reader->rows_read() == 1 + skipped);
+    if (1 + skipped < h) {
+      REQUIRE(reader->read_rows(1, values.data(), valid.data()) == 1);
+      bool same = true;
+      for (int64_t x = 0; x < w; ++x)
+        same = same && values[size_t(x)] == whole.at(x, 1 + skipped) &&
+               (valid[size_t(x)] != 0) == whole.is_valid(x, 1 + skipped);
+      CHECK(same);
+    }
+    CHECK(reader->skip_rows(h) == h - reader->rows_read());
+    CHECK(reader->skip_rows(1) == 0);
   }
 }
 
@@ -108,6 +132,16 @@ TEST_CASE("band reader matches whole reads on raw", "[io][band]") {
   std::string path = dir.file("band.raw");
   terrain::write_raw(path, m, true);
   check_bands_match(path);
+
+  // A file cut short after it was opened (the probe checks its size): seeking past its end is
+  // refused as reading would be, naming the file.
+  std::string cut = dir.file("cut.raw");
+  terrain::write_raw(cut, m);
+  auto reader = terrain::open_band_reader(cut);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) - 301 * 4 * 10);
+  CHECK(reader->skip_rows(139) == 139);
+  CHECK_THROWS_WITH(reader->skip_rows(2),
+                    Catch::Contains("cut.raw") && Catch::Contains("data ends in row 140"));
 }
 
 TEST_CASE("stream_stats equals compute_stats", "[io][band]") {

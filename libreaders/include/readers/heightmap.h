@@ -102,6 +102,11 @@ class BandReader {
   // Reads up to `rows` further rows into values (rows*width) and valid (rows*width, 1 = data).
   // Returns the number of rows read: 0 at the end. Throws Error on bad data (e.g. NaN, truncation).
   virtual int64_t read_rows(int64_t rows, double* values, uint8_t* valid) = 0;
+  // Moves past up to `rows` further rows without returning them (they count as read). Returns the
+  // number of rows skipped: fewer only at the end. Uncompressed fixed-layout files (raw, .hgt, .bil,
+  // .flt) seek; other formats read and discard. The skipped rows are not checked (a later pass that
+  // reads them reports their errors), except that a file too short to hold them is Truncated.
+  virtual int64_t skip_rows(int64_t rows);
   int64_t rows_read() const { return rows_read_; }  // rows returned so far
 
  protected:
