@@ -68,10 +68,7 @@ class RawStreamReader final : public BandReader {
     size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_.get());
     if (got < want) {
       if (file_ && std::ferror(file_.get())) fail(ErrorCode::NotFound, path_, "read error");
-      fail(ErrorCode::Truncated, path_,
-           "data ends in row " + std::to_string(rows_read_ + int64_t(got / row_bytes_)) + " of " +
-               std::to_string(layout_.info.height) + " (" + std::to_string(layout_.info.width) + "x" +
-               std::to_string(layout_.info.height) + " " + sample_type_name(layout_.info.sample_type) + ")");
+      fail_data_ends(rows_read_ + int64_t(got / row_bytes_));
     }
     const int64_t w = layout_.info.width;
     for (int64_t r = 0; r < n; ++r)
@@ -91,14 +88,9 @@ class RawStreamReader final : public BandReader {
     struct stat st {};
     if (::fstat(::fileno(file_.get()), &st) != 0) fail(ErrorCode::NotFound, path_, "cannot stat");
     if (uint64_t(st.st_size) < end)
-      fail(ErrorCode::Truncated, path_,
-           "data ends in row " +
-               std::to_string(uint64_t(st.st_size) > layout_.data_offset
-                                  ? (uint64_t(st.st_size) - layout_.data_offset) / row_bytes_
-                                  : 0) +
-               " of " + std::to_string(layout_.info.height) + " (" + std::to_string(layout_.info.width) +
-               "x" + std::to_string(layout_.info.height) + " " + sample_type_name(layout_.info.sample_type) +
-               ")");
+      fail_data_ends(uint64_t(st.st_size) > layout_.data_offset
+                         ? int64_t((uint64_t(st.st_size) - layout_.data_offset) / row_bytes_)
+                         : 0);
     if (fseeko(file_.get(), off_t(uint64_t(n) * row_bytes_), SEEK_CUR) != 0)
       fail(ErrorCode::NotFound, path_, std::string("cannot seek: ") + std::strerror(errno));
     rows_read_ += n;
@@ -135,6 +127,14 @@ class RawStreamReader final : public BandReader {
   uint32_t nodata_float_bits_ = 0;
 
   size_t read_gz(size_t want) { return inflate_into(buffer_.data(), want); }
+
+  // The file holds only `rows` whole rows of the grid (read_rows and skip_rows).
+  [[noreturn]] void fail_data_ends(int64_t rows) const {
+    fail(ErrorCode::Truncated, path_,
+         "data ends in row " + std::to_string(rows) + " of " + std::to_string(layout_.info.height) + " (" +
+             std::to_string(layout_.info.width) + "x" + std::to_string(layout_.info.height) + " " +
+             sample_type_name(layout_.info.sample_type) + ")");
+  }
 
   // Inflates up to `size` bytes into `out`; fewer only where the member (or the file) ends. The end
   // of the member must be the end of the file: anything after it (garbage, or a second member,
