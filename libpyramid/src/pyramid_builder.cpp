@@ -33,6 +33,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <type_traits>
 #include <utility>
 
 #include "pyramid/internal/filter_downsample.h"
@@ -208,6 +209,22 @@ template <class T> class RowRing {
     end_ += n;
     peak_ = std::max(peak_, end_ - first_);
   }
+  // Up to n recycled row buffers (the rest empty), for rows filled elsewhere and then adopted.
+  std::vector<std::vector<T>> take_spares(int64_t n) {
+    std::vector<std::vector<T>> out(size_t(std::max<int64_t>(0, n)));
+    for (std::vector<T>& buf : out) {
+      if (free_.empty()) break;
+      buf = std::move(free_.back());
+      free_.pop_back();
+    }
+    return out;
+  }
+  // Appends rows[0 .. n), each a buffer of width() values, as the next rows.
+  void adopt(std::vector<std::vector<T>>& rows, int64_t n) {
+    for (int64_t k = 0; k < n; ++k) rows_.push_back(std::move(rows[size_t(k)]));
+    end_ += n;
+    peak_ = std::max(peak_, end_ - first_);
+  }
   void drop_before(int64_t r) {
     r = std::clamp(r, first_, end_);
     for (; first_ < r; ++first_) {
@@ -248,6 +265,8 @@ class LevelRows {
     return narrow_ ? static_cast<const void*>(r16_.row(r)) : static_cast<const void*>(r32_.row(r));
   }
   bool narrow() const { return narrow_; }
+  RowRing<int16_t>& narrow_rows() { return r16_; }
+  RowRing<int32_t>& wide_rows() { return r32_; }
   int64_t first() const { return narrow_ ? r16_.first() : r32_.first(); }
   int64_t end() const { return narrow_ ? r16_.end() : r32_.end(); }
   int64_t peak() const { return narrow_ ? r16_.peak() : r32_.peak(); }
@@ -268,17 +287,19 @@ class MaskRows {
     first_ = 0;
     rows_.clear();
   }
-  void append(const uint8_t* valid, int64_t n) {
-    for (int64_t k = 0; k < n; ++k) {
-      const uint8_t* row = valid + k * width_;
-      std::vector<uint64_t> bits;
-      if (std::memchr(row, 0, size_t(width_)) != nullptr) {
-        bits.assign(size_t((width_ + 63) / 64), 0);
-        for (int64_t x = 0; x < width_; ++x)
-          if (row[x]) bits[size_t(x / 64)] |= uint64_t(1) << (x % 64);
-      }
-      rows_.push_back(std::move(bits));
+  // One row's bits as the mask keeps them (empty: no voids).
+  static std::vector<uint64_t> pack(const uint8_t* row, int64_t width) {
+    std::vector<uint64_t> bits;
+    if (std::memchr(row, 0, size_t(width)) != nullptr) {
+      bits.assign(size_t((width + 63) / 64), 0);
+      for (int64_t x = 0; x < width; ++x)
+        if (row[x]) bits[size_t(x / 64)] |= uint64_t(1) << (x % 64);
     }
+    return bits;
+  }
+  // Appends rows packed by pack().
+  void adopt(std::vector<std::vector<uint64_t>>& rows, int64_t n) {
+    for (int64_t k = 0; k < n; ++k) rows_.push_back(std::move(rows[size_t(k)]));
   }
   // Row r's bits (empty: no voids); the reference stays valid until the row is dropped.
   const std::vector<uint64_t>* row_bits(int64_t r) const { return &rows_[size_t(r - first_)]; }
@@ -379,8 +400,10 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
                std::min(double(engine_workers), batch) * (2 * pw + cw) * 8;
     }
   }
-  // Two input bands (level integers and validity, 8 rows of samples as read), D's fit windows.
-  bytes += 2 * (B * W * 5 + std::min(B, 8.0) * W * 8) + W * 4;
+  // Two input bands (level integers and validity, 8 rows of samples as read), the next band's
+  // rows as the level keeps them (made on the reader's thread), D's fit windows.
+  bytes +=
+      2 * (B * W * 5 + std::min(B, 8.0) * W * 8) + B * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8) + W * 4;
   if (!opt.use_fixed_filter)
     bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
   return bytes;
@@ -550,6 +573,7 @@ class StreamingBuilder {
 
   BuildResult run(BandReader& input) {
     const auto t_start = Clock::now();
+    build_start_ = t_start;
     const double cpu_start = thread_cpu_seconds();
     const int64_t W = info_.width, H = info_.height;
     const int64_t B = std::min(opt_.fill_band_rows, H);
@@ -560,11 +584,51 @@ class StreamingBuilder {
     InputConverter converter(opt_, info_);
     // Reading and converting band k+1 overlaps with processing band k (with threads > 1); the reader
     // and the converter are only ever used by one thread at a time, in band order.
+    // The reader's thread also makes the band's rows as the finest level keeps them (int16 or
+    // int32 row buffers, recycled from the level, and validity bits), which the main thread then
+    // only adopts: that copy was a tenth of the main thread's time at 16 threads.
     struct InputBand {
       std::vector<double> values;
       std::vector<uint8_t> valid;
       std::vector<int32_t> ints;
+      std::vector<std::vector<int16_t>> rows16;
+      std::vector<std::vector<int32_t>> rows32;
+      std::vector<std::vector<uint64_t>> mask;
       int64_t y = 0, rows = 0, voids = 0;
+      bool carry = false;  // above a stripe's cascade: only its voids were converted, no rows made
+    };
+    LevelRows& finest_rows = levels_[size_t(finest_)];
+    const auto level_rows = [&](InputBand& b) {
+      b.mask.resize(size_t(b.rows));
+      for (int64_t r = 0; r < b.rows; ++r) b.mask[size_t(r)] = MaskRows::pack(b.valid.data() + r * W, W);
+      const auto fill = [&](auto& rows) {
+        for (int64_t r = 0; r < b.rows; ++r) {
+          auto& buf = rows[size_t(r)];
+          buf.resize(size_t(W));
+          const int32_t* in = b.ints.data() + r * W;
+          using T = typename std::decay_t<decltype(buf)>::value_type;
+          for (int64_t x = 0; x < W; ++x) buf[size_t(x)] = static_cast<T>(in[x]);
+        }
+      };
+      if (finest_rows.narrow())
+        fill(b.rows16);
+      else
+        fill(b.rows32);
+    };
+    const auto take_spares = [&](InputBand& b, int64_t rows) {
+      if (finest_rows.narrow())
+        b.rows16 = finest_rows.narrow_rows().take_spares(rows);
+      else
+        b.rows32 = finest_rows.wide_rows().take_spares(rows);
+    };
+    const auto adopt = [&](InputBand& b) {
+      // A stripe's first band, with a fixed D: its rows are dropped once the cascade starts.
+      if (b.carry) level_rows(b);
+      if (finest_rows.narrow())
+        finest_rows.narrow_rows().adopt(b.rows16, b.rows);
+      else
+        finest_rows.wide_rows().adopt(b.rows32, b.rows);
+      mask_.adopt(b.mask, b.rows);
     };
     // A band keeps its level integers and validity (5 bytes a sample); the samples as read (8 bytes
     // each) are converted kReadRows rows at a time, so that they are not held for the whole band:
@@ -584,7 +648,8 @@ class StreamingBuilder {
       b.y = y;
       b.rows = std::min(B, H - y);
       b.voids = 0;
-      if (y >= fit_rows_ && y + b.rows <= read_a_) {
+      b.carry = y >= fit_rows_ && y + b.rows <= read_a_;
+      if (b.carry) {
         carry_values.resize(size_t(b.rows * W));
         for (int64_t got = 0; got < b.rows;) {
           const int64_t n =
@@ -610,7 +675,9 @@ class StreamingBuilder {
         got += n;
       }
       if (b.voids) converter.fill(b.valid.data(), b.rows, b.ints.data());
+      level_rows(b);
     };
+    take_spares(bands[0], std::min(B, H));
     produce(bands[0], 0);
     for (int64_t k = 0; bands[k & 1].y < H && bands[k & 1].rows > 0; ++k) {
       InputBand& cur = bands[k & 1];
@@ -620,6 +687,7 @@ class StreamingBuilder {
       std::exception_ptr producer_error;
       std::thread producer;
       if (next_y < stop) {
+        take_spares(next, std::min(B, H - next_y));
         if (opt_.threads > 1)
           producer = std::thread([&] {
             try {
@@ -648,14 +716,23 @@ class StreamingBuilder {
         pump(false);
       }
       if (!filter_ready_) {
-        levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
-        mask_.append(cur.valid.data(), cur.rows);
+        adopt(cur);
         if (levels_[size_t(finest_)].end() >= fit_rows_) start_cascade();
       } else if (in_cascade) {
-        levels_[size_t(finest_)].append(cur.ints.data(), cur.rows);
-        mask_.append(cur.valid.data(), cur.rows);
-        if (finest_ > 0)
-          engines_[size_t(finest_)]->push_rows(cur.ints.data(), cur.rows, emit_[size_t(finest_)]);
+        const auto t_append = Clock::now();
+        adopt(cur);
+        main_.append += seconds_since(t_append);
+        // A few rows at a time, starting the next coding round as soon as one has finished: a round
+        // that ended while the main thread ran D on a whole fill band left the workers idle.
+        constexpr int64_t kPushRows = 8;
+        for (int64_t r = 0; r < cur.rows; r += kPushRows) {
+          const int64_t n = std::min(kPushRows, cur.rows - r);
+          const auto t_push = Clock::now();
+          if (finest_ > 0)
+            engines_[size_t(finest_)]->push_rows(cur.ints.data() + r * W, n, emit_[size_t(finest_)]);
+          main_.cascade += seconds_since(t_push);
+          if (r + n < cur.rows) pump(false);
+        }
         drop_halo_rows(finest_);
       }
       if (filter_ready_) pump(false);
@@ -690,9 +767,23 @@ class StreamingBuilder {
     // thread reads ahead, converts and runs D; it waits when the coding rounds or the reader are behind.
     std::ostringstream main_thread;
     main_thread.precision(3);
-    main_thread << "main thread: reading the input " << wall_read << " s (" << cpu_read << " s CPU, waited "
-                << wait_rounds_ << " s for coding rounds and " << wait_reader_
-                << " s for the reader), then coding the rest " << wall_final << " s";
+    // The coding rounds: their wall time, the thread-seconds their bands held (each its share of the
+    // threads; the rest is threads idle while a round's last bands finish), the time the workers
+    // spent handing bands to the sink (within the rounds), and the time no round was in flight.
+    std::ostringstream rounds;
+    rounds.precision(3);
+    rounds << "coding rounds: " << rounds_.count << " in " << rounds_.wall << " s, their bands held "
+           << rounds_.band_thread_seconds << " thread-seconds of " << rounds_.wall * opt_.threads << " ("
+           << (rounds_.wall > 0 ? 100 * rounds_.band_thread_seconds / (rounds_.wall * opt_.threads) : 0)
+           << " %, " << rounds_.deliver << " s of it writing bands out); no round in flight for "
+           << std::max(0.0, seconds_since(t_start) - rounds_.wall) << " s, the first after "
+           << std::max(0.0, first_round_at_) << " s";
+    result_.log.push_back(rounds.str());
+    main_thread << "main thread: reading the input " << wall_read << " s (" << cpu_read
+                << " s CPU; D cascade " << main_.cascade << " s, adopting rows " << main_.append
+                << " s, starting and committing rounds " << main_.pump << " s, waiting " << wait_rounds_
+                << " s for coding rounds and " << wait_reader_ << " s for the reader), then coding the rest "
+                << wall_final << " s";
     result_.log.push_back(main_thread.str());
     if (result_.void_count)
       result_.log.push_back("nodata: " + std::to_string(result_.void_count) +
@@ -707,6 +798,17 @@ class StreamingBuilder {
   // per stripe edge, most of a stripe's extra work.
   static constexpr int64_t kDHalo = 6;
   double wait_rounds_ = 0, wait_reader_ = 0;  // the main thread's waits, for the build log
+  // The coding rounds' wall time and the thread-seconds their bands held, for the build log.
+  struct RoundFigures {
+    int64_t count = 0;
+    double wall = 0, band_thread_seconds = 0, deliver = 0;
+  } rounds_;
+  // The main thread's wall time in each of its jobs while the input is read, for the build log.
+  struct MainFigures {
+    double append = 0, cascade = 0, pump = 0;
+  } main_;
+  Clock::time_point build_start_;
+  double first_round_at_ = -1;
 
   // Fits D on the top fit_rows rows (all still held: nothing is coded before the filter exists),
   // then starts the D cascade with every row received so far.
@@ -815,6 +917,13 @@ class StreamingBuilder {
   // in groups of bands_in_flight bands; before the end a partial group waits for more rows (a coarse
   // level never waits: it would delay all finer ones). final: codes everything that is left.
   void pump(bool final) {
+    struct Count {  // while the input is read (the final pump is the build log's "coding the rest")
+      double* to;
+      Clock::time_point from;
+      ~Count() {
+        if (to) *to += seconds_since(from);
+      }
+    } count{final ? nullptr : &main_.pump, Clock::now()};
     for (;;) {
       if (round_.active) {
         if (!final && !round_.done.load(std::memory_order_acquire)) return;
@@ -911,6 +1020,7 @@ class StreamingBuilder {
     // Largest bands first, so the small coarse ones fill the gaps at the end.
     std::stable_sort(order.begin(), order.end(),
                      [](const Task& a, const Task& b) { return a.samples > b.samples; });
+    if (rounds_.count == 0 && first_round_at_ < 0) first_round_at_ = seconds_since(build_start_);
     round_.active = true;
     round_.done.store(false, std::memory_order_relaxed);
     if (opt_.threads == 1) {
@@ -974,9 +1084,37 @@ class StreamingBuilder {
       for (size_t k = 0; k < remainder.size() && given < opt_.threads; ++k, ++given)
         ++share[remainder[k].second];
     }
+    const auto t_round = Clock::now();
+    std::vector<double> band_seconds(order.size(), 0.0), deliver_seconds(order.size(), 0.0);
+    // Bands reach the sink in each level's order as soon as they and the ones above them are coded,
+    // by whichever worker finishes one (one at a time): the output's writing overlaps the round's
+    // coding instead of following it. Levels are independent streams, so their interleaving does
+    // not change the file.
+    std::vector<size_t> delivered(round_.groups.size(), 0);
+    std::vector<std::vector<uint8_t>> coded(round_.groups.size());
+    for (size_t gi = 0; gi < round_.groups.size(); ++gi) coded[gi].assign(round_.groups[gi].tasks, 0);
+    std::mutex deliver_lock;
+    bool delivering = false;
+    const auto band_coded = [&](size_t gi, size_t b) {
+      std::unique_lock<std::mutex> hold(deliver_lock);
+      coded[gi][b] = 1;
+      if (delivering) return;  // the worker delivering takes this band too
+      delivering = true;
+      for (;;) {
+        size_t g = 0;
+        while (g < coded.size() && !(delivered[g] < coded[g].size() && coded[g][delivered[g]])) ++g;
+        if (g == coded.size()) break;
+        const size_t band = delivered[g]++;
+        hold.unlock();
+        deliver_band(round_.groups[g], band);
+        hold.lock();
+      }
+      delivering = false;
+    };
     std::atomic<size_t> next{0};
     detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
       for (size_t i; (i = next.fetch_add(1)) < order.size();) {
+        const auto t_band = Clock::now();
         const Group& g = round_.groups[order[i].group];
         const int l = g.level;
         const int64_t fw = sizes_[size_t(l)].width;
@@ -989,30 +1127,40 @@ class StreamingBuilder {
           for (int64_t r = 0; r < bw.rows; ++r)
             MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
         code_band(l, g.window, bw, share[i]);
+        band_seconds[i] = seconds_since(t_band);
+        const auto t_deliver = Clock::now();
+        band_coded(order[i].group, size_t(order[i].band));
+        deliver_seconds[i] = seconds_since(t_deliver);
       }
     });
-    for (const Group& g : round_.groups) deliver_group(g);
+    // Thread-seconds the bands held (each its share of the threads) against the round's: the rest
+    // is threads idle while a round's last bands finish (docs/scale.md, "Where the time goes").
+    const double round_wall = seconds_since(t_round);
+    rounds_.count += 1;
+    rounds_.wall += round_wall;
+    for (size_t i = 0; i < order.size(); ++i) {
+      rounds_.band_thread_seconds += band_seconds[i] * share[i];
+      rounds_.deliver += deliver_seconds[i];
+    }
   }
 
   // Hands a group's bands to the sink in order, with their figures. Called at the end of the
   // round's coding, on the round's thread: the output's writing (a tenth of the main thread's work
   // at 2 threads) stays off the main thread. Rounds end one at a time, in order.
-  void deliver_group(const Group& g) {
+  void deliver_band(const Group& g, size_t b) {
     const int l = g.level;
     const int64_t fw = sizes_[size_t(l)].width;
     const bool finest = l == finest_;
-    for (size_t b = 0; b < g.tasks; ++b) {
-      BandWork& bw = work_[size_t(l)][b];
-      // A stripe's halo bands are coded only for the T^ rows finer bands read.
-      if (bw.y0 >= own_lo_[size_t(l)] && bw.y0 < own_hi_[size_t(l)]) {
-        if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
-        figures_[size_t(l)].add(bw.figures, bw.bytes.size());
-        sink_.band_figures(l, bw.y0, bw.figures);
-        sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
-        if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
-      }
-      bw.bytes = {};
+    BandWork& bw = work_[size_t(l)][b];
+    // A stripe's halo bands are coded only for the T^ rows finer bands read.
+    if (bw.y0 >= own_lo_[size_t(l)] && bw.y0 < own_hi_[size_t(l)]) {
+      if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
+      figures_[size_t(l)].add(bw.figures, bw.bytes.size());
+      sink_.band_figures(l, bw.y0, bw.figures);
+      sink_.band(l, bw.y0, bw.rows, std::move(bw.bytes));
+      if (sink_.wants_reconstruction(l)) sink_.reconstructed_rows(l, bw.y0, bw.rows, fw, bw.rhat.data());
     }
+    bw.bytes = {};
   }
 
   // Takes a delivered group's T^ rows and drops the rows nothing needs any more (main thread).
