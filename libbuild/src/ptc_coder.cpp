@@ -113,12 +113,20 @@ std::vector<uint8_t> PtcResidualCoder::encode(const int32_t* residual, int64_t w
   return encode_spliceable(residual, w, h, reconstructed, levels_above_finest, coarsest, nullptr, 0, threads);
 }
 
+std::vector<uint8_t> PtcResidualCoder::encode_parts(const int32_t* residual, int64_t w, int64_t h,
+                                                    int32_t* reconstructed, int levels_above_finest,
+                                                    bool coarsest, int parts, PartRunner& runner) {
+  return encode_spliceable(residual, w, h, reconstructed, levels_above_finest, coarsest, nullptr, 0, parts,
+                           &runner);
+}
+
 std::vector<uint8_t> PtcResidualCoder::encode_spliceable(const int32_t* residual, int64_t w, int64_t h,
                                                          int32_t* reconstructed, int levels_above_finest,
                                                          bool coarsest, const uint8_t* into, size_t into_size,
-                                                         int threads) {
+                                                         int threads, PartRunner* runner) {
   codec::EncodeOptions copts = to_codec(level_options(levels_above_finest));
   copts.threads = uint32_t(std::max(1, threads));
+  copts.part_runner = runner;
   copts.transform = coarsest ? codec::Transform::Lapped : options_.residual_transform;
   copts.phase_model_stream = into;
   copts.phase_model_stream_size = into_size;

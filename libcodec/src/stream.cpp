@@ -352,11 +352,14 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       // it needs a recon that is not the source (a tile's other modes read the source afterwards).
       replay = recon && !overlap(src, size_t((height - 1) * src_stride + width), recon,
                                  size_t((height - 1) * recon_stride + width));
-      terrain::fork_join(chunk_count, [&](size_t c) {
-        const auto [ty0, ty1] = rows_of(c);
-        phase_statistics_of_rows(src, src_stride, width, height, t, ty0, ty1, params.phase_bin_q8,
-                                 params.max_error, *chunks[c], replay, recon, recon_stride);
-      });
+      terrain::fork_join(
+          chunk_count,
+          [&](size_t c) {
+            const auto [ty0, ty1] = rows_of(c);
+            phase_statistics_of_rows(src, src_stride, width, height, t, ty0, ty1, params.phase_bin_q8,
+                                     params.max_error, *chunks[c], replay, recon, recon_stride);
+          },
+          options.part_runner);
       // Counts add up in any order (integers): the model is the one-pass model.
       detail::PhaseCounts& counts = *chunks[0]->counts;
       for (size_t c = 1; c < chunk_count; ++c)
@@ -378,55 +381,59 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   std::vector<uint8_t>& body = scratch.impl().body;
   const size_t tile_count = size_t(layout.tiles_x * layout.tiles_y);
   if (sizes.size() < tile_count) sizes.resize(tile_count);
-  terrain::fork_join(chunk_count, [&](size_t c) {
-    EncodeChunk& chunk = *chunks[c];
-    // Chunk 0 codes into the stream's body (nothing to copy with one chunk).
-    std::vector<uint8_t>& out = c == 0 ? body : chunk.body;
-    detail::TileWork& work = chunk.work;
-    size_t pos = 0;
-    chunk.any_phase = false;
-    chunk.status = Status::Ok;
-    const auto [ty0, ty1] = rows_of(c);
-    for (int64_t ty = ty0; ty < ty1; ++ty)
-      for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
-        const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
-        const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-        bool empty = within(tile_src, src_stride, tw, th, empty_limit);
-        size_t size = 0;
-        if (!empty) {
-          const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
-          const size_t bound = detail::tile_payload_bound(tw, th);
-          if (out.size() < pos + bound) out.resize(std::max(pos + bound, out.size() * 2));
-          const size_t tile = size_t(ty * layout.tiles_x + tx);
-          const detail::PhaseRecord& record = chunk.phase_record;
-          detail::PhaseReplay rp;
-          if (replay && record.tiles[tile].recorded)
-            rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
-          size =
-              detail::encode_tile(tile_src, src_stride, tw, th, params, work, out.data() + pos,
-                                  out.size() - pos, recon != nullptr || probing, rp.record ? &rp : nullptr);
-          if (size == 0) {
-            chunk.status = Status::BufferTooSmall;
-            return;
+  terrain::fork_join(
+      chunk_count,
+      [&](size_t c) {
+        EncodeChunk& chunk = *chunks[c];
+        // Chunk 0 codes into the stream's body (nothing to copy with one chunk).
+        std::vector<uint8_t>& out = c == 0 ? body : chunk.body;
+        detail::TileWork& work = chunk.work;
+        size_t pos = 0;
+        chunk.any_phase = false;
+        chunk.status = Status::Ok;
+        const auto [ty0, ty1] = rows_of(c);
+        for (int64_t ty = ty0; ty < ty1; ++ty)
+          for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
+            const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+            const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+            bool empty = within(tile_src, src_stride, tw, th, empty_limit);
+            size_t size = 0;
+            if (!empty) {
+              const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
+              const size_t bound = detail::tile_payload_bound(tw, th);
+              if (out.size() < pos + bound) out.resize(std::max(pos + bound, out.size() * 2));
+              const size_t tile = size_t(ty * layout.tiles_x + tx);
+              const detail::PhaseRecord& record = chunk.phase_record;
+              detail::PhaseReplay rp;
+              if (replay && record.tiles[tile].recorded)
+                rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
+              size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, out.data() + pos,
+                                         out.size() - pos, recon != nullptr || probing,
+                                         rp.record ? &rp : nullptr);
+              if (size == 0) {
+                chunk.status = Status::BufferTooSmall;
+                return;
+              }
+              empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
+            }
+            sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
+            if (!empty)
+              chunk.any_phase = chunk.any_phase || (params.phase && detail::is_phase_mode(out[pos]));
+            if (!empty) pos += size;
+            if (recon) {
+              int32_t* dst_tile = recon + ty * t * recon_stride + tx * t;
+              for (int y = 0; y < th; ++y) {
+                if (empty)
+                  std::fill_n(dst_tile + y * recon_stride, tw, 0);
+                else
+                  std::memcpy(dst_tile + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
+                              size_t(tw) * sizeof(int32_t));
+              }
+            }
           }
-          empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
-        }
-        sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
-        if (!empty) chunk.any_phase = chunk.any_phase || (params.phase && detail::is_phase_mode(out[pos]));
-        if (!empty) pos += size;
-        if (recon) {
-          int32_t* dst_tile = recon + ty * t * recon_stride + tx * t;
-          for (int y = 0; y < th; ++y) {
-            if (empty)
-              std::fill_n(dst_tile + y * recon_stride, tw, 0);
-            else
-              std::memcpy(dst_tile + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
-                          size_t(tw) * sizeof(int32_t));
-          }
-        }
-      }
-    chunk.size = pos;
-  });
+        chunk.size = pos;
+      },
+      options.part_runner);
   size_t pos = 0;
   bool any_phase = false;
   for (size_t c = 0; c < chunk_count; ++c) {

@@ -442,6 +442,116 @@ BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const
   return plan;
 }
 
+// The coding rounds' workers: `threads` threads that take a round's bands one at a time (in the
+// order given: largest first) and the parts the coder splits a band into (chunks of its tile rows,
+// ResidualCoder::encode_parts), parts first, so that a band started is finished soon and no thread
+// idles while any band has work left. Each band went to a fixed share of the threads before: ten
+// bands of four tile rows on 16 threads left a third of the round's thread-time idle (16384^2
+// --step 2 on the 16-core host, 2026-12-06). A part never waits; a band waits only for its own parts.
+class RoundWorkers final : public PartRunner {
+ public:
+  // Runs band(i) for i in [0, n) on `threads` threads (this one included) and returns the
+  // thread-seconds they spent in bands and parts, not waiting; the first exception a band threw
+  // (lowest i) is rethrown once all have ended.
+  double run_bands(int threads, size_t n, const std::function<void(size_t)>& band) {
+    {
+      const std::lock_guard<std::mutex> hold(lock_);
+      band_ = &band;
+      bands_ = n, next_band_ = 0, active_ = 0, busy_ = 0;
+      errors_.assign(n, nullptr);
+    }
+    detail::parallel_chunks(threads, threads, [&](int, int64_t, int64_t) { serve(); });
+    for (const std::exception_ptr& e : errors_)
+      if (e) std::rethrow_exception(e);
+    return busy_;
+  }
+
+  void run(size_t n, const std::function<void(size_t)>& part) override {
+    Job job;
+    job.part = &part;
+    job.n = job.left = n;
+    job.errors.assign(n, nullptr);
+    const auto t_run = Clock::now();
+    std::unique_lock<std::mutex> hold(lock_);
+    jobs_.push_back(&job);
+    hold.unlock();
+    wake_.notify_all();
+    // This thread takes its band's parts too, and helps with others' while its own are running.
+    hold.lock();
+    while (job.left > 0) {
+      Job* take = job.next < job.n ? &job : (jobs_.empty() ? nullptr : jobs_.front());
+      if (!take) {
+        wake_.wait(hold);
+        continue;
+      }
+      run_part(*take, hold);
+    }
+    busy_ -= seconds_since(t_run);  // in the band's time: its waits are not busy, its parts counted
+    hold.unlock();
+    for (const std::exception_ptr& e : job.errors)
+      if (e) std::rethrow_exception(e);
+  }
+
+ private:
+  struct Job {
+    const std::function<void(size_t)>* part = nullptr;
+    size_t next = 0, n = 0, left = 0;
+    std::vector<std::exception_ptr> errors;
+  };
+
+  // Runs the next part of `job` (lock held on entry and on return).
+  void run_part(Job& job, std::unique_lock<std::mutex>& hold) {
+    const size_t c = job.next++;
+    if (job.next == job.n) jobs_.erase(std::find(jobs_.begin(), jobs_.end(), &job));
+    hold.unlock();
+    const auto t = Clock::now();
+    try {
+      (*job.part)(c);
+    } catch (...) {
+      job.errors[c] = std::current_exception();
+    }
+    const double took = seconds_since(t);
+    hold.lock();
+    busy_ += took;
+    if (--job.left == 0) wake_.notify_all();
+  }
+
+  void serve() {
+    std::unique_lock<std::mutex> hold(lock_);
+    for (;;) {
+      if (!jobs_.empty()) {
+        run_part(*jobs_.front(), hold);
+      } else if (next_band_ < bands_) {
+        const size_t i = next_band_++;
+        ++active_;
+        hold.unlock();
+        const auto t = Clock::now();
+        try {
+          (*band_)(i);
+        } catch (...) {
+          errors_[i] = std::current_exception();
+        }
+        const double took = seconds_since(t);
+        hold.lock();
+        busy_ += took;
+        if (--active_ == 0 && next_band_ == bands_) wake_.notify_all();
+      } else if (active_ == 0) {
+        return;  // no band left to start, and none running that could add parts
+      } else {
+        wake_.wait(hold);
+      }
+    }
+  }
+
+  std::mutex lock_;
+  std::condition_variable wake_;
+  std::deque<Job*> jobs_;  // jobs with parts not yet taken, oldest first
+  const std::function<void(size_t)>* band_ = nullptr;
+  size_t bands_ = 0, next_band_ = 0, active_ = 0;
+  double busy_ = 0;
+  std::vector<std::exception_ptr> errors_;
+};
+
 class StreamingBuilder {
  public:
   StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink,
@@ -767,14 +877,14 @@ class StreamingBuilder {
     // thread reads ahead, converts and runs D; it waits when the coding rounds or the reader are behind.
     std::ostringstream main_thread;
     main_thread.precision(3);
-    // The coding rounds: their wall time, the thread-seconds their bands held (each its share of the
-    // threads; the rest is threads idle while a round's last bands finish), the time the workers
-    // spent handing bands to the sink (within the rounds), and the time no round was in flight.
+    // The coding rounds: their wall time, the thread-seconds their workers spent in bands and parts
+    // (the rest is workers idle, waiting for a round's last bands), the time they spent handing
+    // bands to the sink (within the rounds), and the time no round was in flight.
     std::ostringstream rounds;
     rounds.precision(3);
-    rounds << "coding rounds: " << rounds_.count << " in " << rounds_.wall << " s, their bands held "
-           << rounds_.band_thread_seconds << " thread-seconds of " << rounds_.wall * opt_.threads << " ("
-           << (rounds_.wall > 0 ? 100 * rounds_.band_thread_seconds / (rounds_.wall * opt_.threads) : 0)
+    rounds << "coding rounds: " << rounds_.count << " in " << rounds_.wall << " s, their workers busy "
+           << rounds_.busy_thread_seconds << " thread-seconds of " << rounds_.wall * opt_.threads << " ("
+           << (rounds_.wall > 0 ? 100 * rounds_.busy_thread_seconds / (rounds_.wall * opt_.threads) : 0)
            << " %, " << rounds_.deliver << " s of it writing bands out); no round in flight for "
            << std::max(0.0, seconds_since(t_start) - rounds_.wall) << " s, the first after "
            << std::max(0.0, first_round_at_) << " s";
@@ -798,10 +908,10 @@ class StreamingBuilder {
   // per stripe edge, most of a stripe's extra work.
   static constexpr int64_t kDHalo = 6;
   double wait_rounds_ = 0, wait_reader_ = 0;  // the main thread's waits, for the build log
-  // The coding rounds' wall time and the thread-seconds their bands held, for the build log.
+  // The coding rounds' wall time, their workers' busy thread-seconds and delivery, for the build log.
   struct RoundFigures {
     int64_t count = 0;
-    double wall = 0, band_thread_seconds = 0, deliver = 0;
+    double wall = 0, busy_thread_seconds = 0, deliver = 0;
   } rounds_;
   // The main thread's wall time in each of its jobs while the input is read, for the build log.
   struct MainFigures {
@@ -1057,35 +1167,13 @@ class StreamingBuilder {
     }
   }
 
-  // Codes the round's bands on `threads` workers and delivers them. Touches only the round's
-  // BandWork, the windows, the rows the band pointers name (none of which the main thread changes
-  // meanwhile), the level figures and the sink (which the main thread leaves alone meanwhile).
+  // Codes the round's bands and their parts on `threads` workers (RoundWorkers) and delivers them.
+  // Touches only the round's BandWork, the windows, the rows the band pointers name (none of which
+  // the main thread changes meanwhile), the level figures and the sink (which the main thread
+  // leaves alone meanwhile).
   void code_round() {
     const std::vector<Task>& order = round_.order;
-    // The round shares the threads out among its bands in proportion to their samples, at least one
-    // each, the largest remainders getting what is left (the bands coded at once by the workers below
-    // leave threads idle when they are fewer than the threads: the drain at the end of the input, a
-    // tight memory budget, a few large bands beside small ones): the coder codes a band's tile rows
-    // on its share, and the bytes do not depend on it.
-    std::vector<int> share(order.size(), 1);
-    int64_t round_samples = 0;
-    for (const Task& task : order) round_samples += task.samples;
-    if (round_samples > 0) {
-      std::vector<std::pair<double, size_t>> remainder;
-      int given = 0;
-      for (size_t i = 0; i < order.size(); ++i) {
-        const double ideal = double(opt_.threads) * double(order[i].samples) / double(round_samples);
-        share[i] = std::max(1, int(ideal));
-        given += share[i];
-        remainder.push_back({ideal - std::floor(ideal), i});
-      }
-      std::stable_sort(remainder.begin(), remainder.end(),
-                       [](const auto& a, const auto& b) { return a.first > b.first; });
-      for (size_t k = 0; k < remainder.size() && given < opt_.threads; ++k, ++given)
-        ++share[remainder[k].second];
-    }
     const auto t_round = Clock::now();
-    std::vector<double> band_seconds(order.size(), 0.0), deliver_seconds(order.size(), 0.0);
     // Bands reach the sink in each level's order as soon as they and the ones above them are coded,
     // by whichever worker finishes one (one at a time): the output's writing overlaps the round's
     // coding instead of following it. Levels are independent streams, so their interleaving does
@@ -1095,6 +1183,7 @@ class StreamingBuilder {
     for (size_t gi = 0; gi < round_.groups.size(); ++gi) coded[gi].assign(round_.groups[gi].tasks, 0);
     std::mutex deliver_lock;
     bool delivering = false;
+    double deliver_seconds = 0;
     const auto band_coded = [&](size_t gi, size_t b) {
       std::unique_lock<std::mutex> hold(deliver_lock);
       coded[gi][b] = 1;
@@ -1106,42 +1195,41 @@ class StreamingBuilder {
         if (g == coded.size()) break;
         const size_t band = delivered[g]++;
         hold.unlock();
+        const auto t_deliver = Clock::now();
         deliver_band(round_.groups[g], band);
+        const double took = seconds_since(t_deliver);
         hold.lock();
+        deliver_seconds += took;
       }
       delivering = false;
     };
-    std::atomic<size_t> next{0};
-    detail::parallel_chunks(opt_.threads, int64_t(order.size()), [&](int, int64_t, int64_t) {
-      for (size_t i; (i = next.fetch_add(1)) < order.size();) {
-        const auto t_band = Clock::now();
-        const Group& g = round_.groups[order[i].group];
-        const int l = g.level;
-        const int64_t fw = sizes_[size_t(l)].width;
-        const bool finest = l == finest_;
-        BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
-        const int64_t n = bw.rows * fw;
-        bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
-        bw.valid.resize(finest ? size_t(n) : 0);
-        if (finest)
-          for (int64_t r = 0; r < bw.rows; ++r)
-            MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
-        code_band(l, g.window, bw, share[i]);
-        band_seconds[i] = seconds_since(t_band);
-        const auto t_deliver = Clock::now();
-        band_coded(order[i].group, size_t(order[i].band));
-        deliver_seconds[i] = seconds_since(t_deliver);
-      }
-    });
-    // Thread-seconds the bands held (each its share of the threads) against the round's: the rest
-    // is threads idle while a round's last bands finish (docs/scale.md, "Where the time goes").
+    const auto code = [&](size_t i) {
+      const Group& g = round_.groups[order[i].group];
+      const int l = g.level;
+      const int64_t fw = sizes_[size_t(l)].width;
+      const bool finest = l == finest_;
+      BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
+      const int64_t n = bw.rows * fw;
+      bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
+      bw.valid.resize(finest ? size_t(n) : 0);
+      if (finest)
+        for (int64_t r = 0; r < bw.rows; ++r)
+          MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
+      code_band(l, g.window, bw, opt_.threads > 1 ? &round_.workers : nullptr);
+      band_coded(order[i].group, size_t(order[i].band));
+    };
+    double busy = 0;
+    if (opt_.threads > 1) {
+      busy = round_.workers.run_bands(opt_.threads, order.size(), code);
+    } else {
+      for (size_t i = 0; i < order.size(); ++i) code(i);
+      busy = seconds_since(t_round);
+    }
     const double round_wall = seconds_since(t_round);
     rounds_.count += 1;
     rounds_.wall += round_wall;
-    for (size_t i = 0; i < order.size(); ++i) {
-      rounds_.band_thread_seconds += band_seconds[i] * share[i];
-      rounds_.deliver += deliver_seconds[i];
-    }
+    rounds_.busy_thread_seconds += busy;
+    rounds_.deliver += deliver_seconds;
   }
 
   // Hands a group's bands to the sink in order, with their figures. Called at the end of the
@@ -1184,7 +1272,8 @@ class StreamingBuilder {
     }
   }
 
-  void code_band(int l, const CoarseWindow& cwin, BandWork& bw, int threads) {
+  // Codes one band; its parts on `workers` (null: on this thread alone).
+  void code_band(int l, const CoarseWindow& cwin, BandWork& bw, RoundWorkers* workers) {
     const GridSize fs = sizes_[size_t(l)];
     const int64_t n = bw.rows * fs.width;
     const bool with_mask = l == finest_;
@@ -1230,7 +1319,11 @@ class StreamingBuilder {
       for (int64_t k = 0; k < n; ++k)
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
     }
-    bw.bytes = coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0, threads);
+    // As many parts as the band has rows (the coder splits by whole tile rows, at most that many).
+    bw.bytes = workers
+                   ? coder_.encode_parts(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l,
+                                         l == 0, int(bw.rows), *workers)
+                   : coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0, 1);
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};
     int64_t res_max = 0, err_max = 0, counted = 0;
@@ -1303,6 +1396,7 @@ class StreamingBuilder {
     std::exception_ptr error;
     std::vector<Group> groups;
     std::vector<Task> order;
+    RoundWorkers workers;
   } round_;
   BuildResult result_;
 };

@@ -64,11 +64,16 @@ class PtcResidualCoder final : public ResidualCoder {
   // threads (codec::EncodeOptions::threads; the same bytes).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
                               int levels_above_finest, bool coarsest, int threads) override;
+  // The band's tile rows in up to `parts` chunks on the runner's threads (the same bytes).
+  std::vector<uint8_t> encode_parts(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
+                                    int levels_above_finest, bool coarsest, int parts,
+                                    PartRunner& runner) override;
   // The same, coded so that its tiles can be spliced into `into` (into_size bytes, an existing stream
   // of the same band; codec::EncodeOptions::phase_model_stream): for editors that re-code some tiles.
   std::vector<uint8_t> encode_spliceable(const int32_t* residual, int64_t w, int64_t h,
                                          int32_t* reconstructed, int levels_above_finest, bool coarsest,
-                                         const uint8_t* into, size_t into_size, int threads = 1);
+                                         const uint8_t* into, size_t into_size, int threads = 1,
+                                         PartRunner* runner = nullptr);
   // The step and max error a level gets (see screen_level_error and coarse_step_ratio).
   PtcCoderOptions level_options(int levels_above_finest) const;
   bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) override;

@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "codec/crc32c.h"
+#include "core/fork_join.h"
 #include "core/rect.h"
 
 namespace codec {
@@ -107,6 +108,9 @@ struct EncodeOptions {
   // are split evenly and joined in order); the Scratch then keeps a coder state and a payload buffer
   // per thread.
   uint32_t threads = 1;
+  // Experimental: runs those chunks of tile rows (threads of them) on the runner's threads instead
+  // of threads started within the call (null, the default). The stream does not depend on it.
+  terrain::PartRunner* part_runner = nullptr;
 };
 
 // Step giving about `target_rms` sample-domain rms error (inverse of predicted_rms); never below 1.

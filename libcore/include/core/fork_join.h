@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <exception>
+#include <functional>
 #include <thread>
 #include <vector>
 
@@ -32,6 +33,27 @@ template <class Body> void fork_join(size_t n, Body&& body) {
   for (std::thread& t : threads) t.join();
   for (const std::exception_ptr& e : errors)
     if (e) std::rethrow_exception(e);
+}
+
+// Experimental: runs the parts of a fork-join on threads the caller already has (the pyramid
+// builder's coding workers, so that the parts of all the bands coded at once share them) instead
+// of threads started for the call.
+class PartRunner {
+ public:
+  virtual ~PartRunner() = default;
+  // Calls part(c) once for every c in [0, n), on any threads and in any order, and returns when all
+  // have returned; the first exception a part threw (lowest c) is then rethrown. Called from any
+  // thread the runner serves; a part must not call run() itself.
+  virtual void run(size_t n, const std::function<void(size_t)>& part) = 0;
+};
+
+// fork_join with the parts on `runner`'s threads (null: on threads started here).
+template <class Body> void fork_join(size_t n, Body&& body, PartRunner* runner) {
+  if (!runner || n <= 1) {
+    fork_join(n, body);
+    return;
+  }
+  runner->run(n, std::function<void(size_t)>(std::ref(body)));
 }
 
 }  // namespace terrain

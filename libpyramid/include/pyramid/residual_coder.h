@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/fork_join.h"
+
 namespace terrain {
 
 // Residual coding interface (the real coder lives in libcodec and implements this).
@@ -29,6 +31,15 @@ class ResidualCoder {
   // the bytes and the reconstruction must not depend on it.
   virtual std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
                                       int levels_above_finest, bool coarsest, int threads) = 0;
+  // Experimental: encode() with the band split into at most `parts` parts that `runner` runs (the
+  // builder's coding workers, which the parts of all the bands coded at once share); the bytes and
+  // the reconstruction are encode()'s. The default codes the band on the calling thread alone.
+  virtual std::vector<uint8_t> encode_parts(const int32_t* residual, int64_t w, int64_t h,
+                                            int32_t* reconstructed, int levels_above_finest, bool coarsest,
+                                            int parts, PartRunner& runner) {
+    (void)parts, (void)runner;
+    return encode(residual, w, h, reconstructed, levels_above_finest, coarsest, 1);
+  }
   // Decodes one band; false on malformed or truncated data (never crashes, never reads past n).
   virtual bool decode(const uint8_t* data, size_t n, int64_t w, int64_t h, int32_t* out) = 0;
 };
