@@ -1,5 +1,7 @@
 // The closed-loop residual pyramid: coding, decoding, streaming, nodata, tiny grids.
+#include <algorithm>
 #include <array>
+#include <atomic>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <iostream>
@@ -214,6 +216,57 @@ TEST_CASE("streamed == in-memory, bit-exact, whatever the chunking and thread co
       build_pyramid(trickle, o, coder, streamed);
       require_same_output(mem, streamed);
     }
+  }
+}
+
+TEST_CASE("a coder's parts run on the round's workers: same bytes, errors reach the caller") {
+  // Codes a band's rows in up to `parts` pieces on the runner (a uniform quantiser's bytes are one
+  // varint per sample, so the pieces' bytes in order are the whole band's).
+  struct PartsCoder final : ResidualCoder {
+    UniformQuantizerCoder inner{3, 32};
+    std::atomic<int> part_calls{0}, runs{0};
+    bool fail = false;
+    int64_t band_rows() const override { return inner.band_rows(); }
+    std::vector<uint8_t> encode(const int32_t* r, int64_t w, int64_t h, int32_t* rec, int above,
+                                bool coarsest, int threads) override {
+      return inner.encode(r, w, h, rec, above, coarsest, threads);
+    }
+    std::vector<uint8_t> encode_parts(const int32_t* r, int64_t w, int64_t h, int32_t* rec, int above,
+                                      bool coarsest, int parts, PartRunner& runner) override {
+      const size_t n = size_t(std::clamp<int64_t>(parts, 1, h));
+      std::vector<std::vector<uint8_t>> pieces(n);
+      ++runs;
+      runner.run(n, [&](size_t c) {
+        ++part_calls;
+        if (fail && c == n - 1) throw std::runtime_error("part failed on purpose");
+        const int64_t y0 = h * int64_t(c) / int64_t(n), y1 = h * int64_t(c + 1) / int64_t(n);
+        pieces[c] = inner.encode(r + y0 * w, w, y1 - y0, rec + y0 * w, above, coarsest, 1);
+      });
+      std::vector<uint8_t> out;
+      for (const auto& p : pieces) out.insert(out.end(), p.begin(), p.end());
+      return out;
+    }
+    bool decode(const uint8_t* d, size_t n, int64_t w, int64_t h, int32_t* out) override {
+      return inner.decode(d, n, w, h, out);
+    }
+  };
+  Heightmap map = synthetic(300, 900, 12);
+  UniformQuantizerCoder plain(3, 32);
+  MemoryPyramid one_thread;
+  build_pyramid(map, options(5, 1), plain, one_thread);
+  for (int threads : {2, 3, 8}) {
+    INFO("threads " << threads);
+    PartsCoder coder;
+    MemoryPyramid parts;
+    build_pyramid(map, options(5, threads), coder, parts);
+    require_same_output(one_thread, parts);
+    CHECK(coder.runs > 0);
+    CHECK(coder.part_calls > coder.runs);  // bands were split into several parts
+    PartsCoder failing;
+    failing.fail = true;
+    MemoryPyramid unused;
+    REQUIRE_THROWS_WITH(build_pyramid(map, options(5, threads), failing, unused),
+                        Catch::Contains("part failed on purpose"));
   }
 }
 
