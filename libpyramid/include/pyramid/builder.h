@@ -123,8 +123,9 @@ struct BuildResult {
 // sink that stores a mask decides what to keep once every row has arrived. reconstructed_rows()
 // calls may come at any time (even before begin()), each level top to bottom. Ordering levels for
 // a file is the sink's business (PyramidFileWriter does it). The calls come one at a time, but not
-// always from the thread that called build_pyramid (the builder's coding workers deliver the
-// bands, each level's as soon as they are coded): a sink needs no lock, only no thread affinity.
+// always from the thread that called build_pyramid (the builder's coding rounds deliver their
+// bands from a thread of their own, each level's as soon as they are coded): a sink needs no lock,
+// only no thread affinity.
 class PyramidSink {
  public:
   virtual ~PyramidSink() = default;
