@@ -1288,6 +1288,55 @@ class StreamingBuilder {
     }
   }
 
+  // The figures of one row without voids where U = T_l - R: the scalar loop's sums, lane k & 3 of
+  // the four partial sums taking the samples k = 0, 4, 8, ... in the same order (so the same
+  // doubles), but in blocks of four that the compiler vectorises. The reconstruction T^ = U + R^ is
+  // summed in int32 with an overflow check; false (nothing changed) if it overflowed somewhere,
+  // for the scalar loop's saturation. k0: the row's first sample's index in the band.
+  static bool figures_fast_row(const int32_t* t, const int32_t* res, int32_t* rhat, int64_t k0, int64_t w,
+                               double res_sq[4], double err_sq[4], int64_t& res_max, int64_t& err_max) {
+    const int32_t* r = res + k0;
+    int32_t* h = rhat + k0;
+    uint32_t overflow = 0;
+    for (int64_t x = 0; x < w; ++x) {
+      const uint32_t pred = uint32_t(t[x]) - uint32_t(r[x]), q = uint32_t(h[x]), rec = pred + q;
+      overflow |= (~(pred ^ q)) & (pred ^ rec);
+    }
+    if (overflow >> 31) return false;
+    double rs[4], es[4], rm = 0, em = 0;
+    for (int j = 0; j < 4; ++j) rs[j] = res_sq[j], es[j] = err_sq[j];
+    // Sample x goes to lane (k0 + x) & 3: a scalar head up to a multiple of four, blocks, a tail.
+    const auto one = [&](int64_t x) {
+      const int32_t rec = int32_t(uint32_t(t[x]) - uint32_t(r[x]) + uint32_t(h[x]));
+      const double rd = double(r[x]), ed = double(t[x]) - double(rec);
+      const size_t lane = size_t((k0 + x) & 3);
+      rs[lane] += rd * rd;
+      es[lane] += ed * ed;
+      rm = std::max(rm, std::fabs(rd));
+      em = std::max(em, std::fabs(ed));
+      h[x] = rec;
+    };
+    int64_t x = 0;
+    for (; x < w && ((k0 + x) & 3) != 0; ++x) one(x);
+    double rmv[4] = {rm, rm, rm, rm}, emv[4] = {em, em, em, em};
+    for (; x + 4 <= w; x += 4)
+      for (int j = 0; j < 4; ++j) {
+        const int32_t rec = int32_t(uint32_t(t[x + j]) - uint32_t(r[x + j]) + uint32_t(h[x + j]));
+        const double rd = double(r[x + j]), ed = double(t[x + j]) - double(rec);
+        rs[j] += rd * rd;
+        es[j] += ed * ed;
+        rmv[j] = std::max(rmv[j], std::fabs(rd));
+        emv[j] = std::max(emv[j], std::fabs(ed));
+        h[x + j] = rec;
+      }
+    for (int j = 0; j < 4; ++j) rm = std::max(rm, rmv[j]), em = std::max(em, emv[j]);
+    for (; x < w; ++x) one(x);
+    for (int j = 0; j < 4; ++j) res_sq[j] = rs[j], err_sq[j] = es[j];
+    res_max = std::max(res_max, int64_t(rm));
+    err_max = std::max(err_max, int64_t(em));
+    return true;
+  }
+
   // Codes one band; its parts on `workers` (null: on this thread alone).
   void code_band(int l, const CoarseWindow& cwin, BandWork& bw, RoundWorkers* workers) {
     const GridSize fs = sizes_[size_t(l)];
@@ -1321,10 +1370,21 @@ class StreamingBuilder {
     bool exact = true;  // T_l - R == U everywhere
     for (int64_t r = 0; r < bw.rows; ++r) {
       const int32_t* t = t_row(r);
-      for (int64_t x = 0, k = r * fw; x < fw; ++x, ++k) {
-        const int64_t d = int64_t(t[x]) - bw.res[size_t(k)];
-        bw.res[size_t(k)] = saturate(d);
-        exact &= bw.res[size_t(k)] == d;
+      int32_t* u = bw.res.data() + r * fw;
+      // In int32 with an overflow check (vectorised), the row again with saturation if it overflowed.
+      uint32_t overflow = 0;
+      for (int64_t x = 0; x < fw; ++x) {
+        const uint32_t a = uint32_t(t[x]), b = uint32_t(u[x]), d = a - b;
+        overflow |= (a ^ b) & (a ^ d);
+        u[x] = int32_t(d);
+      }
+      if (!(overflow >> 31)) continue;
+      const int32_t* t2 = t_row(r);
+      for (int64_t x = 0; x < fw; ++x) {  // u[x] is t - U wrapped: U = t - u[x] (mod 2^32)
+        const int32_t pred = int32_t(uint32_t(t2[x]) - uint32_t(u[x]));
+        const int64_t d = int64_t(t2[x]) - pred;
+        u[x] = saturate(d);
+        exact &= u[x] == d;
       }
     }
     // Voids are restored from the mask, so their residual carries no information.
@@ -1348,6 +1408,11 @@ class StreamingBuilder {
     if (!exact) bw.pred_row.resize(size_t(fw));
     for (int64_t row = 0; row < bw.rows; ++row) {
       const int32_t* t = t_row(row);
+      if (exact && !any_void &&
+          figures_fast_row(t, res, rhat, row * fw, fw, res_sq, err_sq, res_max, err_max)) {
+        counted += fw;
+        continue;
+      }
       if (!exact) predict(Rect{0, bw.y0 + row, fw, 1}, bw.pred_row.data());
       for (int64_t x = 0, k = row * fw; x < fw; ++x, ++k) {
         const int32_t pred = exact ? int32_t(int64_t(t[x]) - res[k]) : bw.pred_row[size_t(x)];
