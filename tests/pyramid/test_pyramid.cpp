@@ -119,6 +119,44 @@ TEST_CASE("closed loop: decoder output equals the builder's reconstruction; step
   }
 }
 
+TEST_CASE("closed loop: int32 extremes saturate; the figures match the decoded levels") {
+  // Neighbours at both ends of int32: U overshoots, residuals and reconstructions saturate, so the
+  // builder's overflow checks send these rows through its saturating loops.
+  // A plateau just below the top with spikes to it: residuals fit, but rounded up by a step of 300
+  // the reconstruction passes the top (the figures' loop saturates it).
+  Heightmap spikes;
+  spikes.info.width = 67, spikes.info.height = 45;
+  spikes.info.sample_type = SampleType::Int32;
+  Heightmap extremes;
+  extremes.info = spikes.info;
+  std::mt19937 rng(3);
+  const double hi = 2147483647.0 - 3, lo = -2147483648.0 + 3;
+  for (int64_t k = 0; k < 67 * 45; ++k) {
+    extremes.values.push_back(rng() % 3 == 0 ? hi : rng() % 2 ? lo : 17.0);
+    spikes.values.push_back(rng() % 5 == 0 ? 2147483647.0 : 2147483647.0 - 200);
+  }
+  for (auto [input, step] : {std::pair{&extremes, 1}, {&extremes, 1000}, {&spikes, 300}}) {
+    const Heightmap& map = *input;
+    INFO("step " << step);
+    for (int threads : {1, 3}) {
+      UniformQuantizerCoder coder(step, 16);
+      MemoryPyramid out;
+      BuildResult res = build_pyramid(map, options(3, threads), coder, out);
+      for (int l = 0; l < 3; ++l) REQUIRE(decode_pyramid(out, coder, l) == out.recon[size_t(l)]);
+      const auto finest = decode_pyramid(out, coder, 2);
+      int64_t max_err = 0;
+      double sum_sq = 0;
+      for (size_t k = 0; k < finest.size(); ++k) {
+        const int64_t e = int64_t(map.values[k]) - finest[k];
+        max_err = std::max<int64_t>(max_err, std::llabs(e));
+        sum_sq += double(e) * double(e);
+      }
+      CHECK(res.levels.back().error_max_abs == max_err);
+      CHECK(res.levels.back().error_rms == Approx(std::sqrt(sum_sq / double(finest.size()))).epsilon(1e-9));
+    }
+  }
+}
+
 TEST_CASE("closed loop: finest-level error does not grow with the number of levels") {
   std::vector<std::pair<std::string, Heightmap>> inputs;
   inputs.emplace_back("synthetic 515x389", synthetic(515, 389, 5));
