@@ -33,7 +33,6 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
-#include <type_traits>
 #include <utility>
 
 #include "pyramid/internal/filter_downsample.h"
@@ -485,10 +484,8 @@ class RoundWorkers final : public PartRunner {
     const auto t_run = Clock::now();
     std::unique_lock<std::mutex> hold(lock_);
     jobs_.push_back(&job);
-    hold.unlock();
     wake_.notify_all();
     // This thread takes its band's parts too, and helps with others' while its own are running.
-    hold.lock();
     while (job.left > 0) {
       Job* take = job.next < job.n ? &job : (jobs_.empty() ? nullptr : jobs_.front());
       if (!take) {
@@ -731,14 +728,8 @@ class StreamingBuilder {
     const auto level_rows = [&](InputBand& b) {
       b.mask.resize(size_t(b.rows));
       for (int64_t r = 0; r < b.rows; ++r) b.mask[size_t(r)] = MaskRows::pack(b.valid.data() + r * W, W);
-      const auto fill = [&](auto& rows) {
-        for (int64_t r = 0; r < b.rows; ++r) {
-          auto& buf = rows[size_t(r)];
-          buf.resize(size_t(W));
-          const int32_t* in = b.ints.data() + r * W;
-          using T = typename std::decay_t<decltype(buf)>::value_type;
-          for (int64_t x = 0; x < W; ++x) buf[size_t(x)] = static_cast<T>(in[x]);
-        }
+      const auto fill = [&](auto& rows) {  // rows from take_spares: width W each
+        for (int64_t r = 0; r < b.rows; ++r) std::copy_n(b.ints.data() + r * W, W, rows[size_t(r)].begin());
       };
       if (finest_rows.narrow())
         fill(b.rows16);
@@ -1150,7 +1141,7 @@ class StreamingBuilder {
     // Largest bands first, so the small coarse ones fill the gaps at the end.
     std::stable_sort(order.begin(), order.end(),
                      [](const Task& a, const Task& b) { return a.samples > b.samples; });
-    if (rounds_.count == 0 && first_round_at_ < 0) first_round_at_ = seconds_since(build_start_);
+    if (first_round_at_ < 0) first_round_at_ = seconds_since(build_start_);
     round_.active = true;
     round_.done.store(false, std::memory_order_relaxed);
     if (opt_.threads == 1) {
@@ -1248,9 +1239,8 @@ class StreamingBuilder {
     rounds_.deliver += deliver_seconds;
   }
 
-  // Hands a group's bands to the sink in order, with their figures. Called at the end of the
-  // round's coding, on the round's thread: the output's writing (a tenth of the main thread's work
-  // at 2 threads) stays off the main thread. Rounds end one at a time, in order.
+  // Hands band b of a group to the sink, with its figures. code_round calls it on the round's thread
+  // (the output's writing stays off the main thread), each level's bands in order.
   void deliver_band(const Group& g, size_t b) {
     const int l = g.level;
     const int64_t fw = sizes_[size_t(l)].width;
@@ -1303,37 +1293,29 @@ class StreamingBuilder {
       overflow |= (~(pred ^ q)) & (pred ^ rec);
     }
     if (overflow >> 31) return false;
-    double rs[4], es[4], rm = 0, em = 0;
+    double rs[4], es[4], rm[4] = {0, 0, 0, 0}, em[4] = {0, 0, 0, 0};
     for (int j = 0; j < 4; ++j) rs[j] = res_sq[j], es[j] = err_sq[j];
-    // Sample x goes to lane (k0 + x) & 3: a scalar head up to a multiple of four, blocks, a tail.
-    const auto one = [&](int64_t x) {
+    // Sample x into lane j = (k0 + x) & 3 (its largest magnitudes too, merged at the end).
+    const auto sample = [&](int64_t x, size_t j) {
       const int32_t rec = int32_t(uint32_t(t[x]) - uint32_t(r[x]) + uint32_t(h[x]));
       const double rd = double(r[x]), ed = double(t[x]) - double(rec);
-      const size_t lane = size_t((k0 + x) & 3);
-      rs[lane] += rd * rd;
-      es[lane] += ed * ed;
-      rm = std::max(rm, std::fabs(rd));
-      em = std::max(em, std::fabs(ed));
+      rs[j] += rd * rd;
+      es[j] += ed * ed;
+      rm[j] = std::max(rm[j], std::fabs(rd));
+      em[j] = std::max(em[j], std::fabs(ed));
       h[x] = rec;
     };
+    // A scalar head up to a multiple of four, blocks of four (one sample a lane), a tail.
     int64_t x = 0;
-    for (; x < w && ((k0 + x) & 3) != 0; ++x) one(x);
-    double rmv[4] = {rm, rm, rm, rm}, emv[4] = {em, em, em, em};
+    for (; x < w && ((k0 + x) & 3) != 0; ++x) sample(x, size_t((k0 + x) & 3));
     for (; x + 4 <= w; x += 4)
-      for (int j = 0; j < 4; ++j) {
-        const int32_t rec = int32_t(uint32_t(t[x + j]) - uint32_t(r[x + j]) + uint32_t(h[x + j]));
-        const double rd = double(r[x + j]), ed = double(t[x + j]) - double(rec);
-        rs[j] += rd * rd;
-        es[j] += ed * ed;
-        rmv[j] = std::max(rmv[j], std::fabs(rd));
-        emv[j] = std::max(emv[j], std::fabs(ed));
-        h[x + j] = rec;
-      }
-    for (int j = 0; j < 4; ++j) rm = std::max(rm, rmv[j]), em = std::max(em, emv[j]);
-    for (; x < w; ++x) one(x);
-    for (int j = 0; j < 4; ++j) res_sq[j] = rs[j], err_sq[j] = es[j];
-    res_max = std::max(res_max, int64_t(rm));
-    err_max = std::max(err_max, int64_t(em));
+      for (size_t j = 0; j < 4; ++j) sample(x + int64_t(j), j);
+    for (; x < w; ++x) sample(x, size_t((k0 + x) & 3));
+    for (int j = 0; j < 4; ++j) {
+      res_sq[j] = rs[j], err_sq[j] = es[j];
+      res_max = std::max(res_max, int64_t(rm[j]));
+      err_max = std::max(err_max, int64_t(em[j]));
+    }
     return true;
   }
 
@@ -1379,10 +1361,9 @@ class StreamingBuilder {
         u[x] = int32_t(d);
       }
       if (!(overflow >> 31)) continue;
-      const int32_t* t2 = t_row(r);
       for (int64_t x = 0; x < fw; ++x) {  // u[x] is t - U wrapped: U = t - u[x] (mod 2^32)
-        const int32_t pred = int32_t(uint32_t(t2[x]) - uint32_t(u[x]));
-        const int64_t d = int64_t(t2[x]) - pred;
+        const int32_t pred = int32_t(uint32_t(t[x]) - uint32_t(u[x]));
+        const int64_t d = int64_t(t[x]) - pred;
         u[x] = saturate(d);
         exact &= u[x] == d;
       }
