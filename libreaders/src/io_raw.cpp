@@ -4,6 +4,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -181,40 +182,55 @@ class RawStreamReader final : public BandReader {
     if (!gz_ended_) fail(ErrorCode::Truncated, path_, "gzip stream ends before its trailer");
   }
 
-  template <typename Fn> void decode_with(const uint8_t* src, double* values, uint8_t* valid, Fn fetch) {
-    const int64_t w = layout_.info.width;
-    const bool has_nodata = layout_.info.nodata.has_value();
-    const double nodata = has_nodata ? *layout_.info.nodata : 0.0;
-    const int bytes = stored_bytes(layout_.stored);
+  // One row of integer samples (stored as T, in either byte order) to doubles and validity. The byte
+  // order and the nodata test are decided once per row and the loop writes through restrict pointers
+  // (valid's bytes could otherwise alias the layout), so that it vectorises: per sample it was a
+  // fifth of a 16-thread build's input thread.
+  template <typename T, bool kBigEndian, bool kNodata>
+  static void decode_ints(const uint8_t* __restrict src, int64_t w, double nodata, double* __restrict values,
+                          uint8_t* __restrict valid) {
     for (int64_t x = 0; x < w; ++x) {
-      double v = fetch(src + x * bytes);
-      bool is_void = has_nodata && v == nodata;
-      values[x] = is_void ? 0.0 : v;
+      T v;
+      std::memcpy(&v, src + x * int64_t(sizeof(T)), sizeof(T));
+      if constexpr (kBigEndian && sizeof(T) == 2) v = T(__builtin_bswap16(uint16_t(v)));
+      if constexpr (kBigEndian && sizeof(T) == 4) v = T(__builtin_bswap32(uint32_t(v)));
+      const double d = double(v);
+      const bool is_void = kNodata && d == nodata;
+      values[x] = is_void ? 0.0 : d;
       valid[x] = is_void ? 0 : 1;
     }
+  }
+  template <typename T> void decode_ints_row(const uint8_t* src, double* values, uint8_t* valid) const {
+    static_assert(std::endian::native == std::endian::little);
+    const int64_t w = layout_.info.width;
+    const double nodata = layout_.info.nodata.value_or(0.0);
+    const bool big = layout_.big_endian && sizeof(T) > 1, has = layout_.info.nodata.has_value();
+    if (big)
+      has ? decode_ints<T, true, true>(src, w, nodata, values, valid)
+          : decode_ints<T, true, false>(src, w, nodata, values, valid);
+    else
+      has ? decode_ints<T, false, true>(src, w, nodata, values, valid)
+          : decode_ints<T, false, false>(src, w, nodata, values, valid);
   }
 
   uint32_t load_u32(const uint8_t* p) const {
     return layout_.big_endian ? (uint32_t(p[0]) << 24 | uint32_t(p[1]) << 16 | uint32_t(p[2]) << 8 | p[3])
                               : (uint32_t(p[3]) << 24 | uint32_t(p[2]) << 16 | uint32_t(p[1]) << 8 | p[0]);
   }
-  uint16_t load_u16(const uint8_t* p) const {
-    return layout_.big_endian ? uint16_t(p[0] << 8 | p[1]) : uint16_t(p[1] << 8 | p[0]);
-  }
 
   void decode_row(const uint8_t* src, int64_t row, double* values, uint8_t* valid) {
     switch (layout_.stored) {
       case StoredType::UInt8:
-        decode_with(src, values, valid, [](const uint8_t* p) { return double(*p); });
+        decode_ints_row<uint8_t>(src, values, valid);
         break;
       case StoredType::Int16:
-        decode_with(src, values, valid, [this](const uint8_t* p) { return double(int16_t(load_u16(p))); });
+        decode_ints_row<int16_t>(src, values, valid);
         break;
       case StoredType::UInt16:
-        decode_with(src, values, valid, [this](const uint8_t* p) { return double(load_u16(p)); });
+        decode_ints_row<uint16_t>(src, values, valid);
         break;
       case StoredType::Int32:
-        decode_with(src, values, valid, [this](const uint8_t* p) { return double(int32_t(load_u32(p))); });
+        decode_ints_row<int32_t>(src, values, valid);
         break;
       case StoredType::Float32:
         decode_float_row(src, row, values, valid);
