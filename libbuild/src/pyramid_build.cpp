@@ -211,9 +211,8 @@ int64_t memory_outside_builder(const GridInfo& g, const BuildOptions& bo, const 
   return bytes;
 }
 
-// Integer level-unit offset that centres the window's valid values when they reach beyond half of
-// libcodec's range; 0 otherwise.
-double centring_offset(const std::vector<Heightmap>& windows, double value_scale) {
+// Lowest and highest valid value of the calibration sample in level units (lo > hi when it has none).
+std::pair<double, double> value_span(const std::vector<Heightmap>& windows, double value_scale) {
   double lo = INFINITY, hi = -INFINITY;
   for (const Heightmap& window : windows)
     for (size_t i = 0; i < window.values.size(); ++i)
@@ -221,8 +220,35 @@ double centring_offset(const std::vector<Heightmap>& windows, double value_scale
         const double v = std::nearbyint(window.values[i] * value_scale);
         lo = std::min(lo, v), hi = std::max(hi, v);
       }
+  return {lo, hi};
+}
+
+// Integer level-unit offset that centres the window's valid values when they reach beyond half of
+// libcodec's range; 0 otherwise.
+double centring_offset(const std::vector<Heightmap>& windows, double value_scale) {
+  const auto [lo, hi] = value_span(windows, value_scale);
   if (!(hi >= lo) || std::max(std::abs(lo), std::abs(hi)) <= double(codec::kMaxAbsSample / 2)) return 0;
   return std::nearbyint(0.5 * (lo + hi));
+}
+
+// The coarsest level is coded as values, centred by `offset`: values beyond +-2^20 units of it do not
+// fit libcodec. Refused here when the calibration sample shows it (a clear error naming the file
+// rather than the coder's failure in the middle of the build; PtcResidualCoder reports what the
+// sample missed the same way).
+void check_value_span(const std::string& input, const std::vector<Heightmap>& windows,
+                      const LevelUnits& units, double offset) {
+  const auto [lo, hi] = value_span(windows, units.value_scale);
+  const double limit = double(codec::kMaxAbsSample);
+  const auto metres = [&](double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.10g", v * units.metres_per_unit);
+    return std::string(text);
+  };
+  if (!(hi >= lo) || (hi - offset <= limit && offset - lo <= limit)) return;
+  throw Error(ErrorCode::InvalidOption,
+              input + ": values from " + metres(lo) + " to " + metres(hi) + " m span " + shortest(hi - lo) +
+                  " units of " + shortest(units.metres_per_unit) + " m, more than the " +
+                  std::to_string(2 * codec::kMaxAbsSample) + " (2^21) a pyramid codes; " + kValueSpanAdvice);
 }
 
 struct Trial {
@@ -291,9 +317,11 @@ Trial trial_build(const std::vector<Heightmap>& windows, BuildOptions bo, const 
 
 }  // namespace
 
-BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
-                                   const std::string& output, const BuildFileOptions& o,
-                                   const std::string& metadata_json_extra, const BuildProgress& progress) {
+namespace {
+
+BuildFileResult build_file(const std::string& input, const ReadOptions& read_options,
+                           const std::string& output, const BuildFileOptions& o,
+                           const std::string& metadata_json_extra, const BuildProgress& progress) {
   // The output must not replace the input or one of its side files (sidecar, ESRI header, .prj).
   check_output_path(output, {input, input + ".json", input + ".hdr", input + ".prj"});
   BuildFileResult out;
@@ -341,6 +369,7 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   if (needs_calibration_sample(g, bo.value_scale, o))
     window = read_calibration_windows(input, read_options, o);
   bo.value_offset = centring_offset(window, units.value_scale);
+  check_value_span(input, window, units, bo.value_offset);
   std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
       LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};
@@ -641,6 +670,18 @@ BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& 
   if (out.stripes) remove_stripe_directory(so.directory);
   out.file_bytes = uint64_t(std::filesystem::file_size(output));
   return out;
+}
+
+}  // namespace
+
+BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
+                                   const std::string& output, const BuildFileOptions& o,
+                                   const std::string& metadata_json_extra, const BuildProgress& progress) {
+  try {
+    return build_file(input, read_options, output, o, metadata_json_extra, progress);
+  } catch (const ValueRangeError& e) {  // the coder does not know the file
+    throw Error(e.code(), input + ": " + e.what());
+  }
 }
 
 }  // namespace terrain::build

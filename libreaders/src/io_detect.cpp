@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <stdexcept>
 #include <vector>
 
 #include "core/text.h"
@@ -86,6 +87,11 @@ GridInfo probe(const std::string& path, const ReadOptions& options) {
       return checked(io::probe_raw_layout(path, options).info, path);
   }
   return {};
+}
+
+int64_t BandReader::read_rows_int32(int64_t, int32_t*, uint8_t*) {
+  throw std::logic_error(
+      "BandReader::read_rows_int32: this reader decodes to doubles only (reads_int32 is false)");
 }
 
 int64_t BandReader::skip_rows(int64_t rows) {

@@ -62,21 +62,32 @@ class RawStreamReader final : public BandReader {
   const GridInfo& info() const override { return layout_.info; }
 
   int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
-    int64_t n = std::min(rows, layout_.info.height - rows_read_);
-    if (n <= 0) return 0;
-    size_t want = size_t(uint64_t(n) * row_bytes_);
-    if (buffer_.size() < want) buffer_.resize(want);
-    size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_.get());
-    if (got < want) {
-      if (file_ && std::ferror(file_.get())) fail(ErrorCode::NotFound, path_, "read error");
-      fail_data_ends(rows_read_ + int64_t(got / row_bytes_));
-    }
-    const int64_t w = layout_.info.width;
-    for (int64_t r = 0; r < n; ++r)
-      decode_row(buffer_.data() + size_t(r) * row_bytes_, rows_read_ + r, values + r * w, valid + r * w);
-    rows_read_ += n;
-    if (layout_.gzip && rows_read_ == layout_.info.height) check_gz_end();
-    return n;
+    return read_and_decode(rows, [&](const uint8_t* src, int64_t row, int64_t r) {
+      const int64_t w = layout_.info.width;
+      decode_row(src, row, values + r * w, valid + r * w);
+    });
+  }
+
+  bool reads_int32() const override { return layout_.stored != StoredType::Float32; }
+  int64_t read_rows_int32(int64_t rows, int32_t* values, uint8_t* valid) override {
+    if (!reads_int32()) return BandReader::read_rows_int32(rows, values, valid);
+    return read_and_decode(rows, [&](const uint8_t* src, int64_t, int64_t r) {
+      const int64_t w = layout_.info.width;
+      switch (layout_.stored) {
+        case StoredType::UInt8:
+          decode_ints_row<uint8_t>(src, values + r * w, valid + r * w);
+          break;
+        case StoredType::Int16:
+          decode_ints_row<int16_t>(src, values + r * w, valid + r * w);
+          break;
+        case StoredType::UInt16:
+          decode_ints_row<uint16_t>(src, values + r * w, valid + r * w);
+          break;
+        default:
+          decode_ints_row<int32_t>(src, values + r * w, valid + r * w);
+          break;
+      }
+    });
   }
 
   // A gzip stream has no random access: inflate and discard (BandReader's). Else seek, once the file
@@ -128,6 +139,23 @@ class RawStreamReader final : public BandReader {
   uint32_t nodata_float_bits_ = 0;
 
   size_t read_gz(size_t want) { return inflate_into(buffer_.data(), want); }
+
+  // Reads up to `rows` rows as bytes and hands each to decode(bytes, grid row, row in the call).
+  template <typename Decode> int64_t read_and_decode(int64_t rows, Decode decode) {
+    const int64_t n = std::min(rows, layout_.info.height - rows_read_);
+    if (n <= 0) return 0;
+    const size_t want = size_t(uint64_t(n) * row_bytes_);
+    if (buffer_.size() < want) buffer_.resize(want);
+    const size_t got = layout_.gzip ? read_gz(want) : std::fread(buffer_.data(), 1, want, file_.get());
+    if (got < want) {
+      if (file_ && std::ferror(file_.get())) fail(ErrorCode::NotFound, path_, "read error");
+      fail_data_ends(rows_read_ + int64_t(got / row_bytes_));
+    }
+    for (int64_t r = 0; r < n; ++r) decode(buffer_.data() + size_t(r) * row_bytes_, rows_read_ + r, r);
+    rows_read_ += n;
+    if (layout_.gzip && rows_read_ == layout_.info.height) check_gz_end();
+    return n;
+  }
 
   // The file holds only `rows` whole rows of the grid (read_rows and skip_rows).
   [[noreturn]] void fail_data_ends(int64_t rows) const {
@@ -186,31 +214,32 @@ class RawStreamReader final : public BandReader {
   // order and the nodata test are decided once per row and the loop writes through restrict pointers
   // (valid's bytes could otherwise alias the layout), so that it vectorises: per sample it was a
   // fifth of a 16-thread build's input thread.
-  template <typename T, bool kBigEndian, bool kNodata>
-  static void decode_ints(const uint8_t* __restrict src, int64_t w, double nodata, double* __restrict values,
+  template <typename T, bool kBigEndian, bool kNodata, typename Out>
+  static void decode_ints(const uint8_t* __restrict src, int64_t w, double nodata, Out* __restrict values,
                           uint8_t* __restrict valid) {
     for (int64_t x = 0; x < w; ++x) {
       T v;
       std::memcpy(&v, src + x * int64_t(sizeof(T)), sizeof(T));
       if constexpr (kBigEndian && sizeof(T) == 2) v = T(__builtin_bswap16(uint16_t(v)));
       if constexpr (kBigEndian && sizeof(T) == 4) v = T(__builtin_bswap32(uint32_t(v)));
-      const double d = double(v);
-      const bool is_void = kNodata && d == nodata;
-      values[x] = is_void ? 0.0 : d;
+      const bool is_void = kNodata && double(v) == nodata;
+      values[x] = is_void ? Out(0) : Out(v);
       valid[x] = is_void ? 0 : 1;
     }
   }
-  template <typename T> void decode_ints_row(const uint8_t* src, double* values, uint8_t* valid) const {
+  // Out: double (read_rows) or int32_t (read_rows_int32, integer storage only: every T fits).
+  template <typename T, typename Out>
+  void decode_ints_row(const uint8_t* src, Out* values, uint8_t* valid) const {
     static_assert(std::endian::native == std::endian::little);
     const int64_t w = layout_.info.width;
     const double nodata = layout_.info.nodata.value_or(0.0);
     const bool big = layout_.big_endian && sizeof(T) > 1, has = layout_.info.nodata.has_value();
     if (big)
-      has ? decode_ints<T, true, true>(src, w, nodata, values, valid)
-          : decode_ints<T, true, false>(src, w, nodata, values, valid);
+      has ? decode_ints<T, true, true, Out>(src, w, nodata, values, valid)
+          : decode_ints<T, true, false, Out>(src, w, nodata, values, valid);
     else
-      has ? decode_ints<T, false, true>(src, w, nodata, values, valid)
-          : decode_ints<T, false, false>(src, w, nodata, values, valid);
+      has ? decode_ints<T, false, true, Out>(src, w, nodata, values, valid)
+          : decode_ints<T, false, false, Out>(src, w, nodata, values, valid);
   }
 
   uint32_t load_u32(const uint8_t* p) const {

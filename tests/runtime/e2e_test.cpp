@@ -240,6 +240,43 @@ TEST_CASE("e2e: pyramid-build fails cleanly on a truncated input and leaves no o
     CHECK(e.path().filename().string().find("out.pyr") == std::string::npos);
 }
 
+TEST_CASE("e2e: values beyond the coder's range are an option error naming the file, not an internal one",
+          "[e2e]") {
+  iotest::TempDir dir;
+  // int32 millimetres with 2.8 km of relief (more than the 2^21 units a pyramid codes: found by the
+  // calibration sample), and one spike the sample misses (found by the coder).
+  const auto write = [&](const std::string& name, int64_t w, int64_t h, auto value) {
+    Heightmap map;
+    map.info.width = w;
+    map.info.height = h;
+    map.info.sample_type = SampleType::Int32;
+    map.values.resize(size_t(w * h));
+    for (int64_t y = 0; y < h; ++y)
+      for (int64_t x = 0; x < w; ++x) map.values[size_t(y * w + x)] = value(x, y);
+    const std::string path = dir.file(name);
+    write_raw(path, map);
+    return path;
+  };
+  const std::string wide = write("wide.raw", 300, 200, [](int64_t x, int64_t y) {
+    return std::round(1500000 + 1400000 * std::sin(double(x) / 30) * std::cos(double(y) / 20));
+  });
+  const std::string spike = write("spike.raw", 3000, 300,
+                                  [](int64_t x, int64_t y) { return x == 3 && y == 150 ? 3000000.0 : 0.0; });
+  for (const std::string& in : {wide, spike})
+    for (const char* mode : {"--lossless", "--step"}) {
+      INFO(in << " " << mode);
+      const std::string out = dir.file("out.pyr");
+      std::vector<std::string> args = {in, "-o", out, mode, "-q"};
+      if (std::string(mode) == "--step") args.insert(args.end() - 1, "2");
+      const auto r = iotest::run_tool(dir, {"pyramid-build", args});
+      CHECK(r.status == 1);
+      CHECK(r.err.find(in) != std::string::npos);
+      CHECK(r.err.find("2^2") != std::string::npos);
+      CHECK(r.err.find("internal error") == std::string::npos);
+      CHECK_FALSE(std::filesystem::exists(out));
+    }
+}
+
 TEST_CASE("e2e: clipmap-view --max-screen-error picks the clipmap size and the original confirms it",
           "[e2e]") {
   // pyramid-build --rms 1, then clipmap-view with a 1-pixel tolerance: it must choose a size 2^k - 1,

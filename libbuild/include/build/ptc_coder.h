@@ -7,6 +7,7 @@
 #include <memory>
 
 #include "codec/codec.h"
+#include "core/error.h"
 #include "pyramid/pyramid.h"
 
 namespace terrain {
@@ -50,6 +51,19 @@ struct PtcCoderOptions {
 };
 
 struct EncodeScratchPool;  // ptc_coder.cpp
+
+// What to do about level values the coder cannot hold (more than 2^20 units from the coarsest level's
+// centre, or residuals as large): the end of the errors that say so.
+// Thrown by PtcResidualCoder for level values beyond the coder's range (InvalidOption; the message
+// names the value, not the file: build_pyramid_file adds that).
+class ValueRangeError : public Error {
+ public:
+  using Error::Error;
+};
+
+inline constexpr const char* kValueSpanAdvice =
+    "float input is coded in units of --quantum (give a coarser one); integer input in its own units (store "
+    "it in coarser ones, centimetres instead of millimetres, or as float32 metres)";
 
 class PtcResidualCoder final : public ResidualCoder {
  public:
