@@ -57,14 +57,23 @@ class ProgressReader final : public BandReader {
   ProgressReader(BandReader& inner, const BuildProgress& progress) : inner_(inner), progress_(progress) {}
   const GridInfo& info() const override { return inner_.info(); }
   int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
-    const int64_t n = inner_.read_rows(rows, values, valid);
+    return advanced(inner_.read_rows(rows, values, valid));
+  }
+  bool reads_int32() const override { return inner_.reads_int32(); }
+  int64_t read_rows_int32(int64_t rows, int32_t* values, uint8_t* valid) override {
+    return advanced(inner_.read_rows_int32(rows, values, valid));
+  }
+  // The inner reader's own skip (a seek on raw and .hgt), not the base class's read and discard.
+  int64_t skip_rows(int64_t rows) override { return advanced(inner_.skip_rows(rows)); }
+
+ private:
+  int64_t advanced(int64_t n) {
     rows_read_ += n;
     if (progress_)
       progress_("reading input", double(rows_read_) / double(std::max<int64_t>(1, info().height)));
     return n;
   }
 
- private:
   BandReader& inner_;
   const BuildProgress& progress_;
 };
