@@ -108,12 +108,16 @@ template <class Visit> inline void for_hp_blocks(int pw, int ph, Position pos, V
     }
 }
 
-void load_padded(const int32_t* src, ptrdiff_t stride, int w, int h, int pw, int ph, int32_t* tile) {
+// The w x h tile at src into a pw x ph buffer (its last column and row repeated), each sample times
+// 2^bits (the fraction bits; the encoder picks them so that the scaled samples stay within +-2^22,
+// quantizer.h), in one pass (the copy and the scaling were two).
+void load_padded(const int32_t* __restrict src, ptrdiff_t stride, int w, int h, int pw, int ph, int bits,
+                 int32_t* __restrict tile) {
   for (int y = 0; y < ph; ++y) {
     const int32_t* row = src + ptrdiff_t(std::min(y, h - 1)) * stride;
     int32_t* dst = tile + size_t(y) * pw;
-    std::memcpy(dst, row, size_t(w) * sizeof(int32_t));
-    std::fill(dst + w, dst + pw, row[w - 1]);
+    for (int x = 0; x < w; ++x) dst[x] = int32_t(uint32_t(row[x]) << bits);
+    std::fill(dst + w, dst + pw, dst[w - 1]);
   }
 }
 
@@ -395,13 +399,6 @@ void dequantize_lifting(int32_t* tile, int w, int h, const BandSteps& steps) {
   }
 }
 
-// The encoder picks fraction_bits so that the scaled samples stay within +-2^22 (quantizer.h).
-
-void scale_up(int32_t* v, size_t n, int bits) {
-  if (bits == 0) return;
-  for (size_t i = 0; i < n; ++i) v[i] = int32_t(uint32_t(v[i]) << bits);
-}
-
 // n inverse-transformed values back to samples, rounded to the nearest (halves up): the decoder's
 // output and the encoder's reconstruction both come through here, so they cannot differ. The add
 // wraps: garbage from a corrupt stream must not be undefined behaviour.
@@ -466,14 +463,11 @@ size_t encode_transform(const int32_t* src, ptrdiff_t stride, int w, int h, cons
   // The residual transform works on the w x h tile itself (no padding to macroblocks).
   const int tile_stride = lifting ? w : pw;
   if (lifting) {
-    for (int y = 0; y < h; ++y)
-      std::memcpy(tile + size_t(y) * w, src + y * stride, size_t(w) * sizeof(int32_t));
-    scale_up(tile, size_t(w) * h, params.fraction_bits);
+    load_padded(src, stride, w, h, w, h, params.fraction_bits, tile);
     forward_lifting(tile, w, h, work.lifting_scratch.data());
     code_lifting_bands(bits, tile, w, h, params.lifting_steps, work.sequence.data());
   } else {
-    load_padded(src, stride, w, h, pw, ph, tile);
-    scale_up(tile, size_t(pw) * ph, params.fraction_bits);
+    load_padded(src, stride, w, h, pw, ph, params.fraction_bits, tile);
     forward_lapped(tile, pw, ph, params.fraction_bits > 0);
     code_bands(bits, tile, pw, ph, params.steps, work.sequence.data());
   }
@@ -521,7 +515,7 @@ size_t encode_spatial(const int32_t* src, ptrdiff_t stride, int w, int h, const 
   out[0] = uint8_t(TileMode::SpatialQuantized);
   BitWriter bits(out + 1, capacity - 1);
   int32_t* tile = work.coefficients.data();
-  load_padded(quantized, w, w, h, pw, ph, tile);
+  load_padded(quantized, w, w, h, pw, ph, 0, tile);
   forward_lapped(tile, pw, ph, false);
   code_bands(bits, tile, pw, ph, unit_band_steps(), work.sequence.data());
   for (size_t i = 0; i < size_t(w) * h; ++i) quantized[i] = saturate(int64_t(quantized[i]) * bin);
