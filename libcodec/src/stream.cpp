@@ -131,6 +131,24 @@ uint32_t phase_bin_q8(bool bound_max_error, uint32_t max_error, uint32_t step_q8
   return bound_max_error ? 256 * (2 * max_error + 1) : step_q8;
 }
 
+// Rate-distortion test of a coded tile of small samples (rms and step streams): left empty, it costs
+// no payload and about nothing in the index, and adds the squared error its coding removed. Worth
+// coding when that error, at lambda bits per squared sample unit (the slope of an entropy-coded
+// uniform quantiser at the step, as for the transform choice), outweighs its payload and index
+// record. Measured (terrain-bench --quick, pyramid only, 13 shared DEMs, bits at equal finest rms):
+// geometric mean -1.1 % at rms 1 m and -1.2 % at 2 m, Swabia -8 % at 1 m, Gothenburg -5 % at 2 m, no
+// DEM above +0.1 %; three synthetic terrains -0.7 % / -1.3 %.
+bool not_worth_coding(const int32_t* src, ptrdiff_t stride, int w, int h, const int32_t* recon, double lambda,
+                      size_t payload_bytes) {
+  double removed = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double v = src[y * stride + x], e = v - recon[size_t(y) * w + x];
+      removed += v * v - e * e;
+    }
+  return lambda * removed < 8.0 * double(payload_bytes + 1);
+}
+
 bool all_zero(const int32_t* v, size_t n) {
   return std::all_of(v, v + n, [](int32_t x) { return x == 0; });
 }
@@ -414,7 +432,9 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
                 chunk.status = Status::BufferTooSmall;
                 return;
               }
-              empty = probing && all_zero(work.reconstruction.data(), size_t(tw) * th);
+              empty = probing && (all_zero(work.reconstruction.data(), size_t(tw) * th) ||
+                                  not_worth_coding(tile_src, src_stride, tw, th, work.reconstruction.data(),
+                                                   params.lambda, size));
             }
             sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
             if (!empty)

@@ -381,11 +381,16 @@ TEST_CASE("decode_region_add adds (saturating) what decode_region writes, and a 
       CHECK(same);
     }
   }
-  // A damaged payload byte (the tile row's CRC fails): a one-tile call leaves dst as it was.
+  // A damaged payload byte (the tile row's CRC fails): a one-tile call leaves dst as it was. The last
+  // tile (13 x 1) gets samples far beyond the step, so that it is coded (small ones may be left empty
+  // by the encoder's rate-distortion test).
+  Image marked = img;
+  for (int64_t x = (img.width - 1) / 64 * 64; x < img.width; ++x)
+    marked.samples[size_t((img.height - 1) * img.width + x)] = 1000 + int32_t(x);
   codec::EncodeOptions options;
   options.tile_size = 64;
   options.step = 6.0;
-  auto stream = encode_image(img, options);
+  auto stream = encode_image(marked, options);
   codec::Decoder intact;
   REQUIRE(intact.open(stream.data(), stream.size()) == codec::Status::Ok);
   const codec::TileEntry& last = intact.index().back();
@@ -828,4 +833,38 @@ TEST_CASE("RLGR escapes: the largest magnitudes round trip in both modes, larger
   CHECK_FALSE(forged(true, uint32_t(kRlgrMaxMagnitude) - 1, &v));
   CHECK(forged(true, uint32_t(kRlgrMaxMagnitude) - 2, &v));
   CHECK(v == big);
+}
+
+TEST_CASE("rms streams leave a tile empty when coding it removes less error than its bits are worth",
+          "[codec]") {
+  // 128 x 64: a left tile of noise within +-3 (at step 8 the coder turns a few coefficients into 9
+  // bytes that remove almost none of its error; before this rule that tile was coded) and a right
+  // tile of a ramp far beyond the step (always coded).
+  Image img;
+  img.width = 128;
+  img.height = 64;
+  img.samples.assign(size_t(img.width * img.height), 0);
+  for (int64_t y = 0; y < 64; ++y)
+    for (int64_t x = 0; x < 128; ++x)
+      img.samples[size_t(y * 128 + x)] =
+          x < 64 ? int32_t((uint32_t(x * 2654435761u ^ y * 40503u ^ 1067u) >> 7) % 7u) - 3
+                 : int32_t(40 * (x - 64) + 20 * y);
+  codec::EncodeOptions options;
+  options.tile_size = 64;
+  options.step = 8.0;
+  std::vector<int32_t> recon;
+  const auto stream = encode_image(img, options, &recon);
+  codec::Decoder decoder;
+  REQUIRE(decoder.open(stream.data(), stream.size()) == codec::Status::Ok);
+  // The index: a run of one empty tile, then the coded one.
+  REQUIRE(decoder.index().size() == 2);
+  CHECK(decoder.index()[0].size == 0);
+  CHECK(decoder.index()[1].size > 0);
+  // What the encoder hands back for the closed loop is what a decoder makes.
+  CHECK(first_difference(decode_image(stream, img), recon) == -1);
+  for (int64_t y = 0; y < 64; ++y)
+    for (int64_t x = 0; x < 64; ++x) REQUIRE(recon[size_t(y * 128 + x)] == 0);
+  // Lossless streams never drop a tile that carries information.
+  options.step = 1;
+  CHECK(first_difference(decode_image(encode_image(img, options), img), img.samples) == -1);
 }
