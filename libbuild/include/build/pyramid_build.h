@@ -94,7 +94,9 @@ using BuildProgress = std::function<void(const std::string& phase, double fracti
 
 // Builds `output` from `input`. Throws Error for input problems (naming the file), Error for
 // output problems, std::invalid_argument for options the input cannot honour (e.g. a step below the
-// input's quantum, lossless on float input without a quantum). Nothing is left at `output` on failure
+// input's quantum, lossless on float input without a quantum), Error(InvalidOption) naming the file
+// for values the coder cannot hold in the input's units (a span over 2^21 units, or a residual over
+// 2^20: docs/pyramid.md "Value range"). Nothing is left at `output` on failure
 // (a striped build keeps its complete parts in OUTPUT.build/ for a resumed run). With a group: every
 // process calls it with the same arguments (collective); only rank 0 writes `output`.
 BuildFileResult build_pyramid_file(const std::string& input, const ReadOptions& read_options,
