@@ -777,18 +777,24 @@ class StreamingBuilder {
       b.voids = 0;
       b.carry = y >= fit_rows_ && y + b.rows <= read_a_;
       if (b.carry) {
-        carry_values.resize(size_t(b.rows * W));
+        if (!int_rows) carry_values.resize(size_t(b.rows * W));
         for (int64_t got = 0; got < b.rows;) {
           const int64_t n =
-              input.read_rows(b.rows - got, carry_values.data() + got * W, b.valid.data() + got * W);
+              int_rows
+                  ? input.read_rows_int32(b.rows - got, b.ints.data() + got * W, b.valid.data() + got * W)
+                  : input.read_rows(b.rows - got, carry_values.data() + got * W, b.valid.data() + got * W);
           if (n <= 0 || n > b.rows - got)
             throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) +
                                                   " of " + std::to_string(H) + " rows");
           got += n;
         }
         if (std::find(b.valid.begin(), b.valid.begin() + b.rows * W, uint8_t(0)) !=
-            b.valid.begin() + b.rows * W)
-          converter.convert(carry_values.data(), b.valid.data(), y, b.rows, b.ints.data());
+            b.valid.begin() + b.rows * W) {
+          if (int_rows)
+            converter.fill(b.valid.data(), b.rows, b.ints.data());  // read as converted, voids 0
+          else
+            converter.convert(carry_values.data(), b.valid.data(), y, b.rows, b.ints.data());
+        }
         return;
       }
       for (int64_t got = 0; got < b.rows;) {
