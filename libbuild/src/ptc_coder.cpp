@@ -160,21 +160,18 @@ std::vector<uint8_t> PtcResidualCoder::encode_spliceable(const int32_t* residual
     s = codec::encode(residual, w, w, h, copts, es.buffer.get(), es.capacity, &written, es.scratch,
                       reconstructed, w);
   }
-  if (s == codec::Status::ValueOutOfRange) {
-    int64_t largest = 0;
-    for (int64_t i = 0; i < w * h; ++i) largest = std::max<int64_t>(largest, std::abs(int64_t(residual[i])));
-    throw ValueRangeError(ErrorCode::InvalidOption,
-                          "level values beyond the coder's range: a " +
-                              std::string(coarsest ? "coarsest-level value" : "residual") + " of " +
-                              std::to_string(largest) + " units from its centre, where at most " +
-                              std::to_string(codec::kMaxAbsSample) +
-                              " (2^20) fit (the input's values span too many units, "
-                              "or vary by that much between neighbours); " +
-                              kValueSpanAdvice);
-  }
   if (s != codec::Status::Ok) {
     int64_t largest = 0;
     for (int64_t i = 0; i < w * h; ++i) largest = std::max<int64_t>(largest, std::abs(int64_t(residual[i])));
+    if (s == codec::Status::ValueOutOfRange)
+      throw ValueRangeError(ErrorCode::InvalidOption,
+                            "level values beyond the coder's range: a " +
+                                std::string(coarsest ? "coarsest-level value" : "residual") + " of " +
+                                std::to_string(largest) + " units from its centre, where at most " +
+                                std::to_string(codec::kMaxAbsSample) +
+                                " (2^20) fit (the input's values span too many units, "
+                                "or vary by that much between neighbours); " +
+                                kValueSpanAdvice);
     throw std::runtime_error(std::string("residual coder: libcodec encode failed (") + std::to_string(w) +
                              "x" + std::to_string(h) + " band, largest |residual| " +
                              std::to_string(largest) + "): " + codec::status_name(s));

@@ -232,10 +232,9 @@ std::pair<double, double> value_span(const std::vector<Heightmap>& windows, doub
   return {lo, hi};
 }
 
-// Integer level-unit offset that centres the window's valid values when they reach beyond half of
-// libcodec's range; 0 otherwise.
-double centring_offset(const std::vector<Heightmap>& windows, double value_scale) {
-  const auto [lo, hi] = value_span(windows, value_scale);
+// Integer level-unit offset that centres the sample's valid values [lo, hi] (value_span) when they
+// reach beyond half of libcodec's range; 0 otherwise.
+double centring_offset(double lo, double hi) {
   if (!(hi >= lo) || std::max(std::abs(lo), std::abs(hi)) <= double(codec::kMaxAbsSample / 2)) return 0;
   return std::nearbyint(0.5 * (lo + hi));
 }
@@ -244,9 +243,8 @@ double centring_offset(const std::vector<Heightmap>& windows, double value_scale
 // fit libcodec. Refused here when the calibration sample shows it (a clear error naming the file
 // rather than the coder's failure in the middle of the build; PtcResidualCoder reports what the
 // sample missed the same way).
-void check_value_span(const std::string& input, const std::vector<Heightmap>& windows,
-                      const LevelUnits& units, double offset) {
-  const auto [lo, hi] = value_span(windows, units.value_scale);
+void check_value_span(const std::string& input, double lo, double hi, const LevelUnits& units,
+                      double offset) {
   const double limit = double(codec::kMaxAbsSample);
   const auto metres = [&](double v) {
     char text[32];
@@ -377,8 +375,9 @@ BuildFileResult build_file(const std::string& input, const ReadOptions& read_opt
   std::vector<Heightmap> window;
   if (needs_calibration_sample(g, bo.value_scale, o))
     window = read_calibration_windows(input, read_options, o);
-  bo.value_offset = centring_offset(window, units.value_scale);
-  check_value_span(input, window, units, bo.value_offset);
+  const auto [lo, hi] = value_span(window, units.value_scale);
+  bo.value_offset = centring_offset(lo, hi);
+  check_value_span(input, lo, hi, units, bo.value_offset);
   std::vector<std::optional<DownsampleFilter>> window_filters;  // each calibration window's D
   const LevelUnits stored =
       LevelUnits{units.metres_per_unit, units.value_scale, units.offset_metres + bo.value_offset * mpu};

@@ -771,6 +771,16 @@ class StreamingBuilder {
     // Integers in the level's own units straight from the reader, where it decodes them itself: what
     // the conversion would give, without the detour through doubles.
     const bool int_rows = input.reads_int32() && converter.identity();
+    // Up to `want` rows as ints (int_rows) or values, and validity; Truncated if the input ends
+    // before input row `at`.
+    const auto read_some = [&](int64_t at, int64_t want, double* values, int32_t* ints, uint8_t* valid) {
+      const int64_t n =
+          int_rows ? input.read_rows_int32(want, ints, valid) : input.read_rows(want, values, valid);
+      if (n <= 0 || n > want)
+        throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(at) + " of " +
+                                              std::to_string(H) + " rows");
+      return n;
+    };
     auto produce = [&](InputBand& b, int64_t y) {
       b.y = y;
       b.rows = std::min(B, H - y);
@@ -778,16 +788,9 @@ class StreamingBuilder {
       b.carry = y >= fit_rows_ && y + b.rows <= read_a_;
       if (b.carry) {
         if (!int_rows) carry_values.resize(size_t(b.rows * W));
-        for (int64_t got = 0; got < b.rows;) {
-          const int64_t n =
-              int_rows
-                  ? input.read_rows_int32(b.rows - got, b.ints.data() + got * W, b.valid.data() + got * W)
-                  : input.read_rows(b.rows - got, carry_values.data() + got * W, b.valid.data() + got * W);
-          if (n <= 0 || n > b.rows - got)
-            throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) +
-                                                  " of " + std::to_string(H) + " rows");
-          got += n;
-        }
+        for (int64_t got = 0; got < b.rows;)
+          got += read_some(y + got, b.rows - got, int_rows ? nullptr : carry_values.data() + got * W,
+                           b.ints.data() + got * W, b.valid.data() + got * W);
         if (std::find(b.valid.begin(), b.valid.begin() + b.rows * W, uint8_t(0)) !=
             b.valid.begin() + b.rows * W) {
           if (int_rows)
@@ -801,11 +804,7 @@ class StreamingBuilder {
         const int64_t want = std::min(kReadRows, b.rows - got);
         uint8_t* const valid = b.valid.data() + got * W;
         int32_t* const ints = b.ints.data() + got * W;
-        const int64_t n = int_rows ? input.read_rows_int32(want, ints, valid)
-                                   : input.read_rows(want, b.values.data(), valid);
-        if (n <= 0 || n > want)
-          throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y + got) + " of " +
-                                                std::to_string(H) + " rows");
+        const int64_t n = read_some(y + got, want, b.values.data(), ints, valid);
         b.voids += int_rows ? std::count(valid, valid + n * W, uint8_t(0))
                             : converter.convert_rows(b.values.data(), valid, y + got, n, ints);
         got += n;

@@ -73,20 +73,7 @@ class RawStreamReader final : public BandReader {
     if (!reads_int32()) return BandReader::read_rows_int32(rows, values, valid);
     return read_and_decode(rows, [&](const uint8_t* src, int64_t, int64_t r) {
       const int64_t w = layout_.info.width;
-      switch (layout_.stored) {
-        case StoredType::UInt8:
-          decode_ints_row<uint8_t>(src, values + r * w, valid + r * w);
-          break;
-        case StoredType::Int16:
-          decode_ints_row<int16_t>(src, values + r * w, valid + r * w);
-          break;
-        case StoredType::UInt16:
-          decode_ints_row<uint16_t>(src, values + r * w, valid + r * w);
-          break;
-        default:
-          decode_ints_row<int32_t>(src, values + r * w, valid + r * w);
-          break;
-      }
+      decode_int_row(src, values + r * w, valid + r * w);
     });
   }
 
@@ -247,7 +234,8 @@ class RawStreamReader final : public BandReader {
                               : (uint32_t(p[3]) << 24 | uint32_t(p[2]) << 16 | uint32_t(p[1]) << 8 | p[0]);
   }
 
-  void decode_row(const uint8_t* src, int64_t row, double* values, uint8_t* valid) {
+  // A row of an integer stored type (not Float32) to Out.
+  template <typename Out> void decode_int_row(const uint8_t* src, Out* values, uint8_t* valid) const {
     switch (layout_.stored) {
       case StoredType::UInt8:
         decode_ints_row<uint8_t>(src, values, valid);
@@ -259,12 +247,17 @@ class RawStreamReader final : public BandReader {
         decode_ints_row<uint16_t>(src, values, valid);
         break;
       case StoredType::Int32:
+      case StoredType::Float32:  // never here: callers take it apart
         decode_ints_row<int32_t>(src, values, valid);
         break;
-      case StoredType::Float32:
-        decode_float_row(src, row, values, valid);
-        break;
     }
+  }
+
+  void decode_row(const uint8_t* src, int64_t row, double* values, uint8_t* valid) {
+    if (layout_.stored == StoredType::Float32)
+      decode_float_row(src, row, values, valid);
+    else
+      decode_int_row(src, values, valid);
   }
 
   void decode_float_row(const uint8_t* src, int64_t row, double* values, uint8_t* valid) {

@@ -52,8 +52,6 @@ struct PtcCoderOptions {
 
 struct EncodeScratchPool;  // ptc_coder.cpp
 
-// What to do about level values the coder cannot hold (more than 2^20 units from the coarsest level's
-// centre, or residuals as large): the end of the errors that say so.
 // Thrown by PtcResidualCoder for level values beyond the coder's range (InvalidOption; the message
 // names the value, not the file: build_pyramid_file adds that).
 class ValueRangeError : public Error {
@@ -61,6 +59,8 @@ class ValueRangeError : public Error {
   using Error::Error;
 };
 
+// What to do about level values the coder cannot hold (more than 2^20 units from the coarsest level's
+// centre, or residuals as large): the end of the errors that say so.
 inline constexpr const char* kValueSpanAdvice =
     "float input is coded in units of --quantum (give a coarser one); integer input in its own units (store "
     "it in coarser ones, centimetres instead of millimetres, or as float32 metres)";
