@@ -143,7 +143,7 @@ TEST_CASE("phase tiles: region decodes equal the full decode", "[codec]") {
   codec_test::check_regions(s, img, recon);
 }
 
-TEST_CASE("format versions: 7 exactly with the phase flag, only in max-error streams; 6 unsupported",
+TEST_CASE("format versions: 7 exactly with the phase flag, only in max-error streams, 6 unsupported",
           "[codec]") {
   // One tile row, so codec_test::reseal works. Header: magic, u16 version, varints width (64), height (16),
   // tile / 16 (2), flags.

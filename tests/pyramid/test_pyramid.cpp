@@ -102,7 +102,7 @@ TEST_CASE("uniform quantiser: error within step/2, exact at step 1, rejects bad 
   CHECK_THROWS_AS(UniformQuantizerCoder(0), std::invalid_argument);
 }
 
-TEST_CASE("closed loop: decoder output equals the builder's reconstruction; step 1 is lossless") {
+TEST_CASE("closed loop: decoder output equals the builder's reconstruction, step 1 is lossless") {
   Heightmap map = synthetic(203, 157, 11);
   for (int32_t step : {1, 4}) {
     UniformQuantizerCoder coder(step, 16);
@@ -119,7 +119,7 @@ TEST_CASE("closed loop: decoder output equals the builder's reconstruction; step
   }
 }
 
-TEST_CASE("closed loop: int32 extremes saturate; the figures match the decoded levels") {
+TEST_CASE("closed loop: int32 extremes saturate, the figures match the decoded levels") {
   // Neighbours at both ends of int32: U overshoots, residuals and reconstructions saturate, so the
   // builder's overflow checks send these rows through its saturating loops.
   // A plateau just below the top with spikes to it: residuals fit, but rounded up by a step of 300

@@ -295,7 +295,7 @@ TEST_CASE("render: transitions keep a slow flight free of popping", "[render]") 
        << kStep << "), " << mesh_name(mesh) << ": without transitions " << worst[0] << ", with " << worst[1]);
 }
 
-TEST_CASE("render: hypsometric shading tints by absolute height, with sky; flat keeps its background",
+TEST_CASE("render: hypsometric shading tints by absolute height, with sky, flat keeps its background",
           "[render]") {
   GlLeakCheckPause pause;
   // A level plane at height h, seen steeply from 300 m above: every pixel is terrain of one tint.
