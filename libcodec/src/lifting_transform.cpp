@@ -8,6 +8,8 @@
 #include <cstring>
 #include <vector>
 
+#include "core/clones.h"
+
 namespace codec::detail {
 namespace {
 
@@ -35,7 +37,7 @@ inline int odd_index(int n, int i) {
 }
 
 // Both passes are cloned for AVX-512 and AVX2 (picked at load time, as tile_coder's row outputs).
-#define LIFTING_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx2", "default")]]
+#define LIFTING_CLONES TERRAIN_TARGET_CLONES("arch=x86-64-v4", "avx2", "default")
 
 // Columns, a whole row of values at a time (the inner loops vectorise). Forward: in place, copy holds
 // w * h values.

@@ -16,6 +16,7 @@
 #include "codec/internal/lifting_transform.h"
 #include "codec/internal/phase_coder.h"
 #include "codec/internal/rlgr.h"
+#include "core/clones.h"
 
 namespace codec::detail {
 namespace {
@@ -263,7 +264,7 @@ inline uint64_t dequantized_magnitude(uint32_t magnitude, uint32_t step_q8) {
 #if defined(__clang__)
 __attribute__((noinline))
 #elif defined(__GNUC__)
-__attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
+__attribute__((noinline, flatten)) TERRAIN_TARGET_CLONES("arch=x86-64-v3", "default")
 #endif
 bool decode_band_group(BitReader& in, size_t count, RlgrState state, const uint32_t* slots,
                        const BandSteps& steps, int32_t* tile, bool& any_nonzero) {
@@ -360,7 +361,7 @@ void code_lifting_bands(BitWriter& out, int32_t* tile, int w, int h, const BandS
 #if defined(__clang__)
 __attribute__((noinline))
 #elif defined(__GNUC__)
-__attribute__((noinline, target_clones("arch=x86-64-v3", "default"), flatten))
+__attribute__((noinline, flatten)) TERRAIN_TARGET_CLONES("arch=x86-64-v3", "default")
 #endif
 bool decode_lifting_band(BitReader& in, size_t count, RlgrState state, int32_t* origin, int band_w, int w,
                          uint32_t step_q8) {
@@ -413,7 +414,7 @@ void scale_down_row(const int32_t* from, int32_t* to, int n, int bits) {
 
 // The decoder's row outputs below are cloned for AVX-512 and AVX2 (picked at load time): the
 // baseline's SSE2 needs about twice the instructions for the saturation and has no 64-bit multiply.
-#define CODEC_ROW_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx2", "default")]]
+#define CODEC_ROW_CLONES TERRAIN_TARGET_CLONES("arch=x86-64-v4", "avx2", "default")
 
 // dst[x] += from[x], saturating (the same as saturate(int64 sum)).
 CODEC_ROW_CLONES void add_row(const int32_t* from, int32_t* dst, int n) {

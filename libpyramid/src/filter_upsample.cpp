@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/clones.h"
 #include "pyramid/pyramid.h"
 
 namespace terrain {
@@ -223,13 +224,12 @@ bool within(const int32_t* data, int64_t stride, int64_t width, int64_t height, 
 // compiles the templates into each clone; clang does not combine the two): the baseline's SSE2 has
 // no 32-bit min/max and 4 lanes.
 #if defined(__clang__)
-__attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+TERRAIN_TARGET_CLONES("arch=x86-64-v4", "avx2", "default")
 #else
-__attribute__((target_clones("arch=x86-64-v4", "avx2", "default"), flatten))
+__attribute__((flatten)) TERRAIN_TARGET_CLONES("arch=x86-64-v4", "avx2", "default")
 #endif
-bool upsample_int32(
-    const CoarseWindow& coarse, const Rect& need, int32_t limit, const Rect& fine, int32_t* out,
-    int64_t out_stride, int32_t* scratch) {
+bool upsample_int32(const CoarseWindow& coarse, const Rect& need, int32_t limit, const Rect& fine,
+                    int32_t* out, int64_t out_stride, int32_t* scratch) {
   const int32_t* need_data =
       coarse.data + (need.y0 - coarse.rect.y0) * coarse.stride + (need.x0 - coarse.rect.x0);
   if (!within(need_data, coarse.stride, need.width, need.height, limit)) return false;

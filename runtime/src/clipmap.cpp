@@ -8,6 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/clones.h"
 #include "pyramid/downsample.h"
 #include "runtime/internal/toroidal_rows.h"
 
@@ -63,7 +64,7 @@ constexpr float kU9 = 9.0f / 16.0f, kU1 = 1.0f / 16.0f;
 
 // A sample row z[0 .. pairs + 3) on the half grid: row[2k] between z[k + 1] and z[k + 2],
 // row[2k + 1] = z[k + 2].
-[[gnu::target_clones("avx2", "default")]] void upsample_row(const float* z, int64_t pairs, float* row) {
+TERRAIN_TARGET_CLONES("avx2", "default") void upsample_row(const float* z, int64_t pairs, float* row) {
   for (int64_t k = 0; k < pairs; ++k) {
     row[2 * k] = kU9 * (z[k + 1] + z[k + 2]) - kU1 * (z[k] + z[k + 3]);
     row[2 * k + 1] = z[k + 2];
@@ -71,16 +72,16 @@ constexpr float kU9 = 9.0f / 16.0f, kU1 = 1.0f / 16.0f;
 }
 
 // The half row between sample rows b and c (a and d the outer taps).
-[[gnu::target_clones("avx2", "default")]] void upsample_between(const float* a, const float* b,
-                                                                const float* c, const float* d, int64_t count,
-                                                                float* out) {
+TERRAIN_TARGET_CLONES("avx2", "default")
+void upsample_between(const float* a, const float* b, const float* c, const float* d, int64_t count,
+                      float* out) {
   for (int64_t i = 0; i < count; ++i) out[i] = kU9 * (b[i] + c[i]) - kU1 * (a[i] + d[i]);
 }
 
 // Texels (dz/dx, dz/dy) at half positions c[0 .. count): differences one sample (two half steps)
 // apart along the row and across the rows above and below.
-[[gnu::target_clones("avx2", "default")]] void slopes(const float* above, const float* c, const float* below,
-                                                      int64_t count, float inv_g, float* dst) {
+TERRAIN_TARGET_CLONES("avx2", "default")
+void slopes(const float* above, const float* c, const float* below, int64_t count, float inv_g, float* dst) {
   for (int64_t i = 0; i < count; ++i) {
     dst[2 * i] = (c[i + 1] - c[i - 1]) * inv_g;
     dst[2 * i + 1] = (below[i] - above[i]) * inv_g;
@@ -88,8 +89,8 @@ constexpr float kU9 = 9.0f / 16.0f, kU1 = 1.0f / 16.0f;
 }
 
 // Per-column range of z and zc over one more row (min/max: exact, the same in both clones).
-[[gnu::target_clones("avx2", "default")]] void accumulate_range(const float* z, const float* zc,
-                                                                int64_t count, float* lo, float* hi) {
+TERRAIN_TARGET_CLONES("avx2", "default")
+void accumulate_range(const float* z, const float* zc, int64_t count, float* lo, float* hi) {
   for (int64_t i = 0; i < count; ++i) {
     lo[i] = std::min(lo[i], std::min(z[i], zc[i]));
     hi[i] = std::max(hi[i], std::max(z[i], zc[i]));

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "core/clones.h"
 #include "pyramid/level_units.h"
 #include "pyramid/reference.h"
 #include "readers/heightmap.h"
@@ -32,8 +33,8 @@ std::vector<GridSize> sizes_from_finest(GridSize finest, int levels) {
 
 // Level units to metres, in double as the decoder's decode_metres does. Compiled for AVX2 and for
 // the baseline (picked at load time); no FMA, so both round identically.
-[[gnu::target_clones("avx2", "default")]] void units_to_metres(const int32_t* units, int64_t count,
-                                                               double scale, double offset, float* out) {
+TERRAIN_TARGET_CLONES("avx2", "default")
+void units_to_metres(const int32_t* units, int64_t count, double scale, double offset, float* out) {
   for (int64_t i = 0; i < count; ++i) out[i] = float(units[i] * scale + offset);
 }
 

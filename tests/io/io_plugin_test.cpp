@@ -84,7 +84,7 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
             "         terrain::runtime::triangle_size_px(640, 480, 60, 255) > 0 ? 0 : 1;\n}\n";
   }
 #ifdef TERRAIN_SANITIZED
-  const std::string flags = " -DCMAKE_CXX_FLAGS=-fsanitize=address,undefined";
+  const std::string flags = std::string(" -DCMAKE_CXX_FLAGS=") + TERRAIN_SANITIZER_FLAGS;
 #else
   const std::string flags;
 #endif
@@ -101,7 +101,7 @@ TEST_CASE("an installed tree, moved elsewhere, loads its own image plugin and se
 
   // The same program built with plain c++ and the installed pkg-config files.
 #ifdef TERRAIN_SANITIZED
-  const std::string cxx_flags = " -fsanitize=address,undefined";
+  const std::string cxx_flags = std::string(" ") + TERRAIN_SANITIZER_FLAGS;
 #else
   const std::string cxx_flags;
 #endif
