@@ -53,15 +53,18 @@ struct Level {
   std::vector<int64_t> r;  // the residual
 };
 
-// Bits of one level's phases 1-3 for the current order (variant 0) and the order 1, 3, 2 with
-// prediction weight w.
+// The new order's prediction weights tried.
+constexpr double kWeights[] = {0.5, 0.75, 1.0};
+constexpr int kWeightCount = 3;
+
+// Bits of one level's phases 1-3 for the current order and the order 1, 3, 2 with each of kWeights.
 struct LevelBits {
-  double current = 0, swapped = 0;
+  double current = 0, swapped[kWeightCount] = {};
   double n = 0;
 };
 
-LevelBits measure(const Level& L, int tile, double w) {
-  Counts cur[3], swp[3];
+LevelBits measure(const Level& L, int tile) {
+  Counts cur[3], swp[kWeightCount][3];
   const auto code = [&](int64_t tx0, int64_t ty0) {
     const int64_t tx1 = std::min(L.w, tx0 + tile), ty1 = std::min(L.h, ty0 + tile);
     const auto in = [&](int64_t x, int64_t y) { return x >= tx0 && x < tx1 && y >= ty0 && y < ty1; };
@@ -83,13 +86,15 @@ LevelBits measure(const Level& L, int tile, double w) {
         if (phase == 1) {  // the same in both orders: phase 0 beside it (0)
           const int c = context_class(up2(x, y));
           cur[0].add(c, v);
-          swp[0].add(c, v);
+          for (Counts* s : swp) s[0].add(c, v);
         } else if (phase == 2) {
           // Today: second, from phases 0 and 1; new: last, also from the phase-3 samples beside it.
           const uint64_t a =
               up2(x, y) + m(x - 1, y - 1) + m(x + 1, y - 1) + m(x - 1, y + 1) + m(x + 1, y + 1);
           cur[1].add(context_class(a), v);
-          swp[2].add(context_class(a + m(x - 1, y) + m(x + 1, y)), v - mean({{x - 1, y}, {x + 1, y}}, w));
+          for (int k = 0; k < kWeightCount; ++k)
+            swp[k][2].add(context_class(a + m(x - 1, y) + m(x + 1, y)),
+                          v - mean({{x - 1, y}, {x + 1, y}}, kWeights[k]));
         } else {
           // Today: last, the mean of its four neighbours (floor((2 S + n) / (2 n))); new: second, from
           // phase 1 above and below.
@@ -100,14 +105,18 @@ LevelBits measure(const Level& L, int tile, double w) {
             if (in(xx, yy)) s += r(xx, yy), ++n;
           const int64_t p = n ? int64_t(std::floor(double(2 * s + n) / double(2 * n))) : 0;
           cur[2].add(context_class(a + m(x - 1, y) + m(x + 1, y)), v - p);
-          swp[1].add(context_class(a), v - mean({{x, y - 1}, {x, y + 1}}, w));
+          for (int k = 0; k < kWeightCount; ++k)
+            swp[k][1].add(context_class(a), v - mean({{x, y - 1}, {x, y + 1}}, kWeights[k]));
         }
       }
   };
   for (int64_t ty = 0; ty < L.h; ty += tile)
     for (int64_t tx = 0; tx < L.w; tx += tile) code(tx, ty);
   LevelBits b;
-  for (int k = 0; k < 3; ++k) b.current += cur[k].bits(), b.swapped += swp[k].bits();
+  for (int p = 0; p < 3; ++p) {
+    b.current += cur[p].bits();
+    for (int k = 0; k < kWeightCount; ++k) b.swapped[k] += swp[k][p].bits();
+  }
   b.n = double(L.w) * double(L.h);
   return b;
 }
@@ -138,13 +147,17 @@ int main(int argc, char** argv) {
     fine = std::move(c);
     size = coarse;
   }
-  for (double w : {0.5, 0.75, 1.0}) {
-    double cur = 0, swp = 0, n = 0;
-    for (const Level& L : levels) {
-      const LevelBits b = measure(L, tile, w);
-      cur += b.current, swp += b.swapped, n += b.n;
+  std::vector<LevelBits> bits;
+  for (const Level& L : levels) bits.push_back(measure(L, tile));
+  for (int k = 0; k < kWeightCount; ++k) {
+    const double w = kWeights[k];
+    double cur = 0, swp = 0;
+    for (size_t l = 0; l < levels.size(); ++l) {
+      const LevelBits& b = bits[l];
+      cur += b.current, swp += b.swapped[k];
       std::printf("w %.2f level %lldx%lld: bits/sample today %.4f, order 1-3-2 %.4f (%.4f)\n", w,
-                  (long long)L.w, (long long)L.h, b.current / b.n, b.swapped / b.n, b.swapped / b.current);
+                  (long long)levels[l].w, (long long)levels[l].h, b.current / b.n, b.swapped[k] / b.n,
+                  b.swapped[k] / b.current);
     }
     std::printf("w %.2f all residual levels: today %.0f bytes, order 1-3-2 %.0f bytes (%.4f)\n", w, cur / 8,
                 swp / 8, swp / cur);
