@@ -207,13 +207,13 @@ void DownsampleEngine::compute(int64_t j0, int64_t j1, const Emit& emit) {
   out_.resize(size_t((j1 - j0) * cw));
   // Threads only pay for themselves on wide batches.
   const int workers = ((j1 - j0) * fine_.width >= (int64_t(1) << 16)) ? threads_ : 1;
-  parallel_chunks(workers, j1 - j0, [&](int w, int64_t b, int64_t e) {
-    for (int64_t j = b; j < e; ++j) {
-      double* out = out_.data() + j * cw;
-      compute_row(j0 + j, scratch_[size_t(w)], out);
-      if (rounded_)
-        for (int64_t i = 0; i < cw; ++i) out[i] = double(round_to_int32(out[i]));
-    }
+  // Rows are claimed one at a time: the batch waits for the rows being computed, not for every
+  // worker to be scheduled among the coding threads (parallel_items).
+  parallel_items(workers, j1 - j0, [&](int slot, int64_t j) {
+    double* out = out_.data() + j * cw;
+    compute_row(j0 + j, scratch_[size_t(slot)], out);
+    if (rounded_)
+      for (int64_t i = 0; i < cw; ++i) out[i] = double(round_to_int32(out[i]));
   });
   emit(j0, j1 - j0, out_.data());
 }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <exception>
@@ -98,6 +99,111 @@ template <class Body> void parallel_chunks(int workers, int64_t n, Body&& body) 
   pool.run(workers, run);
   for (auto& e : errors)
     if (e) std::rethrow_exception(e);
+}
+
+// Workers kept by one calling thread for its parallel_items calls. Where ChunkPool gives each worker
+// a fixed chunk and waits for every worker, here the items are claimed one at a time by whoever is
+// running (the calling thread included) and a batch ends when its items are done: a worker that
+// has not been scheduled by then is not waited for (it finds the batch closed and sleeps again).
+// The builder's D cascade runs hundreds of short batches per level beside the busy coding threads;
+// with fixed chunks each one waited for its last chunk's thread to be scheduled (docs/scale.md,
+// "where the 16-thread build loses"). Not reentrant from inside an item.
+class ClaimPool {
+ public:
+  ~ClaimPool() {
+    {
+      const std::lock_guard<std::mutex> hold(lock_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    for (std::thread& t : threads_) t.join();
+  }
+  // Calls item(slot, i) for every i in [0, n), each once, on this thread (slot 0) and on at most
+  // workers - 1 pool threads (slots 1 .. workers - 1, each slot used by one thread at a time);
+  // returns when every item is done. The first exception is rethrown after that; items not yet
+  // claimed when it was thrown are skipped.
+  void run(int workers, int64_t n, const std::function<void(int, int64_t)>& item) {
+    while (int(threads_.size()) < workers - 1) threads_.emplace_back([this] { serve(); });
+    Batch batch;
+    batch.item = &item, batch.n = n, batch.slots = workers;
+    {
+      const std::lock_guard<std::mutex> hold(lock_);
+      batch_ = &batch;
+      ++generation_;
+    }
+    wake_.notify_all();
+    work(batch, 0);
+    std::unique_lock<std::mutex> hold(lock_);
+    batch_ = nullptr;  // late workers find nothing to join
+    done_.wait(hold, [&] { return batch.users == 0; });
+    if (batch.error) std::rethrow_exception(batch.error);
+  }
+
+ private:
+  struct Batch {
+    const std::function<void(int, int64_t)>* item = nullptr;
+    int64_t n = 0;
+    int slots = 1;
+    std::atomic<int64_t> next{0};
+    std::atomic<bool> failed{false};
+    int users = 0, slots_taken = 1;  // under lock_; slot 0 is the caller's
+    std::exception_ptr error;        // under lock_
+  };
+  void work(Batch& b, int slot) {
+    for (int64_t i; !b.failed.load(std::memory_order_relaxed) &&
+                    (i = b.next.fetch_add(1, std::memory_order_relaxed)) < b.n;) {
+      try {
+        (*b.item)(slot, i);
+      } catch (...) {
+        const std::lock_guard<std::mutex> hold(lock_);
+        if (!b.error) b.error = std::current_exception();
+        b.failed.store(true, std::memory_order_relaxed);
+      }
+    }
+  }
+  void serve() {
+    uint64_t seen = 0;
+    for (;;) {
+      Batch* b = nullptr;
+      int slot = 0;
+      {
+        std::unique_lock<std::mutex> hold(lock_);
+        wake_.wait(hold, [&] { return stop_ || (batch_ && generation_ != seen); });
+        if (stop_) return;
+        seen = generation_;
+        if (batch_->slots_taken >= batch_->slots) continue;
+        b = batch_;
+        slot = b->slots_taken++;
+        ++b->users;
+      }
+      work(*b, slot);
+      {
+        const std::lock_guard<std::mutex> hold(lock_);
+        if (--b->users == 0) done_.notify_one();
+      }
+    }
+  }
+
+  std::vector<std::thread> threads_;
+  std::mutex lock_;
+  std::condition_variable wake_, done_;
+  Batch* batch_ = nullptr;
+  uint64_t generation_ = 0;
+  bool stop_ = false;
+};
+
+// Calls item(slot, i) for i in [0, n), claimed one at a time by the calling thread (slot 0) and up
+// to workers - 1 threads of the calling thread's ClaimPool. For many short items beside other busy
+// threads; results must not depend on which slot ran an item. Rethrows the first exception.
+template <class Item> void parallel_items(int workers, int64_t n, Item&& item) {
+  workers = int(std::clamp<int64_t>(workers, 1, std::max<int64_t>(n, 1)));
+  if (workers == 1) {
+    for (int64_t i = 0; i < n; ++i) item(0, i);
+    return;
+  }
+  const std::function<void(int, int64_t)> run = [&](int slot, int64_t i) { item(slot, i); };
+  thread_local ClaimPool pool;
+  pool.run(workers, n, run);
 }
 
 }  // namespace terrain::detail
