@@ -599,7 +599,7 @@ BuildFileResult build_file(const std::string& input, const ReadOptions& read_opt
   std::error_code ec;
   const auto input_bytes = std::filesystem::file_size(input, ec);
   const auto input_time = std::filesystem::last_write_time(input, ec).time_since_epoch().count();
-  fp << "pyramid-build stripe journal 2\ninput " << input << " " << input_bytes << " " << input_time << " "
+  fp << "pyramid-build stripe journal 3\ninput " << input << " " << input_bytes << " " << input_time << " "
      << g.width << "x" << g.height << " " << sample_type_name(g.sample_type) << " " << g.nodata.value_or(0)
      << "\noptions " << metadata_json_extra << " step " << co.step << " max " << co.max_error << " "
      << co.bound_max_error << " tile " << co.tile_size << " band " << coder.band_rows() << " screen "

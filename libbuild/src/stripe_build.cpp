@@ -42,8 +42,53 @@ constexpr size_t kHeaderBytes = 32, kRecordHeader = 84, kTrailerBytes = 12;
   throw Error(ErrorCode::WriteFailed, path + ": " + what + ": " + std::strerror(errno));
 }
 
+// Part k of K; k == K is the shared coarse levels' part (rank 0 writes it).
 std::string part_path(const std::string& dir, int stripes, int k) {
-  return dir + "/stripe-" + std::to_string(stripes) + "-" + std::to_string(k) + ".part";
+  return dir + "/stripe-" + std::to_string(stripes) + "-" + (k == stripes ? "coarse" : std::to_string(k)) +
+         ".part";
+}
+
+// The coarse levels' sink: keeps T^_k whole for the stripes' fine levels and hands the bands on.
+class CoarseSink final : public PyramidSink {
+ public:
+  CoarseSink(PyramidSink& out, int level, GridSize size) : out_(out), level_(level), width_(size.width) {
+    grid.assign(size_t(size.width * size.height), 0);
+  }
+  void begin(const PyramidHeader& h) override { out_.begin(h); }
+  void band_figures(int l, int64_t y0, const BandFigures& f) override { out_.band_figures(l, y0, f); }
+  void band(int l, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
+    out_.band(l, y0, rows, std::move(bytes));
+  }
+  bool wants_reconstruction(int l) const override { return l == level_; }
+  void reconstructed_rows(int, int64_t y0, int64_t rows, int64_t, const int32_t* data) override {
+    std::copy(data, data + rows * width_, grid.begin() + y0 * width_);
+  }
+  std::vector<int32_t> grid;  // T^_k
+
+ private:
+  PyramidSink& out_;
+  int level_;
+  int64_t width_;
+};
+
+// Runs run(stripe) seeking past the rows above the stripe, and again reading them where a void
+// fill turns out to need its carry from there (BuildStripe::seek_above): each stripe read its way
+// down the input from row 0, which with four stripes was 7 % of the build's CPU (docs/scale.md).
+template <class Run> BuildResult seeking(BuildStripe stripe, Run&& run) {
+  stripe.seek_above = true;
+  try {
+    return run(stripe);
+  } catch (const StripeRowsAboveNeeded&) {
+    stripe.seek_above = false;
+    return run(stripe);
+  }
+}
+
+// The shared coarse level: m - 4 (1/256 of the samples, so building levels 0..k once costs about
+// 0.5 % of the build, and each stripe's cone of needed bands stops 4 levels up), with two or more
+// stripes; -1: none (every stripe codes every level).
+int shared_level(int levels, int stripes, bool wanted) {
+  return wanted && stripes >= 2 && levels >= 2 ? std::max(0, levels - 1 - 4) : -1;
 }
 
 // The builder's output of one stripe, written to a temporary part and renamed when complete.
@@ -388,6 +433,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   bool have_result = false;
   BuildOptions stripe_options = options;
   int resumed = 0;
+  const int split = shared_level(levels, K, so.share_coarse_levels);
   // Where a striped build's time goes (the log): this process's stripes, the wait for the others,
   // rank 0's assembly of the output.
   using Clock = std::chrono::steady_clock;
@@ -397,35 +443,130 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const auto t_stripes = Clock::now();
   std::vector<std::string> stripe_lines;  // this process's stripes, for the log
   auto t_coded = t_stripes;
+  const auto keep_filter = [&](BuildResult&& r) {
+    if (have_result) return;
+    result = std::move(r);
+    have_result = true;
+    stripe_options.use_fixed_filter = true;
+    stripe_options.fixed_filter = result.header.filter;
+  };
+  // This process's stripes, and those a matching journal has complete.
+  std::vector<int> mine, todo;
+  for (int k = rank; k < K; k += ranks) mine.push_back(k);
   try {
-    int mine = 0, done = 0;
-    for (int k = rank; k < K; k += ranks) ++mine;
-    for (int k = rank; k < K; k += ranks) {
-      const std::string path = part_path(so.directory, K, k);
+    for (int k : mine) {
       PartReader existing;
-      if (so.resume && existing.open(path, fp, k, K, levels, info.width, false) && existing.intact()) {
+      if (so.resume && existing.open(part_path(so.directory, K, k), fp, k, K, levels, info.width, false) &&
+          existing.intact())
         ++resumed;
-      } else {
-        const auto t_stripe = Clock::now();
-        PartWriter part(path, fp, k, K, info.width);
-        auto reader = open_input();
-        BuildResult r = build_pyramid_stripe(*reader, stripe_options,
-                                             BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, coder, part);
-        part.finish();
-        // Per stripe, for the balance between stripes (an interior one carries two halos).
-        std::ostringstream line;
-        line.precision(3);
-        line << "stripe " << k << " of " << K << ": rows " << stripe_rows(k) << "-" << stripe_rows(k + 1)
-             << " coded in " << seconds(t_stripe, Clock::now()) << " s";
-        stripe_lines.push_back(line.str());
-        if (!have_result) {
-          result = std::move(r);
-          have_result = true;
-          stripe_options.use_fixed_filter = true;
-          stripe_options.fixed_filter = result.header.filter;
+      else
+        todo.push_back(k);
+    }
+  } catch (...) {
+    error = std::current_exception();
+  }
+  // Shared coarse levels: every stripe's rows of T_k (pass 1), exchanged, then levels 0..k once.
+  std::vector<int32_t> coarse_reconstruction;
+  if (split >= 0) {
+    bool coarse_done = true;
+    if (rank == 0 && !error) {
+      PartReader coarse;
+      coarse_done = so.resume &&
+                    coarse.open(part_path(so.directory, K, K), fp, K, K, levels, info.width, false) &&
+                    coarse.intact();
+    }
+    if (!group.all_true(!error && todo.empty() && coarse_done)) {
+      const GridSize sk =
+          pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side)[size_t(split)];
+      std::vector<uint8_t> blob;
+      const auto t_rows = Clock::now();
+      try {
+        if (error) std::rethrow_exception(error);
+        for (int k : mine) {
+          StripeLevelRows rows;
+          keep_filter(seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
+            auto reader = open_input();
+            return build_stripe_level_rows(*reader, stripe_options, s, split, coder, rows);
+          }));
+          const size_t at = blob.size();
+          blob.resize(at + 16 + rows.rows.size() * 4);
+          bytes::put_u64(blob.data() + at, uint64_t(rows.first_row));
+          bytes::put_u64(blob.data() + at + 8, uint64_t(rows.rows.size()));
+          std::memcpy(blob.data() + at + 16, rows.rows.data(), rows.rows.size() * 4);
         }
+      } catch (...) {
+        error = std::current_exception();
       }
-      if (so.progress) so.progress(double(++done) / double(std::max(1, mine)));
+      if (!group.all_true(!error)) {
+        if (error) std::rethrow_exception(error);
+        throw Error(ErrorCode::WriteFailed, so.directory + ": another process failed");
+      }
+      const double rows_seconds = seconds(t_rows, Clock::now());
+      const auto t_coarse = Clock::now();
+      // T_k put together: the stripes' shares tile the level (checked: a gap would be a logic error).
+      std::vector<int32_t> tk(size_t(sk.width * sk.height));
+      int64_t covered = 0;
+      for (const std::vector<uint8_t>& b : group.all_gather(blob))
+        for (size_t at = 0; at < b.size();) {
+          const int64_t first = int64_t(bytes::get_u64(b.data() + at));
+          const uint64_t n = bytes::get_u64(b.data() + at + 8);
+          if (n % uint64_t(sk.width) != 0 || first < 0 ||
+              uint64_t(first) * uint64_t(sk.width) + n > tk.size() || b.size() - at - 16 < n * 4)
+            throw std::logic_error("stripe build: level rows out of place");
+          std::memcpy(tk.data() + first * sk.width, b.data() + at + 16, n * 4);
+          covered += int64_t(n);
+          at += 16 + n * 4;
+        }
+      if (covered != sk.width * sk.height) throw std::logic_error("stripe build: level rows missing");
+      // Levels 0..k: on every process with stripes to code (they need T^_k) and on rank 0, which
+      // writes them into the coarse part.
+      if (!todo.empty() || rank == 0) try {
+          if (!have_result) {
+            CountingSink none;
+            auto reader = open_input();
+            keep_filter(build_pyramid_stripe(*reader, options, BuildStripe{0, 0}, coder, none));
+          }
+          CountingSink discard;
+          std::unique_ptr<PartWriter> part;
+          if (rank == 0)
+            part = std::make_unique<PartWriter>(part_path(so.directory, K, K), fp, K, K, info.width);
+          CoarseSink sink(part ? static_cast<PyramidSink&>(*part) : discard, split, sk);
+          build_pyramid_coarse_levels(info, stripe_options, split, tk, coder, sink);
+          if (part) part->finish();
+          coarse_reconstruction = std::move(sink.grid);
+        } catch (...) {
+          error = std::current_exception();
+        }
+      std::ostringstream line;
+      line.precision(3);
+      line << "shared coarse levels 0.." << split << ": this process's rows of level " << split << " made in "
+           << rows_seconds << " s, levels 0.." << split << " coded in " << seconds(t_coarse, Clock::now())
+           << " s";
+      stripe_lines.push_back(line.str());
+    }
+  }
+  try {
+    if (error) std::rethrow_exception(error);
+    int done = 0;
+    for (int k : todo) {
+      const auto t_stripe = Clock::now();
+      BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
+        PartWriter part(part_path(so.directory, K, k), fp, k, K, info.width);
+        auto reader = open_input();
+        BuildResult built = split >= 0 ? build_pyramid_stripe_fine_levels(*reader, stripe_options, s, split,
+                                                                          coarse_reconstruction, coder, part)
+                                       : build_pyramid_stripe(*reader, stripe_options, s, coder, part);
+        part.finish();
+        return built;
+      });
+      // Per stripe, for the balance between stripes (an interior one carries two halos).
+      std::ostringstream line;
+      line.precision(3);
+      line << "stripe " << k << " of " << K << ": rows " << stripe_rows(k) << "-" << stripe_rows(k + 1)
+           << " coded in " << seconds(t_stripe, Clock::now()) << " s";
+      stripe_lines.push_back(line.str());
+      keep_filter(std::move(r));
+      if (so.progress) so.progress(double(++done) / double(std::max<size_t>(1, todo.size())));
     }
   } catch (...) {
     error = std::current_exception();
@@ -455,21 +596,25 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const int64_t W = info.width;
   for (int l = 0; l < levels; ++l)
     for (int k = 0; k < K; ++k) {
+      // Levels 0..split come from the coarse part (once), the others from the stripes' parts.
+      if (l <= split && k > 0) break;
+      const int source = l <= split ? K : k;
       PartReader part;
-      part.open(part_path(so.directory, K, k), fp, k, K, levels, W, true);
+      part.open(part_path(so.directory, K, source), fp, source, K, levels, W, true);
       for (const PartRecord& r : part.records()) {
         if (r.level != l) continue;
         part.payload(r, data, bits);
         const int64_t level_height = result.header.levels[size_t(l)].height;
         if (r.rows < 1 || r.y0 < 0 || r.y0 > level_height - r.rows)
-          throw Error(ErrorCode::CorruptData, part_path(so.directory, K, k) + ": record at byte " +
+          throw Error(ErrorCode::CorruptData, part_path(so.directory, K, source) + ": record at byte " +
                                                   std::to_string(r.offset) + " has rows outside level " +
                                                   std::to_string(l));
         if (l == levels - 1) {
           valid.assign(size_t(r.rows * W), 1);
           if (!bits.empty()) {
             if (bits.size() != size_t((r.rows * W + 7) / 8))
-              throw Error(ErrorCode::CorruptData, part_path(so.directory, K, k) + ": mask of the wrong size");
+              throw Error(ErrorCode::CorruptData,
+                          part_path(so.directory, K, source) + ": mask of the wrong size");
             for (int64_t i = 0; i < r.rows * W; ++i) valid[size_t(i)] = (bits[size_t(i / 8)] >> (i % 8)) & 1;
             voids += int64_t(std::count(valid.begin(), valid.end(), uint8_t(0)));
           }

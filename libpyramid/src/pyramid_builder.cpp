@@ -147,10 +147,21 @@ class InputConverter {
   // Whether the level integers are the input samples themselves (integers in their own units).
   bool identity() const { return exact_ && offset_ == 0.0; }
 
-  // Fills the voids of a whole converted band (push-pull; carries state from band to band).
+  // Fills the voids of a whole converted band (push-pull; carries state from band to band). Throws
+  // StripeRowsAboveNeeded where the carry is unknown (forget_carry) and this band would use it.
   void fill(const uint8_t* valid, int64_t rows, int32_t* ints) {
+    if (!carry_known_) {
+      // The carry comes in only where the band's first tile has no valid sample: every tile, void or
+      // not, sets it from its own samples when it has any, and tiles are taken left to right.
+      const int64_t tw = std::min(kFillTile, width_);
+      for (int64_t y = 0; y < rows && !carry_known_; ++y)
+        carry_known_ = std::memchr(valid + y * width_, 1, size_t(tw)) != nullptr;
+      if (!carry_known_) throw StripeRowsAboveNeeded("pyramid: a void fill needs the rows above the stripe");
+    }
     detail::fill_voids(ints, valid, width_, rows, kFillTile, &carry_, scratch_);
   }
+  // The rows that would set the carry were skipped (BuildStripe::seek_above).
+  void forget_carry() { carry_known_ = false; }
 
  private:
   static constexpr int64_t kFillTile = 256;
@@ -158,6 +169,7 @@ class InputConverter {
   bool exact_;
   int64_t width_;
   int32_t carry_ = 0;
+  bool carry_known_ = true;
   detail::PushPullScratch scratch_;
 };
 
@@ -572,11 +584,21 @@ class RoundWorkers final : public PartRunner {
   std::vector<std::exception_ptr> errors_;
 };
 
+// Which part of a stripe's pyramid a builder makes (the striped build's shared coarse levels,
+// docs/scale.md "Cost of the decomposition"): everything (Whole), only the stripe's rows of level k
+// (Rows: D's cascade, nothing coded), levels 0..k from the whole T_k (Coarse), or levels k+1..m
+// with the whole T^_k given (Fine).
+struct Split {
+  enum class Kind { Whole, Rows, Coarse, Fine } kind = Kind::Whole;
+  int level = -1;                              // k
+  const std::vector<int32_t>* grid = nullptr;  // Coarse: T_k; Fine: T^_k (whole level, row-major)
+};
+
 class StreamingBuilder {
  public:
   StreamingBuilder(const GridInfo& info, const BuildOptions& opt, ResidualCoder& coder, PyramidSink& sink,
-                   const BuildStripe& stripe)
-      : info_(info), opt_(opt), coder_(coder), sink_(sink) {
+                   const BuildStripe& stripe, const Split& split = {})
+      : info_(info), opt_(opt), coder_(coder), sink_(sink), split_(split), seek_above_(stripe.seek_above) {
     validate(opt, info);
     sizes_ = pyramid_level_sizes({info.width, info.height}, opt.level_count, opt.min_coarsest_side);
     level_count_ = int(sizes_.size());
@@ -585,7 +607,24 @@ class StreamingBuilder {
     if (finest_band_rows_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
     level_band_rows_ = level_band_rows(level_count_, finest_band_rows_);
     memory_ = plan_memory(info, opt, sizes_, level_band_rows_, stripe.y0 > 0);
-    plan_stripe(stripe);
+    if (split_.kind != Split::Kind::Whole) {
+      if (split_.level < 0 || split_.level >= finest_)
+        throw std::invalid_argument("pyramid: split level " + std::to_string(split_.level) + " outside 0.." +
+                                    std::to_string(finest_ - 1));
+      if (split_.kind != Split::Kind::Rows &&
+          (!split_.grid || int64_t(split_.grid->size()) !=
+                               sizes_[size_t(split_.level)].width * sizes_[size_t(split_.level)].height))
+        throw std::invalid_argument("pyramid: the given level " + std::to_string(split_.level) +
+                                    " does not match its size");
+      if (split_.kind == Split::Kind::Coarse && !opt.use_fixed_filter)
+        throw std::invalid_argument("pyramid: coarse levels need the fixed filter of the stripes");
+    }
+    // The coarsest level the D cascade makes, and the level whose rows come in.
+    stop_ = split_.kind == Split::Kind::Rows   ? split_.level
+            : split_.kind == Split::Kind::Fine ? split_.level + 1
+                                               : 0;
+    entry_ = split_.kind == Split::Kind::Coarse ? split_.level : finest_;
+    plan_stripe(split_.kind == Split::Kind::Coarse ? BuildStripe{0, info.height} : stripe);
     levels_.resize(size_t(level_count_));
     reconstructed_.resize(size_t(level_count_));
     for (int l = 0; l < level_count_; ++l) {
@@ -594,6 +633,14 @@ class StreamingBuilder {
       levels_[size_t(l)].reset(sizes_[size_t(l)].width, narrow,
                                l == finest_ ? 0 : shift_rows_down(read_a_, finest_ - l));
       reconstructed_[size_t(l)].reset(sizes_[size_t(l)].width, need_lo_[size_t(l)]);
+    }
+    if (split_.kind == Split::Kind::Fine) {
+      // T^_k as given: the rows U reads for the stripe's bands of level k + 1.
+      const int k = split_.level;
+      const int64_t wk = sizes_[size_t(k)].width;
+      reconstructed_[size_t(k)].reset(wk, given_lo_);
+      if (given_hi_ > given_lo_)
+        reconstructed_[size_t(k)].append(split_.grid->data() + given_lo_ * wk, given_hi_ - given_lo_);
     }
     mask_.reset(info.width);
     row_scratch_.resize(size_t(info.width));
@@ -671,12 +718,39 @@ class StreamingBuilder {
       }
       need_lo_[size_t(l - 1)] = lo, need_hi_[size_t(l - 1)] = hi;
     }
+    // The D cascade must make these rows of each level (the whole build: the needed ones).
+    std::vector<int64_t> make_lo = need_lo_, make_hi = need_hi_;
+    if (split_.kind != Split::Kind::Whole) {
+      const int k = split_.level;
+      if (split_.kind == Split::Kind::Fine && need_lo_[size_t(k + 1)] < need_hi_[size_t(k + 1)]) {
+        const GridSize fs = sizes_[size_t(k + 1)];
+        const Rect w = upsample_required_window(
+            Rect{0, need_lo_[size_t(k + 1)], fs.width, need_hi_[size_t(k + 1)] - need_lo_[size_t(k + 1)]},
+            fs);
+        given_lo_ = w.y0, given_hi_ = w.y0 + w.height;
+      }
+      const int64_t rows_lo = own_lo_[size_t(k)], rows_hi = own_hi_[size_t(k)];
+      for (int l = 0; l < level_count_; ++l) {
+        const bool coded = split_.kind == Split::Kind::Coarse ? l <= k
+                           : split_.kind == Split::Kind::Fine ? l > k
+                                                              : false;
+        if (coded) continue;
+        // Nothing of this level is coded: its rows are dropped as they come (need = the level's end),
+        // except the exported rows of level k, which stay.
+        const int64_t h = sizes_[size_t(l)].height;
+        const bool kept = split_.kind == Split::Kind::Rows && l == k;
+        need_lo_[size_t(l)] = need_hi_[size_t(l)] = kept ? rows_lo : h;
+        make_lo[size_t(l)] = kept ? rows_lo : 0;
+        make_hi[size_t(l)] = kept ? rows_hi : 0;
+      }
+      if (split_.kind == Split::Kind::Rows) rows_lo_ = rows_lo, rows_hi_ = rows_hi;
+    }
     int64_t a = H, b = 0;
     for (int l = 0; l < level_count_; ++l) {
-      if (need_lo_[size_t(l)] >= need_hi_[size_t(l)]) continue;
+      if (make_lo[size_t(l)] >= make_hi[size_t(l)]) continue;
       const int shift = finest_ - l;
-      a = std::min(a, shift_rows_down_to_input(need_lo_[size_t(l)] - kDHalo, shift));
-      b = std::max(b, shift_rows_down_to_input(need_hi_[size_t(l)] + kDHalo, shift));
+      a = std::min(a, shift_rows_down_to_input(make_lo[size_t(l)] - kDHalo, shift));
+      b = std::max(b, shift_rows_down_to_input(make_hi[size_t(l)] + kDHalo, shift));
     }
     if (a >= b) {  // nothing to code: read only the rows D is fitted on
       read_a_ = read_b_ = 0;
@@ -786,6 +860,15 @@ class StreamingBuilder {
       b.rows = std::min(B, H - y);
       b.voids = 0;
       b.carry = y >= fit_rows_ && y + b.rows <= read_a_;
+      if (b.carry && seek_above_) {
+        // Skipped (a seek for raw, .hgt and .bil): only a void fill whose carry comes from these
+        // rows needs them, and the converter throws where that happens.
+        if (input.skip_rows(b.rows) != b.rows)
+          throw Error(ErrorCode::Truncated, "pyramid input: ended after " + std::to_string(y) + " of " +
+                                                std::to_string(H) + " rows");
+        converter.forget_carry();
+        return;
+      }
       if (b.carry) {
         if (!int_rows) carry_values.resize(size_t(b.rows * W));
         for (int64_t got = 0; got < b.rows;)
@@ -863,7 +946,7 @@ class StreamingBuilder {
         for (int64_t r = 0; r < cur.rows; r += kPushRows) {
           const int64_t n = std::min(kPushRows, cur.rows - r);
           const auto t_push = Clock::now();
-          if (finest_ > 0)
+          if (finest_ > stop_)
             engines_[size_t(finest_)]->push_rows(cur.ints.data() + r * W, n, emit_[size_t(finest_)]);
           main_.cascade += seconds_since(t_push);
           if (r + n < cur.rows) pump(false);
@@ -881,7 +964,7 @@ class StreamingBuilder {
     }
     if (!filter_ready_) start_cascade();
     if (read_a_ < read_b_)
-      for (int l = finest_; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
+      for (int l = finest_; l > stop_; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
     const auto t_final = Clock::now();
     const double cpu_read = thread_cpu_seconds() - cpu_start, wall_read = seconds_since(t_start);
     pump(true);
@@ -889,7 +972,56 @@ class StreamingBuilder {
     for (int l = 0; l < level_count_; ++l)
       if (next_band_[size_t(l)] != need_hi_[size_t(l)])
         throw std::logic_error("pyramid: level not completed");
+    if (split_.kind == Split::Kind::Rows && rows_lo_ < rows_hi_) {
+      const LevelRows& tk = levels_[size_t(split_.level)];
+      if (tk.first() > rows_lo_ || tk.end() < rows_hi_)
+        throw std::logic_error("pyramid: level rows not made");
+      rows_out_.resize(size_t((rows_hi_ - rows_lo_) * sizes_[size_t(split_.level)].width));
+      tk.copy_rows(rows_lo_, rows_hi_ - rows_lo_, rows_out_.data());
+    }
+    return finish_result(t_start, wall_read, cpu_read, wall_final);
+  }
 
+  // Coarse: codes levels 0..k from the whole T_k (split_.grid) with the stripes' fixed filter, through
+  // the same engines and rounds as the whole build, so the same bands.
+  BuildResult run_coarse() {
+    const auto t_start = Clock::now();
+    build_start_ = t_start;
+    const double cpu_start = thread_cpu_seconds();
+    const int k = split_.level;
+    filter_ = opt_.fixed_filter;
+    header_.filter = filter_;
+    result_.filter_report.reason = "fixed filter given by the caller";
+    sink_.begin(header_);
+    make_engines();
+    filter_ready_ = true;
+    const int64_t wk = sizes_[size_t(k)].width, hk = sizes_[size_t(k)].height;
+    constexpr int64_t kPushRows = 8;
+    for (int64_t r = 0; r < hk; r += kPushRows) {
+      const int64_t n = std::min(kPushRows, hk - r);
+      const int32_t* rows = split_.grid->data() + r * wk;
+      levels_[size_t(k)].append(rows, n);
+      if (k > 0) engines_[size_t(k)]->push_rows(rows, n, emit_[size_t(k)]);
+      pump(false);
+    }
+    for (int l = k; l >= 1; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
+    const double cpu_read = thread_cpu_seconds() - cpu_start, wall_read = seconds_since(t_start);
+    const auto t_final = Clock::now();
+    pump(true);
+    const double wall_final = seconds_since(t_final);
+    for (int l = 0; l < level_count_; ++l)
+      if (next_band_[size_t(l)] != need_hi_[size_t(l)])
+        throw std::logic_error("pyramid: level not completed");
+    return finish_result(t_start, wall_read, cpu_read, wall_final);
+  }
+
+  // Rows: the stripe's rows of level k, from rows_first() on.
+  std::vector<int32_t>& rows_out() { return rows_out_; }
+  int64_t rows_first() const { return rows_lo_; }
+
+ private:
+  // The figures and the build log, once everything is coded.
+  BuildResult finish_result(Clock::time_point t_start, double wall_read, double cpu_read, double wall_final) {
     for (int l = 0; l < level_count_; ++l)
       result_.levels[size_t(l)] = figures_[size_t(l)].stats(sizes_[size_t(l)]);
     result_.header = header_;
@@ -927,7 +1059,6 @@ class StreamingBuilder {
     return std::move(result_);
   }
 
- private:
   // Rows beyond the needed ones a stripe's cascade runs on, at every level (see plan_stripe).
   // 6: the 5 wrong rows and one to spare; at the coarsest level it costs 6 * 2^m input rows of D
   // per stripe edge, most of a stripe's extra work.
@@ -977,13 +1108,34 @@ class StreamingBuilder {
     header_.filter = filter_;
     // Output starts now: nothing is coded before the filter exists.
     sink_.begin(header_);
+    make_engines();
+    filter_ready_ = true;
+    result_.seconds_pass_input += seconds_since(t);
+    levels_[size_t(finest_)].skip_to(read_a_);
+    mask_.skip_to(read_a_);
+    if (finest_ > stop_ && read_a_ < read_b_) {
+      const LevelRows& tm = levels_[size_t(finest_)];
+      for (int64_t r = tm.first(); r < std::min(tm.end(), read_b_); ++r) {
+        tm.copy_rows(r, 1, row_scratch_.data());
+        engines_[size_t(finest_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(finest_)]);
+      }
+    }
+    drop_halo_rows(finest_);
+  }
+
+  // The D engines of levels entry_ .. stop_ + 1, each feeding the next coarser one.
+  void make_engines() {
     engines_.resize(size_t(level_count_));
     emit_.resize(size_t(level_count_));
     emitted_.resize(size_t(level_count_));
     // The cascade runs on the stripe's rows [read_a_, read_b_) as on a grid of its own (the whole
     // build: the input); read_a_ is a multiple of 2^m, so level l's rows start at read_a_ >> (m - l).
     int64_t cascade_height = read_b_ - read_a_;
-    for (int l = finest_; l >= 1 && cascade_height > 0; --l) {
+    for (int l = finest_; l > stop_ && cascade_height > 0; --l) {
+      if (l > entry_) {
+        cascade_height = coarse_extent(cascade_height);
+        continue;
+      }
       // Coarse engines emit in small batches for the same reason as the band heights.
       const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, finest_ - l));
       engines_[size_t(l)] = std::make_unique<detail::DownsampleEngine>(
@@ -997,21 +1149,9 @@ class StreamingBuilder {
         for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = static_cast<int32_t>(rows[k]);
         levels_[size_t(l - 1)].append(out.data(), n);
         drop_halo_rows(l - 1);
-        if (l - 1 >= 1) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
+        if (l - 1 > stop_) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
       };
     }
-    filter_ready_ = true;
-    result_.seconds_pass_input += seconds_since(t);
-    levels_[size_t(finest_)].skip_to(read_a_);
-    mask_.skip_to(read_a_);
-    if (finest_ > 0 && read_a_ < read_b_) {
-      const LevelRows& tm = levels_[size_t(finest_)];
-      for (int64_t r = tm.first(); r < std::min(tm.end(), read_b_); ++r) {
-        tm.copy_rows(r, 1, row_scratch_.data());
-        engines_[size_t(finest_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(finest_)]);
-      }
-    }
-    drop_halo_rows(finest_);
   }
 
   // A stripe's rows above its first needed band only feed D (its halo): once the cascade has them,
@@ -1453,6 +1593,13 @@ class StreamingBuilder {
   // Per level: the stripe's own bands [own_lo_, own_hi_) and the rows it codes [need_lo_, need_hi_).
   std::vector<int64_t> own_lo_, own_hi_, need_lo_, need_hi_;
   int64_t read_a_ = 0, read_b_ = 0;  // input rows the D cascade runs on
+  const Split split_;
+  const bool seek_above_;
+  int stop_ = 0;                         // the coarsest level the D cascade makes
+  int entry_ = 0;                        // the level whose rows come in (the input's, but for Coarse)
+  int64_t given_lo_ = 0, given_hi_ = 0;  // Fine: the rows of T^_k held
+  int64_t rows_lo_ = 0, rows_hi_ = 0;    // Rows: the rows of level k made
+  std::vector<int32_t> rows_out_;
   std::vector<LevelFigures> figures_;
   std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
   std::vector<std::vector<int32_t>> windows_;  // per level: the coarse rows U reads for its group
@@ -1497,6 +1644,34 @@ BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCo
 BuildResult build_pyramid_stripe(BandReader& input, const BuildOptions& opt, const BuildStripe& stripe,
                                  ResidualCoder& coder, PyramidSink& sink) {
   StreamingBuilder builder(input.info(), opt, coder, sink, stripe);
+  return builder.run(input);
+}
+
+BuildResult build_stripe_level_rows(BandReader& input, const BuildOptions& opt, const BuildStripe& stripe,
+                                    int level, ResidualCoder& coder, StripeLevelRows& out) {
+  CountingSink none;
+  StreamingBuilder builder(input.info(), opt, coder, none, stripe, Split{Split::Kind::Rows, level, nullptr});
+  BuildResult r = builder.run(input);
+  out.first_row = builder.rows_first();
+  out.width = r.header.levels[size_t(level)].width;
+  out.rows = std::move(builder.rows_out());
+  return r;
+}
+
+BuildResult build_pyramid_coarse_levels(const GridInfo& input, const BuildOptions& opt, int level,
+                                        const std::vector<int32_t>& level_grid, ResidualCoder& coder,
+                                        PyramidSink& sink) {
+  StreamingBuilder builder(input, opt, coder, sink, BuildStripe{0, input.height},
+                           Split{Split::Kind::Coarse, level, &level_grid});
+  return builder.run_coarse();
+}
+
+BuildResult build_pyramid_stripe_fine_levels(BandReader& input, const BuildOptions& opt,
+                                             const BuildStripe& stripe, int level,
+                                             const std::vector<int32_t>& coarse_reconstruction,
+                                             ResidualCoder& coder, PyramidSink& sink) {
+  StreamingBuilder builder(input.info(), opt, coder, sink, stripe,
+                           Split{Split::Kind::Fine, level, &coarse_reconstruction});
   return builder.run(input);
 }
 

@@ -64,7 +64,121 @@ class Recorder final : public PyramidSink {
   int64_t width = 0;
 };
 
+// A Recorder that also keeps T^ of one level, whole.
+class CoarseRecorder final : public PyramidSink {
+ public:
+  CoarseRecorder(Recorder& bands, int level, GridSize size) : bands_(bands), level_(level), size_(size) {
+    grid.assign(size_t(size.width * size.height), 0);
+  }
+  void begin(const PyramidHeader& h) override { bands_.begin(h); }
+  void mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) override {
+    bands_.mask_rows(y0, rows, valid);
+  }
+  void band_figures(int l, int64_t y0, const BandFigures& f) override { bands_.band_figures(l, y0, f); }
+  void band(int l, int64_t y0, int64_t rows, std::vector<uint8_t>&& bytes) override {
+    bands_.band(l, y0, rows, std::move(bytes));
+  }
+  bool wants_reconstruction(int l) const override { return l == level_; }
+  void reconstructed_rows(int l, int64_t y0, int64_t rows, int64_t width, const int32_t* data) override {
+    REQUIRE(l == level_);
+    REQUIRE(width == size_.width);
+    REQUIRE(y0 + rows <= size_.height);
+    std::copy(data, data + rows * width, grid.begin() + y0 * width);
+    rows_seen += rows;
+  }
+  std::vector<int32_t> grid;
+  int64_t rows_seen = 0;
+
+ private:
+  Recorder& bands_;
+  int level_;
+  GridSize size_;
+};
+
 }  // namespace
+
+TEST_CASE("shared coarse levels: stripes' level rows, coarse levels and fine levels equal the whole build",
+          "[pyramid][stripes]") {
+  struct Case {
+    int64_t w, h;
+    bool voids;
+    double step;
+  };
+  const Case cases[] = {{257, 700, false, 1}, {301, 517, true, 3}, {120, 1201, false, 2}};
+  for (const Case& c : cases) {
+    const Heightmap map = rough(c.w, c.h, uint32_t(c.w) + 5, c.voids);
+    PtcCoderOptions co;
+    co.step = c.step;
+    co.tile_size = 16;
+    co.band_rows = 32;
+    PtcResidualCoder coder(co);
+    BuildOptions bo;
+    bo.min_coarsest_side = 16;
+    bo.threads = 2;
+    bo.fit_rows = 96;
+    bo.fill_band_rows = 8;
+    Recorder whole;
+    const BuildResult ref = build_pyramid(map, bo, coder, whole);
+    const int m = int(ref.header.levels.size()) - 1;
+    REQUIRE(m >= 3);
+    BuildOptions fixed = bo;
+    fixed.use_fixed_filter = true;
+    fixed.fixed_filter = ref.header.filter;
+    for (int k : {0, m / 2, m - 1})
+      for (int stripes : {1, 2, 3, 7}) {
+        INFO(c.w << "x" << c.h << ", level " << k << ", " << stripes << " stripes");
+        const GridSize sk = ref.header.levels[size_t(k)];
+        std::vector<int32_t> tk(size_t(sk.width * sk.height), 0);
+        int64_t next = 0;
+        std::vector<BuildStripe> cut;
+        for (int s = 0; s < stripes; ++s) cut.push_back({s * c.h / stripes, (s + 1) * c.h / stripes});
+        for (const BuildStripe& s : cut) {
+          StripeLevelRows rows;
+          auto reader = make_memory_band_reader(map, 37);
+          // The first stripe fits D as the whole build does; the others get it fixed.
+          const BuildResult r = build_stripe_level_rows(*reader, s.y0 == 0 ? bo : fixed, s, k, coder, rows);
+          CHECK(r.header.filter.taps == ref.header.filter.taps);
+          REQUIRE(rows.width == sk.width);
+          REQUIRE(rows.first_row == next);  // the shares tile the level
+          std::copy(rows.rows.begin(), rows.rows.end(), tk.begin() + rows.first_row * sk.width);
+          next += int64_t(rows.rows.size()) / sk.width;
+        }
+        REQUIRE(next == sk.height);
+        Recorder coarse;
+        CoarseRecorder that(coarse, k, sk);
+        build_pyramid_coarse_levels(map.info, fixed, k, tk, coder, that);
+        REQUIRE(that.rows_seen == sk.height);
+        std::vector<std::vector<Band>> joined(whole.levels.size());
+        for (int l = 0; l <= k; ++l) joined[size_t(l)] = coarse.levels[size_t(l)];
+        for (size_t l = size_t(k) + 1; l < coarse.levels.size(); ++l) CHECK(coarse.levels[l].empty());
+        for (const BuildStripe& s : cut) {
+          Recorder part;
+          auto reader = make_memory_band_reader(map, 37);
+          build_pyramid_stripe_fine_levels(*reader, fixed, s, k, that.grid, coder, part);
+          for (int l = 0; l <= k; ++l) CHECK(part.levels[size_t(l)].empty());
+          for (size_t l = size_t(k) + 1; l < part.levels.size(); ++l)
+            joined[l].insert(joined[l].end(), part.levels[l].begin(), part.levels[l].end());
+        }
+        for (size_t l = 0; l < joined.size(); ++l) {
+          INFO("level " << l);
+          REQUIRE(joined[l].size() == whole.levels[l].size());
+          for (size_t b = 0; b < joined[l].size(); ++b) CHECK(joined[l][b] == whole.levels[l][b]);
+        }
+      }
+    // Unusable splits.
+    Recorder sink;
+    auto reader = make_memory_band_reader(map);
+    StripeLevelRows rows;
+    CHECK_THROWS_AS(build_stripe_level_rows(*reader, bo, BuildStripe{0, c.h}, m, coder, rows),
+                    std::invalid_argument);
+    CHECK_THROWS_AS(build_pyramid_coarse_levels(map.info, bo, 0, std::vector<int32_t>(1), coder, sink),
+                    std::invalid_argument);
+    const GridSize s0 = ref.header.levels[0];
+    CHECK_THROWS_AS(build_pyramid_coarse_levels(
+                        map.info, bo, 0, std::vector<int32_t>(size_t(s0.width * s0.height)), coder, sink),
+                    std::invalid_argument);
+  }
+}
 
 TEST_CASE("stripe builds put together equal the whole build", "[pyramid][stripes]") {
   struct Case {

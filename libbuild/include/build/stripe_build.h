@@ -14,6 +14,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "container/pyramid_file.h"
 #include "pyramid/pyramid.h"
@@ -29,6 +30,8 @@ class ProcessGroup {
   virtual int size() const = 0;
   // Collective (every process calls it, a barrier): true when every process passed true.
   virtual bool all_true(bool value) = 0;
+  // Collective: every process's `mine`, in rank order (this process's own included).
+  virtual std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) = 0;
 };
 
 // This process alone.
@@ -37,14 +40,19 @@ class SingleProcess final : public ProcessGroup {
   int rank() const override { return 0; }
   int size() const override { return 1; }
   bool all_true(bool value) override { return value; }
+  std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) override { return {mine}; }
 };
 
 struct StripeBuildOptions {
-  std::string directory;          // OUT.build
-  std::string fingerprint;        // input and options: parts of another build are never reused
-  int stripes = 1;                // stripes of whole finest bands (fewer when the input has fewer bands)
-  bool resume = true;             // false: complete parts of a matching journal are coded again
-  ProcessGroup* group = nullptr;  // null: this process alone
+  std::string directory;    // OUT.build
+  std::string fingerprint;  // input and options: parts of another build are never reused
+  int stripes = 1;          // stripes of whole finest bands (fewer when the input has fewer bands)
+  bool resume = true;       // false: complete parts of a matching journal are coded again
+  // With two or more stripes: levels 0..k are coded once, from the stripes' rows of T_k put together
+  // (exchanged with ProcessGroup::all_gather), and each stripe codes levels k+1..m only (docs/scale.md
+  // "Cost of the decomposition"); the bytes are the same either way. false: every stripe codes all.
+  bool share_coarse_levels = true;
+  ProcessGroup* group = nullptr;         // null: this process alone
   std::function<void(double)> progress;  // fraction of this process's stripes done
 };
 

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -176,9 +177,46 @@ BuildResult build_pyramid(BandReader& input, const BuildOptions& options, Residu
 // std::invalid_argument for a stripe outside 0..height.
 struct BuildStripe {
   int64_t y0 = 0, y1 = 0;
+  // Skip the rows above the stripe's cascade (BandReader::skip_rows, a seek for raw, .hgt and .bil)
+  // instead of reading them for the void fill's carry; where a fill then needs the carry, the build
+  // throws StripeRowsAboveNeeded and the caller runs the stripe again without seek_above (its sink
+  // may have received bands by then).
+  bool seek_above = false;
+};
+class StripeRowsAboveNeeded : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
 };
 BuildResult build_pyramid_stripe(BandReader& input, const BuildOptions& options, const BuildStripe& stripe,
                                  ResidualCoder& coder, PyramidSink& sink);
+
+// Experimental: the shared coarse levels of libbuild's striped build (docs/scale.md "Cost of the
+// decomposition"). A stripe's needed bands grow by about a band per level up the pyramid, so a
+// stripe that codes every level runs D over some 30 x 2^m input rows beyond each of its edges; these
+// three split the work at a level k (0 <= k < m) instead, with the same bytes as build_pyramid:
+//  1. build_stripe_level_rows: the stripe's share of T_k (the level-k rows whose first row times
+//     2^(m-k) lies in the stripe, as build_pyramid_stripe shares out bands), made by the D cascade
+//     exactly as the whole build makes them; nothing is coded and the sink sees nothing;
+//  2. build_pyramid_coarse_levels: levels 0..k coded from the whole T_k (the stripes' shares put
+//     together) with options.use_fixed_filter set to the stripes' D; the sink gets them as the whole
+//     build gives them, and wants_reconstruction(k) yields T^_k;
+//  3. build_pyramid_stripe_fine_levels: the stripe's bands of levels k+1..m, with the whole T^_k given.
+// Each throws as build_pyramid_stripe, and std::invalid_argument for k outside 0..m-1, a given grid
+// of the wrong size, or (2) no fixed filter. Thread-safe as build_pyramid (options.threads inside).
+struct StripeLevelRows {
+  int64_t first_row = 0;      // the first of the stripe's rows of level k
+  int64_t width = 0;          // level k's width
+  std::vector<int32_t> rows;  // (rows.size() / width) rows from first_row on, row-major
+};
+BuildResult build_stripe_level_rows(BandReader& input, const BuildOptions& options, const BuildStripe& stripe,
+                                    int level, ResidualCoder& coder, StripeLevelRows& out);
+BuildResult build_pyramid_coarse_levels(const GridInfo& input, const BuildOptions& options, int level,
+                                        const std::vector<int32_t>& level_grid, ResidualCoder& coder,
+                                        PyramidSink& sink);
+BuildResult build_pyramid_stripe_fine_levels(BandReader& input, const BuildOptions& options,
+                                             const BuildStripe& stripe, int level,
+                                             const std::vector<int32_t>& coarse_reconstruction,
+                                             ResidualCoder& coder, PyramidSink& sink);
 
 // The same builder fed from memory (the grid is streamed from `map` through a BandReader).
 BuildResult build_pyramid(const Heightmap& map, const BuildOptions& options, ResidualCoder& coder,
