@@ -372,17 +372,17 @@ void remove_stripe_directory(const std::string& directory) {
 namespace {
 
 // Stripe boundaries in finest rows, multiples of the band height S (any split gives the same bytes).
-// Each stripe edge costs both neighbours the D cascade and the coarse bands over its halo (about
-// 9 x 2^m input rows, which cost D and coarse coding but no finest-level coding): measured on a
-// 16384^2 input (m = 7) at 4 even stripes, the two end stripes took 3.6-3.7 s and the two interior
-// ones 4.0-4.2 s (0.45 s an edge, about 4.5 x 2^m rows of a stripe's cost). So with three or more
-// stripes the two end ones, which have one neighbour, get h = 4 x 2^m rows more than the others;
-// an even split where that would leave a stripe without a band.
-std::vector<int64_t> stripe_bounds(int64_t H, int64_t S, int K, int m) {
+// Where every stripe codes every level, each stripe edge costs both neighbours the D cascade and the
+// coarse bands over its halo: measured on a 16384^2 input (m = 7) at 4 even stripes, the two end
+// stripes took 3.6-3.7 s and the two interior ones 4.0-4.2 s (0.45 s an edge, about 4.5 x 2^m rows
+// of a stripe's cost). So with three or more stripes the two end ones, which have one neighbour, get
+// h = 4 x 2^m rows more than the others; an even split where that would leave a stripe without a
+// band. With the coarse levels shared (`shared`) an edge costs a few dozen rows: an even split.
+std::vector<int64_t> stripe_bounds(int64_t H, int64_t S, int K, int m, bool shared) {
   const int64_t bands = (H + S - 1) / S;
   std::vector<int64_t> even(size_t(K) + 1);
   for (int k = 0; k <= K; ++k) even[size_t(k)] = std::min(H, int64_t(k) * bands / K * S);
-  if (K < 3) return even;
+  if (K < 3 || shared) return even;
   const int64_t h = int64_t(4) << std::clamp(m, 0, 40);
   const double r = (double(H) - 2.0 * double(h)) / double(K);  // an interior stripe's rows
   if (r < double(S)) return even;
@@ -412,7 +412,8 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const uint32_t fp = codec::crc32c(so.fingerprint.data(), so.fingerprint.size());
   const int levels =
       int(pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side).size());
-  const std::vector<int64_t> bounds = stripe_bounds(H, S, K, levels - 1);
+  const int split = shared_level(levels, K, so.share_coarse_levels);
+  const std::vector<int64_t> bounds = stripe_bounds(H, S, K, levels - 1, split >= 0);
   const auto stripe_rows = [&](int k) { return bounds[size_t(k)]; };
 
   // Set up by rank 0 before anyone looks at the directory.
@@ -433,7 +434,6 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   bool have_result = false;
   BuildOptions stripe_options = options;
   int resumed = 0;
-  const int split = shared_level(levels, K, so.share_coarse_levels);
   // Where a striped build's time goes (the log): this process's stripes, the wait for the others,
   // rank 0's assembly of the output.
   using Clock = std::chrono::steady_clock;
@@ -467,6 +467,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   }
   // Shared coarse levels: every stripe's rows of T_k (pass 1), exchanged, then levels 0..k once.
   std::vector<int32_t> coarse_reconstruction;
+  std::vector<StripeLevelRows> kept;  // per stripe: the T_{m-1} rows its first pass kept
   if (split >= 0) {
     bool coarse_done = true;
     if (rank == 0 && !error) {
@@ -480,19 +481,32 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
           pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side)[size_t(split)];
       std::vector<uint8_t> blob;
       const auto t_rows = Clock::now();
+      // The first pass keeps each stripe's T_{m-1} rows for the second (D's finest level, most of D,
+      // then runs once) where they fit: about a quarter of this process's stripes' samples as int32,
+      // up to a quarter of the memory budget (the second pass's builder, with the coarse levels given,
+      // holds far less than a whole build; docs/scale.md).
+      int64_t my_rows = 0;
+      for (int k : todo) my_rows += stripe_rows(k + 1) - stripe_rows(k);
+      const double fine_bytes = double(my_rows) * double(info.width);
+      const bool keep_fine =
+          !todo.empty() && (options.memory_budget == 0 || fine_bytes <= double(options.memory_budget) / 4);
+      kept.resize(size_t(K));
       try {
         if (error) std::rethrow_exception(error);
         for (int k : mine) {
           StripeLevelRows rows;
+          const bool keep = keep_fine && std::find(todo.begin(), todo.end(), k) != todo.end();
           keep_filter(seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
             auto reader = open_input();
-            return build_stripe_level_rows(*reader, stripe_options, s, split, coder, rows);
+            return build_stripe_level_rows(*reader, stripe_options, s, split, coder, rows, keep);
           }));
           const size_t at = blob.size();
           blob.resize(at + 16 + rows.rows.size() * 4);
           bytes::put_u64(blob.data() + at, uint64_t(rows.first_row));
           bytes::put_u64(blob.data() + at + 8, uint64_t(rows.rows.size()));
           std::memcpy(blob.data() + at + 16, rows.rows.data(), rows.rows.size() * 4);
+          rows.rows = {};
+          kept[size_t(k)] = std::move(rows);
         }
       } catch (...) {
         error = std::current_exception();
@@ -553,12 +567,14 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
         PartWriter part(part_path(so.directory, K, k), fp, k, K, info.width);
         auto reader = open_input();
-        BuildResult built = split >= 0 ? build_pyramid_stripe_fine_levels(*reader, stripe_options, s, split,
-                                                                          coarse_reconstruction, coder, part)
+        BuildResult built = split >= 0 ? build_pyramid_stripe_fine_levels(
+                                             *reader, stripe_options, s, split, coarse_reconstruction, coder,
+                                             part, k < int(kept.size()) ? &kept[size_t(k)] : nullptr)
                                        : build_pyramid_stripe(*reader, stripe_options, s, coder, part);
         part.finish();
         return built;
       });
+      if (k < int(kept.size())) kept[size_t(k)] = {};
       // Per stripe, for the balance between stripes (an interior one carries two halos).
       std::ostringstream line;
       line.precision(3);

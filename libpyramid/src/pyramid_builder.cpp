@@ -592,6 +592,8 @@ struct Split {
   enum class Kind { Whole, Rows, Coarse, Fine } kind = Kind::Whole;
   int level = -1;                              // k
   const std::vector<int32_t>* grid = nullptr;  // Coarse: T_k; Fine: T^_k (whole level, row-major)
+  bool keep_fine = false;                      // Rows: also keep the T_{m-1} rows Fine will need
+  const StripeLevelRows* fine = nullptr;       // Fine: those rows (D's finest level is not run again)
 };
 
 class StreamingBuilder {
@@ -624,7 +626,24 @@ class StreamingBuilder {
             : split_.kind == Split::Kind::Fine ? split_.level + 1
                                                : 0;
     entry_ = split_.kind == Split::Kind::Coarse ? split_.level : finest_;
-    plan_stripe(split_.kind == Split::Kind::Coarse ? BuildStripe{0, info.height} : stripe);
+    if (split_.kind == Split::Kind::Rows && split_.keep_fine && split_.level < finest_ - 1) {
+      // The rows of T_{m-1} the stripe's Fine build runs its cascade on: its plan's.
+      plan_stripe(stripe, Split::Kind::Fine);
+      if (read_a_ < read_b_)
+        fine_lo_ = read_a_ >> 1, fine_hi_ = (read_a_ >> 1) + coarse_extent(read_b_ - read_a_);
+    }
+    plan_stripe(split_.kind == Split::Kind::Coarse ? BuildStripe{0, info.height} : stripe, split_.kind);
+    if (split_.kind == Split::Kind::Fine && split_.fine && split_.level < finest_ - 1 && read_a_ < read_b_) {
+      const int64_t w = sizes_[size_t(finest_ - 1)].width;
+      if (split_.fine->fine_first_row != read_a_ >> 1 ||
+          int64_t(split_.fine->fine_rows.size()) != coarse_extent(read_b_ - read_a_) * w)
+        throw std::invalid_argument("pyramid: the given level " + std::to_string(finest_ - 1) +
+                                    " rows are not this stripe's");
+      fine_lo_ = fed_ = read_a_ >> 1;
+      fine_hi_ = fine_lo_ + coarse_extent(read_b_ - read_a_);
+      fed_fine_ = true;
+      entry_ = finest_ - 1;  // D's finest engine is not needed
+    }
     levels_.resize(size_t(level_count_));
     reconstructed_.resize(size_t(level_count_));
     for (int l = 0; l < level_count_; ++l) {
@@ -689,7 +708,7 @@ class StreamingBuilder {
   // 4, 5, 5, ...; the test cuts stripes everywhere and compares bytes). read_a_ and read_b_ are
   // multiples of 2^m (each level's rows then keep the input's parity) and of the fill band (a
   // band is filled whole, as in the whole build), or the input's end.
-  void plan_stripe(const BuildStripe& stripe) {
+  void plan_stripe(const BuildStripe& stripe, Split::Kind kind) {
     const int64_t H = info_.height;
     if (stripe.y0 < 0 || stripe.y1 < stripe.y0 || stripe.y1 > H)
       throw std::invalid_argument("pyramid: stripe rows " + std::to_string(stripe.y0) + ".." +
@@ -720,9 +739,9 @@ class StreamingBuilder {
     }
     // The D cascade must make these rows of each level (the whole build: the needed ones).
     std::vector<int64_t> make_lo = need_lo_, make_hi = need_hi_;
-    if (split_.kind != Split::Kind::Whole) {
+    if (kind != Split::Kind::Whole) {
       const int k = split_.level;
-      if (split_.kind == Split::Kind::Fine && need_lo_[size_t(k + 1)] < need_hi_[size_t(k + 1)]) {
+      if (kind == Split::Kind::Fine && need_lo_[size_t(k + 1)] < need_hi_[size_t(k + 1)]) {
         const GridSize fs = sizes_[size_t(k + 1)];
         const Rect w = upsample_required_window(
             Rect{0, need_lo_[size_t(k + 1)], fs.width, need_hi_[size_t(k + 1)] - need_lo_[size_t(k + 1)]},
@@ -731,19 +750,18 @@ class StreamingBuilder {
       }
       const int64_t rows_lo = own_lo_[size_t(k)], rows_hi = own_hi_[size_t(k)];
       for (int l = 0; l < level_count_; ++l) {
-        const bool coded = split_.kind == Split::Kind::Coarse ? l <= k
-                           : split_.kind == Split::Kind::Fine ? l > k
-                                                              : false;
+        const bool coded = kind == Split::Kind::Coarse ? l <= k : kind == Split::Kind::Fine ? l > k : false;
         if (coded) continue;
         // Nothing of this level is coded: its rows are dropped as they come (need = the level's end),
-        // except the exported rows of level k, which stay.
+        // except the rows made for export (level k, and level m-1 for the Fine build), which stay.
         const int64_t h = sizes_[size_t(l)].height;
-        const bool kept = split_.kind == Split::Kind::Rows && l == k;
-        need_lo_[size_t(l)] = need_hi_[size_t(l)] = kept ? rows_lo : h;
-        make_lo[size_t(l)] = kept ? rows_lo : 0;
-        make_hi[size_t(l)] = kept ? rows_hi : 0;
+        int64_t lo = 0, hi = 0;
+        if (kind == Split::Kind::Rows && l == k) lo = rows_lo, hi = rows_hi;
+        if (kind == Split::Kind::Rows && l == finest_ - 1 && l != k) lo = fine_lo_, hi = fine_hi_;
+        need_lo_[size_t(l)] = need_hi_[size_t(l)] = lo < hi ? lo : h;
+        make_lo[size_t(l)] = lo, make_hi[size_t(l)] = hi;
       }
-      if (split_.kind == Split::Kind::Rows) rows_lo_ = rows_lo, rows_hi_ = rows_hi;
+      if (kind == Split::Kind::Rows) rows_lo_ = rows_lo, rows_hi_ = rows_hi;
     }
     int64_t a = H, b = 0;
     for (int l = 0; l < level_count_; ++l) {
@@ -946,7 +964,9 @@ class StreamingBuilder {
         for (int64_t r = 0; r < cur.rows; r += kPushRows) {
           const int64_t n = std::min(kPushRows, cur.rows - r);
           const auto t_push = Clock::now();
-          if (finest_ > stop_)
+          if (fed_fine_)
+            feed_fine((cur.y + r + n) >> 1);
+          else if (finest_ > stop_)
             engines_[size_t(finest_)]->push_rows(cur.ints.data() + r * W, n, emit_[size_t(finest_)]);
           main_.cascade += seconds_since(t_push);
           if (r + n < cur.rows) pump(false);
@@ -964,7 +984,13 @@ class StreamingBuilder {
     }
     if (!filter_ready_) start_cascade();
     if (read_a_ < read_b_)
-      for (int l = finest_; l > stop_; --l) engines_[size_t(l)]->finish(emit_[size_t(l)]);
+      for (int l = finest_; l > stop_; --l) {
+        if (l == finest_ && fed_fine_) {
+          feed_fine(fine_hi_);
+          continue;
+        }
+        engines_[size_t(l)]->finish(emit_[size_t(l)]);
+      }
     const auto t_final = Clock::now();
     const double cpu_read = thread_cpu_seconds() - cpu_start, wall_read = seconds_since(t_start);
     pump(true);
@@ -978,6 +1004,13 @@ class StreamingBuilder {
         throw std::logic_error("pyramid: level rows not made");
       rows_out_.resize(size_t((rows_hi_ - rows_lo_) * sizes_[size_t(split_.level)].width));
       tk.copy_rows(rows_lo_, rows_hi_ - rows_lo_, rows_out_.data());
+    }
+    if (split_.kind == Split::Kind::Rows && fine_lo_ < fine_hi_) {
+      const LevelRows& tf = levels_[size_t(finest_ - 1)];
+      if (tf.first() > fine_lo_ || tf.end() < fine_hi_)
+        throw std::logic_error("pyramid: level rows not made");
+      fine_out_.resize(size_t((fine_hi_ - fine_lo_) * sizes_[size_t(finest_ - 1)].width));
+      tf.copy_rows(fine_lo_, fine_hi_ - fine_lo_, fine_out_.data());
     }
     return finish_result(t_start, wall_read, cpu_read, wall_final);
   }
@@ -1015,9 +1048,11 @@ class StreamingBuilder {
     return finish_result(t_start, wall_read, cpu_read, wall_final);
   }
 
-  // Rows: the stripe's rows of level k, from rows_first() on.
+  // Rows: the stripe's rows of level k, from rows_first() on; with keep_fine, those of level m-1.
   std::vector<int32_t>& rows_out() { return rows_out_; }
   int64_t rows_first() const { return rows_lo_; }
+  std::vector<int32_t>& fine_out() { return fine_out_; }
+  int64_t fine_first() const { return fine_lo_; }
 
  private:
   // The figures and the build log, once everything is coded.
@@ -1113,7 +1148,9 @@ class StreamingBuilder {
     result_.seconds_pass_input += seconds_since(t);
     levels_[size_t(finest_)].skip_to(read_a_);
     mask_.skip_to(read_a_);
-    if (finest_ > stop_ && read_a_ < read_b_) {
+    if (fed_fine_) {
+      feed_fine(std::min(levels_[size_t(finest_)].end(), read_b_) >> 1);
+    } else if (finest_ > stop_ && read_a_ < read_b_) {
       const LevelRows& tm = levels_[size_t(finest_)];
       for (int64_t r = tm.first(); r < std::min(tm.end(), read_b_); ++r) {
         tm.copy_rows(r, 1, row_scratch_.data());
@@ -1147,11 +1184,26 @@ class StreamingBuilder {
         out.resize(size_t(n * cw));
         // Rounded by the engine's workers (exact int32 values): a cast, not a serial rounding.
         for (int64_t k = 0; k < n * cw; ++k) out[size_t(k)] = static_cast<int32_t>(rows[k]);
-        levels_[size_t(l - 1)].append(out.data(), n);
-        drop_halo_rows(l - 1);
-        if (l - 1 > stop_) engines_[size_t(l - 1)]->push_rows(out.data(), n, emit_[size_t(l - 1)]);
+        take_rows(l - 1, out.data(), n);
       };
     }
+  }
+
+  // The next n rows of level l (made by D, or given): kept for coding, and D's next engine runs on them.
+  void take_rows(int l, const int32_t* rows, int64_t n) {
+    levels_[size_t(l)].append(rows, n);
+    drop_halo_rows(l);
+    if (l > stop_) engines_[size_t(l)]->push_rows(rows, n, emit_[size_t(l)]);
+  }
+
+  // Fed T_{m-1} (Fine with the Rows build's rows): the given rows up to level row `end`, in step with
+  // the input rows read (input row r gives level row r / 2), so the levels hold what they would.
+  void feed_fine(int64_t end) {
+    end = std::min(end, fine_hi_);
+    if (end <= fed_) return;
+    const int64_t w = sizes_[size_t(finest_ - 1)].width;
+    take_rows(finest_ - 1, split_.fine->fine_rows.data() + (fed_ - fine_lo_) * w, end - fed_);
+    fed_ = end;
   }
 
   // A stripe's rows above its first needed band only feed D (its halo): once the cascade has them,
@@ -1599,7 +1651,10 @@ class StreamingBuilder {
   int entry_ = 0;                        // the level whose rows come in (the input's, but for Coarse)
   int64_t given_lo_ = 0, given_hi_ = 0;  // Fine: the rows of T^_k held
   int64_t rows_lo_ = 0, rows_hi_ = 0;    // Rows: the rows of level k made
-  std::vector<int32_t> rows_out_;
+  std::vector<int32_t> rows_out_, fine_out_;
+  // T_{m-1} rows: kept by Rows (keep_fine), fed by Fine (fed_fine_: up to fed_) instead of D's finest engine.
+  int64_t fine_lo_ = 0, fine_hi_ = 0, fed_ = 0;
+  bool fed_fine_ = false;
   std::vector<LevelFigures> figures_;
   std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
   std::vector<std::vector<int32_t>> windows_;  // per level: the coarse rows U reads for its group
@@ -1648,13 +1703,16 @@ BuildResult build_pyramid_stripe(BandReader& input, const BuildOptions& opt, con
 }
 
 BuildResult build_stripe_level_rows(BandReader& input, const BuildOptions& opt, const BuildStripe& stripe,
-                                    int level, ResidualCoder& coder, StripeLevelRows& out) {
+                                    int level, ResidualCoder& coder, StripeLevelRows& out, bool keep_fine) {
   CountingSink none;
-  StreamingBuilder builder(input.info(), opt, coder, none, stripe, Split{Split::Kind::Rows, level, nullptr});
+  StreamingBuilder builder(input.info(), opt, coder, none, stripe,
+                           Split{Split::Kind::Rows, level, nullptr, keep_fine, nullptr});
   BuildResult r = builder.run(input);
   out.first_row = builder.rows_first();
   out.width = r.header.levels[size_t(level)].width;
   out.rows = std::move(builder.rows_out());
+  out.fine_first_row = builder.fine_first();
+  out.fine_rows = std::move(builder.fine_out());
   return r;
 }
 
@@ -1669,9 +1727,11 @@ BuildResult build_pyramid_coarse_levels(const GridInfo& input, const BuildOption
 BuildResult build_pyramid_stripe_fine_levels(BandReader& input, const BuildOptions& opt,
                                              const BuildStripe& stripe, int level,
                                              const std::vector<int32_t>& coarse_reconstruction,
-                                             ResidualCoder& coder, PyramidSink& sink) {
+                                             ResidualCoder& coder, PyramidSink& sink,
+                                             const StripeLevelRows* fine) {
   StreamingBuilder builder(input.info(), opt, coder, sink, stripe,
-                           Split{Split::Kind::Fine, level, &coarse_reconstruction});
+                           Split{Split::Kind::Fine, level, &coarse_reconstruction, false,
+                                 fine && !fine->fine_rows.empty() ? fine : nullptr});
   return builder.run(input);
 }
 

@@ -126,17 +126,23 @@ TEST_CASE("shared coarse levels: stripes' level rows, coarse levels and fine lev
     fixed.fixed_filter = ref.header.filter;
     for (int k : {0, m / 2, m - 1})
       for (int stripes : {1, 2, 3, 7}) {
-        INFO(c.w << "x" << c.h << ", level " << k << ", " << stripes << " stripes");
+        // With the T_{m-1} rows kept by the first pass (D's finest level runs once) or made again.
+        const bool keep = stripes != 2;
+        INFO(c.w << "x" << c.h << ", level " << k << ", " << stripes << " stripes, keep " << keep);
         const GridSize sk = ref.header.levels[size_t(k)];
         std::vector<int32_t> tk(size_t(sk.width * sk.height), 0);
         int64_t next = 0;
         std::vector<BuildStripe> cut;
         for (int s = 0; s < stripes; ++s) cut.push_back({s * c.h / stripes, (s + 1) * c.h / stripes});
-        for (const BuildStripe& s : cut) {
-          StripeLevelRows rows;
+        std::vector<StripeLevelRows> kept(cut.size());
+        for (size_t i = 0; i < cut.size(); ++i) {
+          const BuildStripe& s = cut[i];
+          StripeLevelRows& rows = kept[i];
           auto reader = make_memory_band_reader(map, 37);
           // The first stripe fits D as the whole build does; the others get it fixed.
-          const BuildResult r = build_stripe_level_rows(*reader, s.y0 == 0 ? bo : fixed, s, k, coder, rows);
+          const BuildResult r =
+              build_stripe_level_rows(*reader, s.y0 == 0 ? bo : fixed, s, k, coder, rows, keep);
+          CHECK(rows.fine_rows.empty() == (!keep || k == m - 1));
           CHECK(r.header.filter.taps == ref.header.filter.taps);
           REQUIRE(rows.width == sk.width);
           REQUIRE(rows.first_row == next);  // the shares tile the level
@@ -151,10 +157,19 @@ TEST_CASE("shared coarse levels: stripes' level rows, coarse levels and fine lev
         std::vector<std::vector<Band>> joined(whole.levels.size());
         for (int l = 0; l <= k; ++l) joined[size_t(l)] = coarse.levels[size_t(l)];
         for (size_t l = size_t(k) + 1; l < coarse.levels.size(); ++l) CHECK(coarse.levels[l].empty());
-        for (const BuildStripe& s : cut) {
+        for (size_t i = 0; i < cut.size(); ++i) {
           Recorder part;
           auto reader = make_memory_band_reader(map, 37);
-          build_pyramid_stripe_fine_levels(*reader, fixed, s, k, that.grid, coder, part);
+          build_pyramid_stripe_fine_levels(*reader, fixed, cut[i], k, that.grid, coder, part, &kept[i]);
+          const StripeLevelRows& other = kept[(i + 1) % cut.size()];
+          if (!kept[i].fine_rows.empty() && !other.fine_rows.empty() &&
+              other.fine_first_row != kept[i].fine_first_row) {  // another stripe's rows are refused
+            Recorder unused;
+            auto again = make_memory_band_reader(map, 37);
+            CHECK_THROWS_AS(
+                build_pyramid_stripe_fine_levels(*again, fixed, cut[i], k, that.grid, coder, unused, &other),
+                std::invalid_argument);
+          }
           for (int l = 0; l <= k; ++l) CHECK(part.levels[size_t(l)].empty());
           for (size_t l = size_t(k) + 1; l < part.levels.size(); ++l)
             joined[l].insert(joined[l].end(), part.levels[l].begin(), part.levels[l].end());

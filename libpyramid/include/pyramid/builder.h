@@ -200,23 +200,31 @@ BuildResult build_pyramid_stripe(BandReader& input, const BuildOptions& options,
 //  2. build_pyramid_coarse_levels: levels 0..k coded from the whole T_k (the stripes' shares put
 //     together) with options.use_fixed_filter set to the stripes' D; the sink gets them as the whole
 //     build gives them, and wants_reconstruction(k) yields T^_k;
-//  3. build_pyramid_stripe_fine_levels: the stripe's bands of levels k+1..m, with the whole T^_k given.
+//  3. build_pyramid_stripe_fine_levels: the stripe's bands of levels k+1..m, with the whole T^_k given
+//     and, optionally, the stripe's T_{m-1} rows that (1) kept (the same stripe, options and seek_above
+//     need not match; std::invalid_argument when the rows are another stripe's).
 // Each throws as build_pyramid_stripe, and std::invalid_argument for k outside 0..m-1, a given grid
 // of the wrong size, or (2) no fixed filter. Thread-safe as build_pyramid (options.threads inside).
 struct StripeLevelRows {
   int64_t first_row = 0;      // the first of the stripe's rows of level k
   int64_t width = 0;          // level k's width
   std::vector<int32_t> rows;  // (rows.size() / width) rows from first_row on, row-major
+  // With keep_fine (and k < m - 1): the rows of T_{m-1} the stripe's fine-level build runs D on, so
+  // that it need not run D's finest level again (a quarter of the stripe's samples, as int32).
+  int64_t fine_first_row = 0;
+  std::vector<int32_t> fine_rows;
 };
 BuildResult build_stripe_level_rows(BandReader& input, const BuildOptions& options, const BuildStripe& stripe,
-                                    int level, ResidualCoder& coder, StripeLevelRows& out);
+                                    int level, ResidualCoder& coder, StripeLevelRows& out,
+                                    bool keep_fine = false);
 BuildResult build_pyramid_coarse_levels(const GridInfo& input, const BuildOptions& options, int level,
                                         const std::vector<int32_t>& level_grid, ResidualCoder& coder,
                                         PyramidSink& sink);
 BuildResult build_pyramid_stripe_fine_levels(BandReader& input, const BuildOptions& options,
                                              const BuildStripe& stripe, int level,
                                              const std::vector<int32_t>& coarse_reconstruction,
-                                             ResidualCoder& coder, PyramidSink& sink);
+                                             ResidualCoder& coder, PyramidSink& sink,
+                                             const StripeLevelRows* fine = nullptr);
 
 // The same builder fed from memory (the grid is streamed from `map` through a BandReader).
 BuildResult build_pyramid(const Heightmap& map, const BuildOptions& options, ResidualCoder& coder,
