@@ -350,6 +350,10 @@ int64_t fit_rows_held(const BuildOptions& opt, int64_t height) {
   return opt.use_fixed_filter ? 0 : std::min(height, opt.fit_rows);
 }
 
+// Input bands the builder holds: the one the main thread works on and those the reader thread makes
+// ahead of it.
+constexpr int kInputSlots = 3;
+
 // Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
 constexpr int64_t kMinCoarseBandRows = 16;
 
@@ -419,10 +423,10 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
                std::min(double(engine_workers), batch) * (2 * pw + cw) * 8;
     }
   }
-  // Two input bands (level integers and validity, 8 rows of samples as read), the next band's
-  // rows as the level keeps them (made on the reader's thread), D's fit windows.
-  bytes +=
-      2 * (B * W * 5 + std::min(B, 8.0) * W * 8) + B * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8) + W * 4;
+  // The input bands (level integers and validity, 8 rows of samples as read), the rows of those the
+  // reader works on ahead as the level keeps them (made on the reader's thread), D's fit windows.
+  bytes += kInputSlots * (B * W * 5 + std::min(B, 8.0) * W * 8) +
+           (kInputSlots - 1) * B * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8) + W * 4;
   if (!opt.use_fixed_filter)
     bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
   return bytes;
@@ -850,7 +854,8 @@ class StreamingBuilder {
     // each) are converted kReadRows rows at a time, so that they are not held for the whole band:
     // the two bands were most of a wide input's memory. The fill still sees the whole band.
     constexpr int64_t kReadRows = 8;
-    InputBand bands[2];
+    InputBand bands[kInputSlots];
+    constexpr int64_t kSlots = kInputSlots;
     for (InputBand& b : bands) {
       b.values.resize(size_t(std::min(B, kReadRows) * W));
       b.valid.resize(size_t(B * W));
@@ -913,34 +918,67 @@ class StreamingBuilder {
       if (b.voids) converter.fill(b.valid.data(), b.rows, b.ints.data());
       level_rows(b);
     };
-    take_spares(bands[0], std::min(B, H));
+    // The bands with rows below `stop`: band 0 here, the others on a reader thread kept for the whole
+    // read (threads > 1) that works up to kSlots - 1 bands ahead of this one. A thread started per
+    // band had to be scheduled among the busy coding threads before it read anything, and this thread
+    // waited 0.4-0.5 s of a 16-thread build for it (docs/scale.md).
+    const int64_t n_bands = std::max<int64_t>(1, (stop + B - 1) / B);
+    const auto band_y = [&](int64_t i) { return i * B; };
+    for (int64_t i = 0; i < std::min<int64_t>(kSlots, n_bands); ++i)
+      take_spares(bands[i % kSlots], std::min(B, H - band_y(i)));
     produce(bands[0], 0);
-    for (int64_t k = 0; bands[k & 1].y < H && bands[k & 1].rows > 0; ++k) {
-      InputBand& cur = bands[k & 1];
-      InputBand& next = bands[(k + 1) & 1];
-      const int64_t next_y = cur.y + cur.rows;
-      next.rows = 0;
-      std::exception_ptr producer_error;
-      std::thread producer;
-      if (next_y < stop) {
-        take_spares(next, std::min(B, H - next_y));
-        if (opt_.threads > 1)
-          producer = std::thread([&] {
-            try {
-              produce(next, next_y);
-            } catch (...) {
-              producer_error = std::current_exception();
-            }
-          });
-        else
-          produce(next, next_y);
-      }
-      struct Joiner {
-        std::thread& t;
-        ~Joiner() {
-          if (t.joinable()) t.join();
+    struct Reader {
+      std::mutex lock;
+      std::condition_variable wake;
+      int64_t produced = 1, consumed = 0;  // bands [0, produced) ready; [0, consumed) done with
+      bool stop = false;
+      std::exception_ptr error;
+      std::thread thread;
+      ~Reader() {
+        if (!thread.joinable()) return;
+        {
+          const std::lock_guard<std::mutex> hold(lock);
+          stop = true;
         }
-      } joiner{producer};
+        wake.notify_all();
+        thread.join();
+      }
+    } reader;
+    const bool ahead = opt_.threads > 1 && n_bands > 1;
+    if (ahead)
+      reader.thread = std::thread([&] {
+        for (int64_t i = 1; i < n_bands; ++i) {
+          {
+            std::unique_lock<std::mutex> hold(reader.lock);
+            reader.wake.wait(hold, [&] { return reader.stop || i < reader.consumed + kSlots; });
+            if (reader.stop) return;
+          }
+          try {
+            produce(bands[i % kSlots], band_y(i));
+          } catch (...) {
+            const std::lock_guard<std::mutex> hold(reader.lock);
+            reader.error = std::current_exception();
+            reader.wake.notify_all();
+            return;
+          }
+          {
+            const std::lock_guard<std::mutex> hold(reader.lock);
+            reader.produced = i + 1;
+          }
+          reader.wake.notify_all();
+        }
+      });
+    for (int64_t i = 0; i < n_bands; ++i) {
+      InputBand& cur = bands[i % kSlots];
+      if (i > 0 && ahead) {
+        const auto t_wait = Clock::now();
+        std::unique_lock<std::mutex> hold(reader.lock);
+        reader.wake.wait(hold, [&] { return reader.produced > i || reader.error; });
+        if (reader.produced <= i) std::rethrow_exception(reader.error);
+        wait_reader_ += seconds_since(t_wait);
+      } else if (i > 0) {
+        produce(cur, band_y(i));
+      }
       // Rows above a stripe's cascade serve only D's fit (and the fill's carry, in the converter).
       const bool in_cascade = cur.y + cur.rows > read_a_ && cur.y < read_b_;
       if (in_cascade) result_.void_count += cur.voids;
@@ -974,13 +1012,15 @@ class StreamingBuilder {
         drop_halo_rows(finest_);
       }
       if (filter_ready_) pump(false);
-      if (producer.joinable()) {
-        const auto t_wait = Clock::now();
-        producer.join();
-        wait_reader_ += seconds_since(t_wait);
+      // The slot's next band: its row buffers are allocated here (RowRing::take_spares says why).
+      if (i + kSlots < n_bands) take_spares(cur, std::min(B, H - band_y(i + kSlots)));
+      if (ahead) {
+        {
+          const std::lock_guard<std::mutex> hold(reader.lock);
+          reader.consumed = i + 1;
+        }
+        reader.wake.notify_all();
       }
-      if (producer_error) std::rethrow_exception(producer_error);
-      if (next_y >= stop) break;
     }
     if (!filter_ready_) start_cascade();
     if (read_a_ < read_b_)
