@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -23,7 +24,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "codec/crc32c.h"
 #include "core/bytes.h"
@@ -82,6 +85,29 @@ template <class Run> BuildResult seeking(BuildStripe stripe, Run&& run) {
     stripe.seek_above = false;
     return run(stripe);
   }
+}
+
+// Runs run(i) for i in [0, n) on `workers` threads (this one included), claimed in order; returns
+// after all, rethrowing the first exception (items not yet started are then skipped).
+template <class Run> void run_concurrently(int workers, size_t n, Run&& run) {
+  std::atomic<size_t> next{0};
+  std::atomic<bool> failed{false};
+  std::exception_ptr error;
+  std::mutex lock;
+  const auto work = [&] {
+    for (size_t i; !failed.load() && (i = next.fetch_add(1)) < n;) try {
+        run(i);
+      } catch (...) {
+        const std::lock_guard<std::mutex> hold(lock);
+        if (!error) error = std::current_exception();
+        failed.store(true);
+      }
+  };
+  std::vector<std::thread> threads;
+  for (int w = 1; w < std::min<int>(workers, int(n)); ++w) threads.emplace_back(work);
+  work();
+  for (std::thread& t : threads) t.join();
+  if (error) std::rethrow_exception(error);
 }
 
 // The shared coarse level: m - 4 (1/256 of the samples, so building levels 0..k once costs about
@@ -172,8 +198,8 @@ class PartWriter final : public PyramidSink {
   }
 
  private:
-  static int64_t& bands_written_total() {
-    static int64_t n = 0;
+  static std::atomic<int64_t>& bands_written_total() {
+    static std::atomic<int64_t> n{0};
     return n;
   }
   void append(const uint8_t* p, size_t n) {
@@ -465,6 +491,45 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   } catch (...) {
     error = std::current_exception();
   }
+  // This process's stripes are built `concurrency` at a time, each on threads / concurrency threads
+  // and an equal share of the memory budget (as many at once as the budget holds the fine-level
+  // builders' minimum; the T_{m-1} rows pass 1 keeps come off the top): with the coarse levels
+  // shared, a stripe on one thread scales as separate processes do, where the threads of one
+  // streaming build wait on its serial parts (docs/scale.md).
+  std::mutex result_lock;
+  const int threads = std::max(1, options.threads);
+  const bool keeps_fine_rows = [&] {
+    int64_t rows = 0;
+    for (int k : todo) rows += stripe_rows(k + 1) - stripe_rows(k);
+    return split >= 0 && split < levels - 2 && !todo.empty() &&
+           (options.memory_budget == 0 ||
+            double(rows) * double(info.width) <= double(options.memory_budget) / 4);
+  }();
+  const double fine_rows_bytes = [&] {
+    int64_t rows = 0;
+    for (int k : todo) rows += stripe_rows(k + 1) - stripe_rows(k);
+    return keeps_fine_rows ? double(rows) * double(info.width) : 0.0;
+  }();
+  int concurrency = int(std::clamp<size_t>(mine.size(), 1, size_t(threads)));
+  const auto concurrent_options = [&](int c) {
+    BuildOptions o = stripe_options;
+    o.threads = std::max(1, threads / c);
+    if (options.memory_budget > 0)
+      o.memory_budget = std::max<int64_t>(1, int64_t((double(options.memory_budget) - fine_rows_bytes) / c));
+    return o;
+  };
+  while (concurrency > 1) {
+    BuildOptions o = concurrent_options(concurrency);
+    if (options.memory_budget == 0) break;
+    const int64_t budget = o.memory_budget;
+    o.memory_budget = 0;
+    if (plan_build_memory(info, o, S, true, split >= 0 ? split + 1 : 0).minimum_bytes <= budget) break;
+    --concurrency;
+  }
+  if (concurrency > 1)
+    stripe_lines.push_back("stripes built " + std::to_string(concurrency) + " at a time, " +
+                           std::to_string(std::max(1, threads / concurrency)) + " thread(s) each");
+
   // Shared coarse levels: every stripe's rows of T_k (pass 1), exchanged, then levels 0..k once.
   std::vector<int32_t> coarse_reconstruction;
   std::vector<StripeLevelRows> kept;  // per stripe: the T_{m-1} rows its first pass kept
@@ -485,21 +550,29 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       // then runs once) where they fit: about a quarter of this process's stripes' samples as int32,
       // up to a quarter of the memory budget (the second pass's builder, with the coarse levels given,
       // holds far less than a whole build; docs/scale.md).
-      int64_t my_rows = 0;
-      for (int k : todo) my_rows += stripe_rows(k + 1) - stripe_rows(k);
-      const double fine_bytes = double(my_rows) * double(info.width);
-      const bool keep_fine =
-          !todo.empty() && (options.memory_budget == 0 || fine_bytes <= double(options.memory_budget) / 4);
+      const bool keep_fine = keeps_fine_rows;
       kept.resize(size_t(K));
+      std::vector<StripeLevelRows> made(mine.size());
       try {
         if (error) std::rethrow_exception(error);
-        for (int k : mine) {
-          StripeLevelRows rows;
+        const auto make = [&](size_t i, const BuildOptions& o) {
+          const int k = mine[i];
           const bool keep = keep_fine && std::find(todo.begin(), todo.end(), k) != todo.end();
-          keep_filter(seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
+          BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
             auto reader = open_input();
-            return build_stripe_level_rows(*reader, stripe_options, s, split, coder, rows, keep);
-          }));
+            return build_stripe_level_rows(*reader, o, s, split, coder, made[i], keep);
+          });
+          const std::lock_guard<std::mutex> hold(result_lock);
+          keep_filter(std::move(r));
+        };
+        // The first stripe fits D (when it is fitted) before the others start with it fixed.
+        size_t from = 0;
+        if (!stripe_options.use_fixed_filter && !mine.empty()) make(from++, stripe_options);
+        const BuildOptions o = concurrent_options(concurrency);
+        run_concurrently(concurrency, mine.size() - from, [&](size_t i) { make(from + i, o); });
+        for (size_t i = 0; i < mine.size(); ++i) {
+          const int k = mine[i];
+          StripeLevelRows& rows = made[i];
           const size_t at = blob.size();
           blob.resize(at + 16 + rows.rows.size() * 4);
           bytes::put_u64(blob.data() + at, uint64_t(rows.first_row));
@@ -562,15 +635,16 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   try {
     if (error) std::rethrow_exception(error);
     int done = 0;
-    for (int k : todo) {
+    const auto code = [&](size_t i, const BuildOptions& o) {
+      const int k = todo[i];
       const auto t_stripe = Clock::now();
       BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
         PartWriter part(part_path(so.directory, K, k), fp, k, K, info.width);
         auto reader = open_input();
         BuildResult built = split >= 0 ? build_pyramid_stripe_fine_levels(
-                                             *reader, stripe_options, s, split, coarse_reconstruction, coder,
-                                             part, k < int(kept.size()) ? &kept[size_t(k)] : nullptr)
-                                       : build_pyramid_stripe(*reader, stripe_options, s, coder, part);
+                                             *reader, o, s, split, coarse_reconstruction, coder, part,
+                                             k < int(kept.size()) ? &kept[size_t(k)] : nullptr)
+                                       : build_pyramid_stripe(*reader, o, s, coder, part);
         part.finish();
         return built;
       });
@@ -580,10 +654,15 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       line.precision(3);
       line << "stripe " << k << " of " << K << ": rows " << stripe_rows(k) << "-" << stripe_rows(k + 1)
            << " coded in " << seconds(t_stripe, Clock::now()) << " s";
+      const std::lock_guard<std::mutex> hold(result_lock);
       stripe_lines.push_back(line.str());
       keep_filter(std::move(r));
       if (so.progress) so.progress(double(++done) / double(std::max<size_t>(1, todo.size())));
-    }
+    };
+    size_t from = 0;
+    if (!stripe_options.use_fixed_filter && !todo.empty()) code(from++, stripe_options);
+    const BuildOptions o = concurrent_options(concurrency);
+    run_concurrently(concurrency, todo.size() - from, [&](size_t i) { code(from + i, o); });
   } catch (...) {
     error = std::current_exception();
   }

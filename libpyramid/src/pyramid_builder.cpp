@@ -379,9 +379,13 @@ std::vector<int64_t> level_band_rows(int level_count, int64_t finest_band_rows) 
 
 // The builder's bytes with c bands of each level in flight (plan_build_memory; docs/scale.md
 // "Memory model"). Doubles: a 40-level pyramid's shifts overflow int64, the heights bound the rows.
+// first: the coarsest level coded (a stripe's fine levels, k + 1, with the coarse ones given; 0 for
+// a whole build): the coarser levels hold nothing and set no lag.
 double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
-                      const std::vector<int64_t>& band_rows, int c, int64_t* finest_rows = nullptr) {
+                      const std::vector<int64_t>& band_rows, int c, int64_t* finest_rows = nullptr,
+                      int first = 0) {
   const int m = int(sizes.size()) - 1;
+  first = std::clamp(first, 0, m);
   const double W = double(info.width), H = double(info.height);
   const double B = double(std::min(opt.fill_band_rows, info.height));
   const auto scale = [m](int l) { return std::ldexp(1.0, m - l); };  // level l's spacing in input rows
@@ -392,15 +396,15 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   // arrive while a round is coded) and one fill band; at least D's fit rows. The main thread does
   // not read beyond it while a round is in flight.
   const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
-  double lag = 7 * scale(0) + 32.0 * (m + 1) + groups * double(band_rows[size_t(m)]) + B;
-  for (int l = 0; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
+  double lag = 7 * scale(first) + 32.0 * (m + 1 - first) + groups * double(band_rows[size_t(m)]) + B;
+  for (int l = first; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
   lag = std::min(H, std::max(lag, double(fit_rows_held(opt, info.height)) + B));
   if (finest_rows) *finest_rows = int64_t(lag);
   const bool narrow = info.sample_type == SampleType::Int16 && opt.value_scale == 1.0;
   // Level rows (int16 or int32) and their validity bits.
   double bytes = lag * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8);
   const int engine_workers = std::max(1, opt.threads);
-  for (int l = 0; l <= m; ++l) {
+  for (int l = first; l <= m; ++l) {
     const double w = double(sizes[size_t(l)].width), h = double(sizes[size_t(l)].height);
     const double S = std::min(h, double(band_rows[size_t(l)]));
     // The bands in flight: R (U's prediction until R is formed in place) and T^ (int32 each), the
@@ -414,7 +418,7 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
       const double held = std::min(2 * h, lag / scale(l) + 2 * c * double(band_rows[size_t(l)]) + 8);
       bytes += (held + c * S_finer / 2 + 8) * w * 4;
     }
-    if (l >= 1) {
+    if (l >= 1 && l > first) {
       // D engine of level l: its fine rows (int32), a batch of coarse rows (double and int32) and
       // each worker's fold / even / odd / sum rows.
       const double batch = std::max(1.0, std::floor(32.0 / scale(l)));
@@ -433,7 +437,7 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
 }
 
 BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const std::vector<GridSize>& sizes,
-                            const std::vector<int64_t>& band_rows, bool striped) {
+                            const std::vector<int64_t>& band_rows, bool striped, int first = 0) {
   // A stripe also reads the rows above its own in whole fill bands of samples (8 bytes each).
   const double extra =
       striped ? double(std::min(opt.fill_band_rows, info.height)) * double(info.width) * 8 : 0.0;
@@ -442,7 +446,7 @@ BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const
   const double per_thread = double(int64_t(256) << 10);
   const auto with_slack = [&](double items) { return items * 1.05 + per_thread * opt.threads; };
   const auto estimate = [&](int c) {
-    return with_slack(estimate_bytes(info, opt, sizes, band_rows, c) + extra);
+    return with_slack(estimate_bytes(info, opt, sizes, band_rows, c, nullptr, first) + extra);
   };
   BuildMemoryPlan plan;
   const double minimum = estimate(1);
@@ -460,8 +464,8 @@ BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const
     while (c > 1 && estimate(c) > double(opt.memory_budget)) --c;
   }
   plan.bands_in_flight = c;
-  plan.estimated_bytes = int64_t(
-      std::min(with_slack(estimate_bytes(info, opt, sizes, band_rows, c, &plan.finest_rows) + extra), 9e18));
+  plan.estimated_bytes = int64_t(std::min(
+      with_slack(estimate_bytes(info, opt, sizes, band_rows, c, &plan.finest_rows, first) + extra), 9e18));
   return plan;
 }
 
@@ -612,7 +616,11 @@ class StreamingBuilder {
     finest_band_rows_ = coder.band_rows();
     if (finest_band_rows_ < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
     level_band_rows_ = level_band_rows(level_count_, finest_band_rows_);
-    memory_ = plan_memory(info, opt, sizes_, level_band_rows_, stripe.y0 > 0);
+    // A stripe's fine levels (Fine) or rows (Rows) hold no coarse lag: the plan counts from there.
+    memory_ = plan_memory(info, opt, sizes_, level_band_rows_, stripe.y0 > 0,
+                          split_.kind == Split::Kind::Fine || split_.kind == Split::Kind::Rows
+                              ? std::max(0, split_.level + 1)
+                              : 0);
     if (split_.kind != Split::Kind::Whole) {
       if (split_.level < 0 || split_.level >= finest_)
         throw std::invalid_argument("pyramid: split level " + std::to_string(split_.level) + " outside 0.." +
@@ -1722,12 +1730,13 @@ class StreamingBuilder {
 }  // namespace
 
 BuildMemoryPlan plan_build_memory(const GridInfo& input, const BuildOptions& options, int64_t band_rows,
-                                  bool striped) {
+                                  bool striped, int first_level) {
   validate(options, input);
   if (band_rows < 1) throw std::invalid_argument("pyramid: coder band_rows must be >= 1");
   const std::vector<GridSize> sizes =
       pyramid_level_sizes({input.width, input.height}, options.level_count, options.min_coarsest_side);
-  return plan_memory(input, options, sizes, level_band_rows(int(sizes.size()), band_rows), striped);
+  return plan_memory(input, options, sizes, level_band_rows(int(sizes.size()), band_rows), striped,
+                     first_level);
 }
 
 BuildResult build_pyramid(BandReader& input, const BuildOptions& opt, ResidualCoder& coder,

@@ -62,9 +62,10 @@ struct BuildMemoryPlan {
 // (threads when the budget is 0). Throws std::invalid_argument naming the minimum when even one band
 // in flight does not fit, and as build_pyramid for unusable options. `band_rows`: the coder's
 // (ResidualCoder::band_rows); `striped`: a stripe of a striped build (it also holds a fill band of
-// samples read above its rows). Thread-safe.
+// samples read above its rows). `first_level`: a stripe's fine-level build
+// (build_pyramid_stripe_fine_levels at k = first_level - 1), which holds no coarse level. Thread-safe.
 BuildMemoryPlan plan_build_memory(const GridInfo& input, const BuildOptions& options, int64_t band_rows,
-                                  bool striped = false);
+                                  bool striped = false, int first_level = 0);
 
 // Everything a decoder needs besides the per-band bytes.
 struct PyramidHeader {
