@@ -110,11 +110,24 @@ template <class Run> void run_concurrently(int workers, size_t n, Run&& run) {
   if (error) std::rethrow_exception(error);
 }
 
-// The shared coarse level: m - 4 (1/256 of the samples, so building levels 0..k once costs about
-// 0.5 % of the build, and each stripe's cone of needed bands stops 4 levels up), with two or more
-// stripes; -1: none (every stripe codes every level).
-int shared_level(int levels, int stripes, bool wanted) {
-  return wanted && stripes >= 2 && levels >= 2 ? std::max(0, levels - 1 - 4) : -1;
+// The shared coarse level k, with two or more stripes (-1: none, every stripe codes every level).
+// The higher k, the shorter each stripe's cone of needed bands (they stop at level k + 1) but the
+// more the coarse levels cost, and every process builds them: m - 2 for one process (levels 0..m-2
+// are 1/12 of the samples, built once on all its threads), m - 3 for several (1/48 each). One
+// process, one thread, 8192^2 Everest mirror, --step 2, T_{m-1} kept (user CPU, whole build 2.97 s):
+// 4 / 16 stripes 3.25 / 3.88 s at m - 2, 3.33 / 4.37 s at m - 3, 3.39 / 4.68 s at m - 4. T_k and
+// T^_k are held whole (8 bytes a sample of level k): k comes down until they take at most an eighth
+// of the memory budget.
+int shared_level(const std::vector<GridSize>& sizes, int stripes, int processes, bool wanted,
+                 int64_t budget) {
+  const int m = int(sizes.size()) - 1;
+  if (!wanted || stripes < 2 || m < 1) return -1;
+  int k = std::max(0, m - (processes > 1 ? 3 : 2));
+  const auto bytes = [&](int l) {
+    return 8.0 * double(sizes[size_t(l)].width) * double(sizes[size_t(l)].height);
+  };
+  while (k > 0 && budget > 0 && bytes(k) > double(budget) / 8) --k;
+  return k;
 }
 
 // The builder's output of one stripe, written to a temporary part and renamed when complete.
@@ -438,7 +451,9 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const uint32_t fp = codec::crc32c(so.fingerprint.data(), so.fingerprint.size());
   const int levels =
       int(pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side).size());
-  const int split = shared_level(levels, K, so.share_coarse_levels);
+  const std::vector<GridSize> level_sizes =
+      pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side);
+  const int split = shared_level(level_sizes, K, ranks, so.share_coarse_levels, options.memory_budget);
   const std::vector<int64_t> bounds = stripe_bounds(H, S, K, levels - 1, split >= 0);
   const auto stripe_rows = [&](int k) { return bounds[size_t(k)]; };
 
@@ -505,17 +520,21 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
            (options.memory_budget == 0 ||
             double(rows) * double(info.width) <= double(options.memory_budget) / 4);
   }();
-  const double fine_rows_bytes = [&] {
+  const double held_bytes = [&] {
     int64_t rows = 0;
     for (int k : todo) rows += stripe_rows(k + 1) - stripe_rows(k);
-    return keeps_fine_rows ? double(rows) * double(info.width) : 0.0;
+    // With T_k and T^_k, held whole while the stripes are built.
+    const double shared = split >= 0 ? 8.0 * double(level_sizes[size_t(split)].width) *
+                                           double(level_sizes[size_t(split)].height)
+                                     : 0.0;
+    return (keeps_fine_rows ? double(rows) * double(info.width) : 0.0) + shared;
   }();
   int concurrency = int(std::clamp<size_t>(mine.size(), 1, size_t(threads)));
   const auto concurrent_options = [&](int c) {
     BuildOptions o = stripe_options;
     o.threads = std::max(1, threads / c);
     if (options.memory_budget > 0)
-      o.memory_budget = std::max<int64_t>(1, int64_t((double(options.memory_budget) - fine_rows_bytes) / c));
+      o.memory_budget = std::max<int64_t>(1, int64_t((double(options.memory_budget) - held_bytes) / c));
     return o;
   };
   while (concurrency > 1) {
