@@ -259,6 +259,16 @@ template <class T> class RowRing {
   template <class Out> void copy_rows(int64_t r0, int64_t n, Out* out) const {
     for (int64_t k = 0; k < n; ++k) std::copy(row(r0 + k), row(r0 + k) + width_, out + k * width_);
   }
+  // Moves rows [r0, r1) out (first() <= r0 <= r1 <= end()); the ring is left empty, its spares freed.
+  std::vector<std::vector<T>> take(int64_t r0, int64_t r1) {
+    std::vector<std::vector<T>> out;
+    out.reserve(size_t(r1 - r0));
+    for (int64_t r = r0; r < r1; ++r) out.push_back(std::move(rows_[size_t(r - first_)]));
+    rows_.clear();
+    free_.clear();
+    first_ = end_;
+    return out;
+  }
 
  private:
   std::deque<std::vector<T>> rows_;
@@ -648,7 +658,9 @@ class StreamingBuilder {
     if (split_.kind == Split::Kind::Fine && split_.fine && split_.level < finest_ - 1 && read_a_ < read_b_) {
       const int64_t w = sizes_[size_t(finest_ - 1)].width;
       if (split_.fine->fine_first_row != read_a_ >> 1 ||
-          int64_t(split_.fine->fine_rows.size()) != coarse_extent(read_b_ - read_a_) * w)
+          int64_t(split_.fine->fine_rows.size()) != coarse_extent(read_b_ - read_a_) ||
+          std::any_of(split_.fine->fine_rows.begin(), split_.fine->fine_rows.end(),
+                      [&](const std::vector<int32_t>& row) { return int64_t(row.size()) != w; }))
         throw std::invalid_argument("pyramid: the given level " + std::to_string(finest_ - 1) +
                                     " rows are not this stripe's");
       fine_lo_ = fed_ = read_a_ >> 1;
@@ -1057,8 +1069,8 @@ class StreamingBuilder {
       const LevelRows& tf = levels_[size_t(finest_ - 1)];
       if (tf.first() > fine_lo_ || tf.end() < fine_hi_)
         throw std::logic_error("pyramid: level rows not made");
-      fine_out_.resize(size_t((fine_hi_ - fine_lo_) * sizes_[size_t(finest_ - 1)].width));
-      tf.copy_rows(fine_lo_, fine_hi_ - fine_lo_, fine_out_.data());
+      // Moved out of the level's store, not copied: they are a quarter of the stripe's samples.
+      fine_out_ = levels_[size_t(finest_ - 1)].wide_rows().take(fine_lo_, fine_hi_);
     }
     return finish_result(t_start, wall_read, cpu_read, wall_final);
   }
@@ -1099,7 +1111,7 @@ class StreamingBuilder {
   // Rows: the stripe's rows of level k, from rows_first() on; with keep_fine, those of level m-1.
   std::vector<int32_t>& rows_out() { return rows_out_; }
   int64_t rows_first() const { return rows_lo_; }
-  std::vector<int32_t>& fine_out() { return fine_out_; }
+  std::vector<std::vector<int32_t>>& fine_out() { return fine_out_; }
   int64_t fine_first() const { return fine_lo_; }
 
  private:
@@ -1249,9 +1261,8 @@ class StreamingBuilder {
   void feed_fine(int64_t end) {
     end = std::min(end, fine_hi_);
     if (end <= fed_) return;
-    const int64_t w = sizes_[size_t(finest_ - 1)].width;
-    take_rows(finest_ - 1, split_.fine->fine_rows.data() + (fed_ - fine_lo_) * w, end - fed_);
-    fed_ = end;
+    for (; fed_ < end; ++fed_)
+      take_rows(finest_ - 1, split_.fine->fine_rows[size_t(fed_ - fine_lo_)].data(), 1);
   }
 
   // A stripe's rows above its first needed band only feed D (its halo): once the cascade has them,
@@ -1699,7 +1710,8 @@ class StreamingBuilder {
   int entry_ = 0;                        // the level whose rows come in (the input's, but for Coarse)
   int64_t given_lo_ = 0, given_hi_ = 0;  // Fine: the rows of T^_k held
   int64_t rows_lo_ = 0, rows_hi_ = 0;    // Rows: the rows of level k made
-  std::vector<int32_t> rows_out_, fine_out_;
+  std::vector<int32_t> rows_out_;
+  std::vector<std::vector<int32_t>> fine_out_;
   // T_{m-1} rows: kept by Rows (keep_fine), fed by Fine (fed_fine_: up to fed_) instead of D's finest engine.
   int64_t fine_lo_ = 0, fine_hi_ = 0, fed_ = 0;
   bool fed_fine_ = false;

@@ -213,7 +213,7 @@ struct StripeLevelRows {
   // With keep_fine (and k < m - 1): the rows of T_{m-1} the stripe's fine-level build runs D on, so
   // that it need not run D's finest level again (a quarter of the stripe's samples, as int32).
   int64_t fine_first_row = 0;
-  std::vector<int32_t> fine_rows;
+  std::vector<std::vector<int32_t>> fine_rows;  // one vector per row
 };
 BuildResult build_stripe_level_rows(BandReader& input, const BuildOptions& options, const BuildStripe& stripe,
                                     int level, ResidualCoder& coder, StripeLevelRows& out,
