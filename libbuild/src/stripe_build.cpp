@@ -113,16 +113,18 @@ template <class Run> void run_concurrently(int workers, size_t n, Run&& run) {
 // The shared coarse level k, with two or more stripes (-1: none, every stripe codes every level).
 // The higher k, the shorter each stripe's cone of needed bands (they stop at level k + 1) but the
 // more the coarse levels cost, and every process builds them: m - 2 for one process (levels 0..m-2
-// are 1/12 of the samples, built once on all its threads), m - 3 for several (1/48 each). One
+// are 1/12 of the samples, built once on all its threads), m - 4 for several (1/192 each). One
 // process, one thread, 8192^2 Everest mirror, --step 2, T_{m-1} kept (user CPU, whole build 2.97 s):
-// 4 / 16 stripes 3.25 / 3.88 s at m - 2, 3.33 / 4.37 s at m - 3, 3.39 / 4.68 s at m - 4. T_k and
-// T^_k are held whole (8 bytes a sample of level k): k comes down until they take at most an eighth
-// of the memory budget.
+// 4 / 16 stripes 3.25 / 3.88 s at m - 2, 3.33 / 4.37 s at m - 3, 3.39 / 4.68 s at m - 4. MPI on the
+// 2-core VM, 16384^2 --lossless --threads 1: -np 2 8.72-9.53 s at m - 3 against 8.20-8.25 s at m - 4
+// (8b251b7: 7.99-8.18 s), -np 4 (oversubscribed) 14.27 / 14.18 s of user CPU in all (8b251b7 14.33).
+// T_k and T^_k are held whole (8 bytes a sample of level k): k comes down until they take at most an
+// eighth of the memory budget.
 int shared_level(const std::vector<GridSize>& sizes, int stripes, int processes, bool wanted,
                  int64_t budget) {
   const int m = int(sizes.size()) - 1;
   if (!wanted || stripes < 2 || m < 1) return -1;
-  int k = std::max(0, m - (processes > 1 ? 3 : 2));
+  int k = std::max(0, m - (processes > 1 ? 4 : 2));
   const auto bytes = [&](int l) {
     return 8.0 * double(sizes[size_t(l)].width) * double(sizes[size_t(l)].height);
   };
