@@ -451,10 +451,9 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const int64_t bands = (H + S - 1) / S;
   const int K = int(std::clamp<int64_t>(so.stripes, 1, std::max<int64_t>(1, bands)));
   const uint32_t fp = codec::crc32c(so.fingerprint.data(), so.fingerprint.size());
-  const int levels =
-      int(pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side).size());
   const std::vector<GridSize> level_sizes =
       pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side);
+  const int levels = int(level_sizes.size());
   const int split = shared_level(level_sizes, K, ranks, so.share_coarse_levels, options.memory_budget);
   const std::vector<int64_t> bounds = stripe_bounds(H, S, K, levels - 1, split >= 0);
   const auto stripe_rows = [&](int k) { return bounds[size_t(k)]; };
@@ -550,6 +549,14 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   if (concurrency > 1)
     stripe_lines.push_back("stripes built " + std::to_string(concurrency) + " at a time, " +
                            std::to_string(std::max(1, threads / concurrency)) + " thread(s) each");
+  // Runs build(i, options) for i in [0, n), `concurrency` at a time; where D is fitted (not fixed),
+  // item 0 first and alone, with all the threads, so that the others start with its filter fixed.
+  const auto build_all = [&](size_t n, const std::function<void(size_t, const BuildOptions&)>& build) {
+    size_t from = 0;
+    if (!stripe_options.use_fixed_filter && n > 0) build(from++, stripe_options);
+    const BuildOptions o = concurrent_options(concurrency);
+    run_concurrently(concurrency, n - from, [&](size_t i) { build(from + i, o); });
+  };
 
   // Shared coarse levels: every stripe's rows of T_k (pass 1), exchanged, then levels 0..k once.
   std::vector<int32_t> coarse_reconstruction;
@@ -563,22 +570,17 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
                     coarse.intact();
     }
     if (!group.all_true(!error && todo.empty() && coarse_done)) {
-      const GridSize sk =
-          pyramid_level_sizes({info.width, H}, options.level_count, options.min_coarsest_side)[size_t(split)];
+      const GridSize sk = level_sizes[size_t(split)];
       std::vector<uint8_t> blob;
       const auto t_rows = Clock::now();
-      // The first pass keeps each stripe's T_{m-1} rows for the second (D's finest level, most of D,
-      // then runs once) where they fit: about a quarter of this process's stripes' samples as int32,
-      // up to a quarter of the memory budget (the second pass's builder, with the coarse levels given,
-      // holds far less than a whole build; docs/scale.md).
-      const bool keep_fine = keeps_fine_rows;
       kept.resize(size_t(K));
       std::vector<StripeLevelRows> made(mine.size());
       try {
         if (error) std::rethrow_exception(error);
         const auto make = [&](size_t i, const BuildOptions& o) {
           const int k = mine[i];
-          const bool keep = keep_fine && std::find(todo.begin(), todo.end(), k) != todo.end();
+          // Only a stripe still to be coded needs its T_{m-1} rows (keeps_fine_rows above says where).
+          const bool keep = keeps_fine_rows && std::find(todo.begin(), todo.end(), k) != todo.end();
           BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
             auto reader = open_input();
             return build_stripe_level_rows(*reader, o, s, split, coder, made[i], keep);
@@ -586,11 +588,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
           const std::lock_guard<std::mutex> hold(result_lock);
           keep_filter(std::move(r));
         };
-        // The first stripe fits D (when it is fitted) before the others start with it fixed.
-        size_t from = 0;
-        if (!stripe_options.use_fixed_filter && !mine.empty()) make(from++, stripe_options);
-        const BuildOptions o = concurrent_options(concurrency);
-        run_concurrently(concurrency, mine.size() - from, [&](size_t i) { make(from + i, o); });
+        build_all(mine.size(), make);
         for (size_t i = 0; i < mine.size(); ++i) {
           const int k = mine[i];
           StripeLevelRows& rows = made[i];
@@ -680,10 +678,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       keep_filter(std::move(r));
       if (so.progress) so.progress(double(++done) / double(std::max<size_t>(1, todo.size())));
     };
-    size_t from = 0;
-    if (!stripe_options.use_fixed_filter && !todo.empty()) code(from++, stripe_options);
-    const BuildOptions o = concurrent_options(concurrency);
-    run_concurrently(concurrency, todo.size() - from, [&](size_t i) { code(from + i, o); });
+    build_all(todo.size(), code);
   } catch (...) {
     error = std::current_exception();
   }

@@ -33,6 +33,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
 #include <utility>
 
 #include "pyramid/internal/filter_downsample.h"
@@ -651,20 +652,19 @@ class StreamingBuilder {
     if (split_.kind == Split::Kind::Rows && split_.keep_fine && split_.level < finest_ - 1) {
       // The rows of T_{m-1} the stripe's Fine build runs its cascade on: its plan's.
       plan_stripe(stripe, Split::Kind::Fine);
-      if (read_a_ < read_b_)
-        fine_lo_ = read_a_ >> 1, fine_hi_ = (read_a_ >> 1) + coarse_extent(read_b_ - read_a_);
+      if (read_a_ < read_b_) std::tie(fine_lo_, fine_hi_) = cascade_fine_rows();
     }
     plan_stripe(split_.kind == Split::Kind::Coarse ? BuildStripe{0, info.height} : stripe, split_.kind);
     if (split_.kind == Split::Kind::Fine && split_.fine && split_.level < finest_ - 1 && read_a_ < read_b_) {
       const int64_t w = sizes_[size_t(finest_ - 1)].width;
-      if (split_.fine->fine_first_row != read_a_ >> 1 ||
-          int64_t(split_.fine->fine_rows.size()) != coarse_extent(read_b_ - read_a_) ||
+      std::tie(fine_lo_, fine_hi_) = cascade_fine_rows();
+      if (split_.fine->fine_first_row != fine_lo_ ||
+          int64_t(split_.fine->fine_rows.size()) != fine_hi_ - fine_lo_ ||
           std::any_of(split_.fine->fine_rows.begin(), split_.fine->fine_rows.end(),
                       [&](const std::vector<int32_t>& row) { return int64_t(row.size()) != w; }))
         throw std::invalid_argument("pyramid: the given level " + std::to_string(finest_ - 1) +
                                     " rows are not this stripe's");
-      fine_lo_ = fed_ = read_a_ >> 1;
-      fine_hi_ = fine_lo_ + coarse_extent(read_b_ - read_a_);
+      fed_ = fine_lo_;
       fed_fine_ = true;
       entry_ = finest_ - 1;  // D's finest engine is not needed
     }
@@ -802,6 +802,11 @@ class StreamingBuilder {
     const int64_t align = finest_ >= 40 ? H : std::min(H, std::lcm(int64_t(1) << finest_, fill));
     read_a_ = std::max<int64_t>(0, a) / align * align;
     read_b_ = std::min(H, round_up(std::max<int64_t>(0, b), align));
+  }
+
+  // The rows of T_{m-1} D's finest engine makes over the cascade's input rows [read_a_, read_b_).
+  std::pair<int64_t, int64_t> cascade_fine_rows() const {
+    return {read_a_ >> 1, (read_a_ >> 1) + coarse_extent(read_b_ - read_a_)};
   }
 
   // Level rows -> finest rows (saturated at the input height) and back.

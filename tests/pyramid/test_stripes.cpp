@@ -95,6 +95,34 @@ class CoarseRecorder final : public PyramidSink {
   GridSize size_;
 };
 
+// The coder and build options both stripe tests use: many bands, so that stripes cut every level.
+PtcCoderOptions small_band_coder(double step) {
+  PtcCoderOptions co;
+  co.step = step;
+  co.tile_size = 16;
+  co.band_rows = 32;
+  return co;
+}
+BuildOptions small_build_options(int levels) {
+  BuildOptions bo;
+  bo.level_count = levels;
+  bo.min_coarsest_side = 16;
+  bo.threads = 2;
+  bo.fit_rows = 96;
+  bo.fill_band_rows = 8;  // stripe reads aligned to 8 rows (and 2^m): little slack beyond the D halo
+  return bo;
+}
+
+// Every level's bands put together from the stripes equal the whole build's, band for band.
+void check_bands_equal(const std::vector<std::vector<Band>>& joined,
+                       const std::vector<std::vector<Band>>& whole) {
+  for (size_t l = 0; l < joined.size(); ++l) {
+    INFO("level " << l);
+    REQUIRE(joined[l].size() == whole[l].size());
+    for (size_t b = 0; b < joined[l].size(); ++b) CHECK(joined[l][b] == whole[l][b]);
+  }
+}
+
 }  // namespace
 
 TEST_CASE("shared coarse levels: stripes' level rows, coarse levels and fine levels equal the whole build",
@@ -107,16 +135,8 @@ TEST_CASE("shared coarse levels: stripes' level rows, coarse levels and fine lev
   const Case cases[] = {{257, 700, false, 1}, {301, 517, true, 3}, {120, 1201, false, 2}};
   for (const Case& c : cases) {
     const Heightmap map = rough(c.w, c.h, uint32_t(c.w) + 5, c.voids);
-    PtcCoderOptions co;
-    co.step = c.step;
-    co.tile_size = 16;
-    co.band_rows = 32;
-    PtcResidualCoder coder(co);
-    BuildOptions bo;
-    bo.min_coarsest_side = 16;
-    bo.threads = 2;
-    bo.fit_rows = 96;
-    bo.fill_band_rows = 8;
+    PtcResidualCoder coder(small_band_coder(c.step));
+    const BuildOptions bo = small_build_options(0);
     Recorder whole;
     const BuildResult ref = build_pyramid(map, bo, coder, whole);
     const int m = int(ref.header.levels.size()) - 1;
@@ -174,11 +194,7 @@ TEST_CASE("shared coarse levels: stripes' level rows, coarse levels and fine lev
           for (size_t l = size_t(k) + 1; l < part.levels.size(); ++l)
             joined[l].insert(joined[l].end(), part.levels[l].begin(), part.levels[l].end());
         }
-        for (size_t l = 0; l < joined.size(); ++l) {
-          INFO("level " << l);
-          REQUIRE(joined[l].size() == whole.levels[l].size());
-          for (size_t b = 0; b < joined[l].size(); ++b) CHECK(joined[l][b] == whole.levels[l][b]);
-        }
+        check_bands_equal(joined, whole.levels);
       }
     // Unusable splits.
     Recorder sink;
@@ -205,17 +221,8 @@ TEST_CASE("stripe builds put together equal the whole build", "[pyramid][stripes
   const Case cases[] = {{257, 700, false, 1, 0}, {301, 517, true, 3, 0}, {120, 1201, false, 2, 5}};
   for (const Case& c : cases) {
     const Heightmap map = rough(c.w, c.h, uint32_t(c.w), c.voids);
-    PtcCoderOptions co;
-    co.step = c.step;
-    co.tile_size = 16;
-    co.band_rows = 32;  // many bands, so that stripes cut every level
-    PtcResidualCoder coder(co);
-    BuildOptions bo;
-    bo.level_count = c.levels;
-    bo.min_coarsest_side = 16;
-    bo.threads = 2;
-    bo.fit_rows = 96;
-    bo.fill_band_rows = 8;  // stripe reads aligned to 8 rows (and 2^m): little slack beyond the D halo
+    PtcResidualCoder coder(small_band_coder(c.step));
+    const BuildOptions bo = small_build_options(c.levels);
     Recorder whole;
     const BuildResult ref = build_pyramid(map, bo, coder, whole);
     for (int stripes : {1, 2, 3, 7}) {
@@ -231,11 +238,7 @@ TEST_CASE("stripe builds put together equal the whole build", "[pyramid][stripes
         for (size_t l = 0; l < part.levels.size(); ++l)
           joined[l].insert(joined[l].end(), part.levels[l].begin(), part.levels[l].end());
       }
-      for (size_t l = 0; l < joined.size(); ++l) {
-        INFO("level " << l);
-        REQUIRE(joined[l].size() == whole.levels[l].size());
-        for (size_t b = 0; b < joined[l].size(); ++b) CHECK(joined[l][b] == whole.levels[l][b]);
-      }
+      check_bands_equal(joined, whole.levels);
     }
     // An empty stripe codes nothing and fits the same D.
     Recorder none;
