@@ -37,7 +37,7 @@ class MpiWorld final : public ProcessGroup {
     MPI_Allreduce(&in, &out, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
     return out != 0;
   }
-  std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) override {
+  std::vector<std::vector<uint8_t>> all_gather(std::vector<uint8_t> mine) override {
     std::vector<long long> sizes(size_t(size_), 0);
     long long n = (long long)mine.size();
     MPI_Allgather(&n, 1, MPI_LONG_LONG, sizes.data(), 1, MPI_LONG_LONG, MPI_COMM_WORLD);
@@ -47,7 +47,7 @@ class MpiWorld final : public ProcessGroup {
     for (int r = 0; r < size_; ++r) {
       std::vector<uint8_t>& v = all[size_t(r)];
       if (r == rank_)
-        v = mine;
+        v = std::move(mine);
       else
         v.resize(size_t(sizes[size_t(r)]));
       for (long long at = 0; at < sizes[size_t(r)]; at += kPiece) {

@@ -612,7 +612,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       // T_k put together: the stripes' shares tile the level (checked: a gap would be a logic error).
       std::vector<int32_t> tk(size_t(sk.width * sk.height));
       int64_t covered = 0;
-      for (const std::vector<uint8_t>& b : group.all_gather(blob))
+      for (const std::vector<uint8_t>& b : group.all_gather(std::move(blob)))
         for (size_t at = 0; at < b.size();) {
           const int64_t first = int64_t(bytes::get_u64(b.data() + at));
           const uint64_t n = bytes::get_u64(b.data() + at + 8);

@@ -30,8 +30,9 @@ class ProcessGroup {
   virtual int size() const = 0;
   // Collective (every process calls it, a barrier): true when every process passed true.
   virtual bool all_true(bool value) = 0;
-  // Collective: every process's `mine`, in rank order (this process's own included).
-  virtual std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) = 0;
+  // Collective: every process's `mine`, in rank order (this process's own included, moved: the
+  // level rows it carries are tens of MiB, and one process alone would otherwise copy them).
+  virtual std::vector<std::vector<uint8_t>> all_gather(std::vector<uint8_t> mine) = 0;
 };
 
 // This process alone.
@@ -40,7 +41,11 @@ class SingleProcess final : public ProcessGroup {
   int rank() const override { return 0; }
   int size() const override { return 1; }
   bool all_true(bool value) override { return value; }
-  std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) override { return {mine}; }
+  std::vector<std::vector<uint8_t>> all_gather(std::vector<uint8_t> mine) override {
+    std::vector<std::vector<uint8_t>> all(1);
+    all[0] = std::move(mine);
+    return all;
+  }
 };
 
 struct StripeBuildOptions {
