@@ -43,7 +43,10 @@ struct BuildOptions {
   int64_t fit_rows = 512;       // D is fitted on windows within the top fit_rows input rows
   // Bytes the builder may hold (its estimate, plan_build_memory): bands of every level are coded at
   // most bands_in_flight at a time, fewer than `threads` when the budget is tight (the bytes are the
-  // same: only the schedule changes). 0: no budget (threads bands in flight).
+  // same: only the schedule changes). 0: no budget (threads bands in flight). The estimate allows
+  // 256 KiB of heap slack per thread, which holds where the allocator's arenas are few: glibc's
+  // default (8 per core) let a 64-thread build exceed its budget by 7 % on 16 cores; pyramid-build
+  // sets M_ARENA_MAX to 8, and an embedding process with many cores should do the same.
   int64_t memory_budget = 0;
 };
 
