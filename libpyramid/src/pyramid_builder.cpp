@@ -730,8 +730,9 @@ class StreamingBuilder {
   // input's) makes at most 5 rows wrong at each end of every level (11 taps: coarse row j reads fine
   // rows 2j - 5 .. 2j + 5, so t wrong rows at an end give floor((t + 4) / 2) + 1 coarse ones: 3,
   // 4, 5, 5, ...; the test cuts stripes everywhere and compares bytes). read_a_ and read_b_ are
-  // multiples of 2^m (each level's rows then keep the input's parity) and of the fill band (a
-  // band is filled whole, as in the whole build), or the input's end.
+  // multiples of 2^(m - c), c the coarsest level the cascade makes (each level's rows then keep the
+  // input's parity), and of the fill band (a band is filled whole, as in the whole build), or the
+  // input's end.
   void plan_stripe(const BuildStripe& stripe, Split::Kind kind) {
     const int64_t H = info_.height;
     if (stripe.y0 < 0 || stripe.y1 < stripe.y0 || stripe.y1 > H)
@@ -798,8 +799,15 @@ class StreamingBuilder {
       read_a_ = read_b_ = 0;
       return;
     }
+    // The cascade keeps each level's row parity down to the coarsest level it makes: a stripe's Rows
+    // build (down to k) needs multiples of 2^(m-k), its Fine build 2^(m-k-1), not 2^m. With 2^m, a
+    // 1024-row stripe of 16384^2 (m = 7) ran its Rows cascade on 1280 rows.
+    const int coarsest = kind == Split::Kind::Rows   ? split_.level
+                         : kind == Split::Kind::Fine ? split_.level + 1
+                                                     : 0;
+    const int shift = finest_ - coarsest;
     const int64_t fill = std::min(opt_.fill_band_rows, H);
-    const int64_t align = finest_ >= 40 ? H : std::min(H, std::lcm(int64_t(1) << finest_, fill));
+    const int64_t align = shift >= 40 ? H : std::min(H, std::lcm(int64_t(1) << shift, fill));
     read_a_ = std::max<int64_t>(0, a) / align * align;
     read_b_ = std::min(H, round_up(std::max<int64_t>(0, b), align));
   }
@@ -1231,7 +1239,8 @@ class StreamingBuilder {
     emit_.resize(size_t(level_count_));
     emitted_.resize(size_t(level_count_));
     // The cascade runs on the stripe's rows [read_a_, read_b_) as on a grid of its own (the whole
-    // build: the input); read_a_ is a multiple of 2^m, so level l's rows start at read_a_ >> (m - l).
+    // build: the input); read_a_ is a multiple of 2^(m - stop_), so level l's rows start at
+    // read_a_ >> (m - l).
     int64_t cascade_height = read_b_ - read_a_;
     for (int l = finest_; l > stop_ && cascade_height > 0; --l) {
       if (l > entry_) {
