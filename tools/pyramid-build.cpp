@@ -269,7 +269,7 @@ int main(int argc, char** argv) {
   // The memory budget counts what the builder holds plus a small slack per thread; glibc keeps up to
   // 8 arenas per core, and freed blocks in each. On the 16-core host a 32768^2 --step 2 build at 64
   // threads peaked at 1098 MiB under the 1 GiB default; on this VM with 128 arenas allowed 1042 MiB,
-  // with 16 / 8 / 4 arenas 953 / 949 / 919 MiB at the same speed (docs/scale.md "Memory model").
+  // with 16 / 8 / 4 arenas 953 / 949 / 919 MiB at the same speed (docs/scale.md "The budget").
   mallopt(M_ARENA_MAX, 8);
   return cli::run_tool("pyramid-build", [&] { return run(argc, argv); });
 }

@@ -70,9 +70,11 @@ constexpr double kWaveletSum = 514;
 
 // The wavelet D's fused passes (DownsampleEngine::compute_row): each output in one pass with the
 // taps as constants (the outer taps are zero), the sums in the order of the per-tap loops they
-// replaced, so the doubles are the same to the bit (16384^2 at one thread: the D cascade 1.08-1.18 ->
-// 0.83-1.01 s). An AVX2 clone of the two (no FMA: the same doubles) measured within noise of this.
-static_assert(kWaveletTaps[0] == 0 && kWaveletTaps[10] == 0, "the fused wavelet D skips the outer taps");
+// replaced, so the doubles are the same to the bit (16384^2 at one thread, alternated: the D cascade
+// 1.08-1.18 -> 0.91-0.98 s). An AVX2 clone of the two (no FMA: the same doubles) measured within noise
+// of this. The row pointers below assume radius 5.
+static_assert(DownsampleFilter::kRadius == 5 && kWaveletTaps[0] == 0 && kWaveletTaps[10] == 0,
+              "the fused wavelet D reads rows 2j - 4 .. 2j + 4 (the outer taps are zero)");
 constexpr double kH0 = kWaveletTaps[5] / kWaveletSum, kH1 = kWaveletTaps[6] / kWaveletSum,
                  kH2 = kWaveletTaps[7] / kWaveletSum, kH3 = kWaveletTaps[8] / kWaveletSum,
                  kH4 = kWaveletTaps[9] / kWaveletSum;

@@ -645,9 +645,7 @@ class StreamingBuilder {
         throw std::invalid_argument("pyramid: coarse levels need the fixed filter of the stripes");
     }
     // The coarsest level the D cascade makes, and the level whose rows come in.
-    stop_ = split_.kind == Split::Kind::Rows   ? split_.level
-            : split_.kind == Split::Kind::Fine ? split_.level + 1
-                                               : 0;
+    stop_ = cascade_stop(split_.kind);
     entry_ = split_.kind == Split::Kind::Coarse ? split_.level : finest_;
     if (split_.kind == Split::Kind::Rows && split_.keep_fine && split_.level < finest_ - 1) {
       // The rows of T_{m-1} the stripe's Fine build runs its cascade on: its plan's.
@@ -721,6 +719,12 @@ class StreamingBuilder {
   }
   StreamingBuilder(const StreamingBuilder&) = delete;
   StreamingBuilder& operator=(const StreamingBuilder&) = delete;
+
+  // The coarsest level the D cascade of a `kind` build makes (its rows of level k for Rows; levels
+  // k + 1 .. m for Fine; every level otherwise).
+  int cascade_stop(Split::Kind kind) const {
+    return kind == Split::Kind::Rows ? split_.level : kind == Split::Kind::Fine ? split_.level + 1 : 0;
+  }
 
   // Which bands the stripe owns and codes, and which input rows its D cascade runs on (the whole
   // build: every band, all rows). own: the bands whose first row times 2^(m-l) lies in the stripe.
@@ -802,10 +806,7 @@ class StreamingBuilder {
     // The cascade keeps each level's row parity down to the coarsest level it makes: a stripe's Rows
     // build (down to k) needs multiples of 2^(m-k), its Fine build 2^(m-k-1), not 2^m. With 2^m, a
     // 1024-row stripe of 16384^2 (m = 7) ran its Rows cascade on 1280 rows.
-    const int coarsest = kind == Split::Kind::Rows   ? split_.level
-                         : kind == Split::Kind::Fine ? split_.level + 1
-                                                     : 0;
-    const int shift = finest_ - coarsest;
+    const int shift = finest_ - cascade_stop(kind);
     const int64_t fill = std::min(opt_.fill_band_rows, H);
     const int64_t align = shift >= 40 ? H : std::min(H, std::lcm(int64_t(1) << shift, fill));
     read_a_ = std::max<int64_t>(0, a) / align * align;
