@@ -361,9 +361,9 @@ int64_t fit_rows_held(const BuildOptions& opt, int64_t height) {
   return opt.use_fixed_filter ? 0 : std::min(height, opt.fit_rows);
 }
 
-// Input bands the builder holds: the one the main thread works on and those the reader thread makes
-// ahead of it.
-constexpr int kInputSlots = 3;
+// Input bands the builder holds: the one the main thread works on, those the reader thread makes
+// ahead of it and (threads > 1) those D's finest thread has not yet read (one, usually).
+constexpr int kInputSlots = 4;
 
 // Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
 constexpr int64_t kMinCoarseBandRows = 16;
@@ -404,10 +404,13 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   // rows, the finer ones for its T^), D's reach (5 rows a level, doubled per level up: 5 * 2^m),
   // U's (2 coarse rows a level), the coarse engines' batches (about 32 input rows each), the group
   // of c bands the finest level codes at once (with threads > 1 twice: the next group's rows
-  // arrive while a round is coded) and one fill band; at least D's fit rows. The main thread does
-  // not read beyond it while a round is in flight.
+  // arrive while a round is coded) and one fill band (with threads > 1 also those D's finest thread
+  // has not reached); at least D's fit rows. The main thread does not read beyond it while a round
+  // is in flight.
   const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
-  double lag = 7 * scale(first) + 32.0 * (m + 1 - first) + groups * double(band_rows[size_t(m)]) + B;
+  const double input_bands = opt.threads > 1 ? kInputSlots : 1;
+  double lag =
+      7 * scale(first) + 32.0 * (m + 1 - first) + groups * double(band_rows[size_t(m)]) + input_bands * B;
   for (int l = first; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
   lag = std::min(H, std::max(lag, double(fit_rows_held(opt, info.height)) + B));
   if (finest_rows) *finest_rows = int64_t(lag);
@@ -964,8 +967,12 @@ class StreamingBuilder {
     struct Reader {
       std::mutex lock;
       std::condition_variable wake;
-      int64_t produced = 1, consumed = 0;  // bands [0, produced) ready; [0, consumed) done with
+      // Bands [0, produced) ready; [0, consumed) done with by the main thread, [0, d_consumed) by
+      // the finest D's thread (while it has bands: their int32 rows are read there).
+      std::atomic<int64_t> produced{1};
+      int64_t consumed = 0, d_consumed = std::numeric_limits<int64_t>::max();
       bool stop = false;
+      std::atomic<bool> failed{false};
       std::exception_ptr error;
       std::thread thread;
       ~Reader() {
@@ -984,7 +991,9 @@ class StreamingBuilder {
         for (int64_t i = 1; i < n_bands; ++i) {
           {
             std::unique_lock<std::mutex> hold(reader.lock);
-            reader.wake.wait(hold, [&] { return reader.stop || i < reader.consumed + kSlots; });
+            reader.wake.wait(hold, [&] {
+              return reader.stop || i < std::min(reader.consumed, reader.d_consumed) + kSlots;
+            });
             if (reader.stop) return;
           }
           try {
@@ -992,23 +1001,164 @@ class StreamingBuilder {
           } catch (...) {
             const std::lock_guard<std::mutex> hold(reader.lock);
             reader.error = std::current_exception();
+            reader.failed.store(true, std::memory_order_release);
             reader.wake.notify_all();
+            main_signal_.notify();
             return;
           }
-          {
-            const std::lock_guard<std::mutex> hold(reader.lock);
-            reader.produced = i + 1;
-          }
-          reader.wake.notify_all();
+          reader.produced.store(i + 1, std::memory_order_release);
+          main_signal_.notify();
         }
       });
+    // D's finest engine on a thread of its own (threads > 1), fed whole input bands: on the main
+    // thread its batches were a fork-join among the busy coders, 1.2-1.7 s of a 2.8-3.3 s 16-thread
+    // build on the 16-core host (docs/scale.md). Its coarse rows come back through `made`, taken by
+    // the main thread (take_coarse), which runs the coarser engines and the rounds as before, in the
+    // same order: the same rows, so the same bytes. Declared after the reader and the bands, so that
+    // it stops first: its jobs read the bands' rows and report to the reader.
+    struct FinestD {
+      struct Job {
+        const int32_t* rows;
+        int64_t n;     // 0: a band outside the cascade, only counted
+        int64_t band;  // its index, for the reader
+      };
+      std::mutex lock;
+      std::condition_variable wake;
+      std::deque<Job> jobs;
+      bool finish = false, stop = false;
+      std::atomic<bool> finished{false}, has_made{false};
+      std::vector<std::vector<int32_t>> made, spare;  // coarse rows for the main thread, buffers
+      std::vector<int64_t> made_rows;
+      std::exception_ptr error;
+      double busy = 0;  // its thread's seconds in the engine
+      std::thread thread;
+      ~FinestD() {
+        if (!thread.joinable()) return;
+        {
+          const std::lock_guard<std::mutex> hold(lock);
+          stop = true;
+        }
+        wake.notify_all();
+        thread.join();
+      }
+    } fd;
+    const bool d_thread_wanted = ahead && !fed_fine_ && finest_ > stop_ && entry_ == finest_;
+    const auto d_loop = [&] {
+      detail::DownsampleEngine& engine = *engines_[size_t(finest_)];
+      const int64_t cw = sizes_[size_t(finest_ - 1)].width;
+      const auto emit = [&](int64_t, int64_t n, const double* rows) {
+        std::vector<int32_t> chunk;
+        {
+          const std::lock_guard<std::mutex> hold(fd.lock);
+          if (!fd.spare.empty()) {
+            chunk = std::move(fd.spare.back());
+            fd.spare.pop_back();
+          }
+        }
+        chunk.resize(size_t(n * cw));
+        // Rounded by the engine's workers (exact int32 values): a cast, as in emit_.
+        for (int64_t k = 0; k < n * cw; ++k) chunk[size_t(k)] = static_cast<int32_t>(rows[k]);
+        {
+          const std::lock_guard<std::mutex> hold(fd.lock);
+          fd.made.push_back(std::move(chunk));
+          fd.made_rows.push_back(n);
+          fd.has_made.store(true, std::memory_order_release);
+        }
+        main_signal_.notify();
+      };
+      for (;;) {
+        FinestD::Job job{nullptr, 0, -1};
+        {
+          std::unique_lock<std::mutex> hold(fd.lock);
+          fd.wake.wait(hold, [&] { return fd.stop || fd.finish || !fd.jobs.empty(); });
+          if (fd.stop) return;
+          if (!fd.jobs.empty()) {
+            job = fd.jobs.front();
+            fd.jobs.pop_front();
+          }
+        }
+        try {
+          const auto t = Clock::now();
+          if (job.band < 0) {
+            engine.finish(emit);
+            fd.busy += seconds_since(t);
+            fd.finished.store(true, std::memory_order_release);
+            main_signal_.notify();
+            return;
+          }
+          if (job.n > 0) engine.push_rows(job.rows, job.n, emit);
+          fd.busy += seconds_since(t);
+        } catch (...) {
+          {
+            const std::lock_guard<std::mutex> hold(fd.lock);
+            fd.error = std::current_exception();
+          }
+          fd.finished.store(true, std::memory_order_release);
+          main_signal_.notify();
+          return;
+        }
+        {
+          const std::lock_guard<std::mutex> hold(reader.lock);
+          reader.d_consumed = job.band + 1;
+        }
+        reader.wake.notify_all();
+      }
+    };
+    const auto d_give = [&](FinestD::Job job) {
+      {
+        const std::lock_guard<std::mutex> hold(fd.lock);
+        if (job.band < 0)
+          fd.finish = true;
+        else
+          fd.jobs.push_back(job);
+      }
+      fd.wake.notify_one();
+    };
+    // The coarse rows D's thread has made, into level m - 1 (and the coarser engines), in order.
+    const auto take_coarse = [&] {
+      if (!fd.has_made.load(std::memory_order_acquire) && !fd.finished.load(std::memory_order_acquire))
+        return;
+      std::vector<std::vector<int32_t>> got;
+      std::vector<int64_t> rows;
+      {
+        const std::lock_guard<std::mutex> hold(fd.lock);
+        if (fd.error) std::rethrow_exception(fd.error);
+        got.swap(fd.made);
+        rows.swap(fd.made_rows);
+        fd.has_made.store(false, std::memory_order_relaxed);
+      }
+      const auto t = Clock::now();
+      for (size_t k = 0; k < got.size(); ++k) take_rows(finest_ - 1, got[k].data(), rows[k]);
+      main_.cascade += seconds_since(t);
+      const std::lock_guard<std::mutex> hold(fd.lock);
+      for (std::vector<int32_t>& c : got) fd.spare.push_back(std::move(c));
+    };
+    // What the main thread waits for wakes it also for D's rows and a finished round, which it
+    // serves meanwhile.
+    const auto serve_until = [&](const auto& done) {
+      for (;;) {
+        if (fd.thread.joinable()) take_coarse();
+        if (filter_ready_) pump(false);
+        if (done()) return;
+        main_signal_.wait([&] {
+          return done() || fd.has_made.load(std::memory_order_acquire) ||
+                 fd.finished.load(std::memory_order_acquire) ||
+                 (round_.active && round_.done.load(std::memory_order_acquire));
+        });
+      }
+    };
     for (int64_t i = 0; i < n_bands; ++i) {
       InputBand& cur = bands[i % kSlots];
       if (i > 0 && ahead) {
         const auto t_wait = Clock::now();
-        std::unique_lock<std::mutex> hold(reader.lock);
-        reader.wake.wait(hold, [&] { return reader.produced > i || reader.error; });
-        if (reader.produced <= i) std::rethrow_exception(reader.error);
+        serve_until([&] {
+          return reader.produced.load(std::memory_order_acquire) > i ||
+                 reader.failed.load(std::memory_order_acquire);
+        });
+        if (reader.produced.load(std::memory_order_acquire) <= i) {
+          const std::lock_guard<std::mutex> hold(reader.lock);
+          std::rethrow_exception(reader.error);
+        }
         wait_reader_ += seconds_since(t_wait);
       } else if (i > 0) {
         produce(cur, band_y(i));
@@ -1023,9 +1173,26 @@ class StreamingBuilder {
         wait_rounds_ += seconds_since(t_wait);
         pump(false);
       }
+      if (filter_ready_ && d_thread_wanted && !fd.thread.joinable() && engines_[size_t(finest_)]) {
+        // From this band on every band goes to D's thread (counted there for the reader).
+        {
+          const std::lock_guard<std::mutex> hold(reader.lock);
+          reader.d_consumed = i;
+        }
+        fd.thread = std::thread(d_loop);
+      }
       if (!filter_ready_) {
         adopt(cur);
         if (levels_[size_t(finest_)].end() >= fit_rows_) start_cascade();
+      } else if (fd.thread.joinable()) {
+        if (in_cascade) {
+          const auto t_append = Clock::now();
+          adopt(cur);
+          main_.append += seconds_since(t_append);
+          drop_halo_rows(finest_);
+        }
+        d_give({cur.ints.data(), in_cascade ? cur.rows : 0, i});
+        take_coarse();
       } else if (in_cascade) {
         const auto t_append = Clock::now();
         adopt(cur);
@@ -1057,8 +1224,18 @@ class StreamingBuilder {
       }
     }
     if (!filter_ready_) start_cascade();
+    if (fd.thread.joinable()) {
+      const auto t_wait = Clock::now();
+      d_give({nullptr, 0, -1});
+      serve_until([&] { return fd.finished.load(std::memory_order_acquire); });
+      take_coarse();
+      fd.thread.join();
+      finest_d_busy_ = fd.busy;
+      finest_d_wait_ = seconds_since(t_wait);
+    }
     if (read_a_ < read_b_)
       for (int l = finest_; l > stop_; --l) {
+        if (l == finest_ && fd.finished.load(std::memory_order_acquire)) continue;
         if (l == finest_ && fed_fine_) {
           feed_fine(fine_hi_);
           continue;
@@ -1160,6 +1337,9 @@ class StreamingBuilder {
                 << " s, starting and committing rounds " << main_.pump << " s, waiting " << wait_rounds_
                 << " s for coding rounds and " << wait_reader_ << " s for the reader), then coding the rest "
                 << wall_final << " s";
+    if (finest_d_busy_ >= 0)
+      main_thread << "; D's finest level on its own thread: " << finest_d_busy_
+                  << " s in the engine, its last rows waited for " << finest_d_wait_ << " s";
     result_.log.push_back(main_thread.str());
     if (result_.void_count)
       result_.log.push_back("nodata: " + std::to_string(result_.void_count) +
@@ -1173,6 +1353,23 @@ class StreamingBuilder {
   // per stripe edge, most of a stripe's extra work.
   static constexpr int64_t kDHalo = 6;
   double wait_rounds_ = 0, wait_reader_ = 0;  // the main thread's waits, for the build log
+  // D's finest thread: its seconds in the engine, and the main thread's wait for its last rows.
+  double finest_d_busy_ = -1, finest_d_wait_ = 0;
+  // Wakes the main thread when anything it waits for happens (the reader's next band, D's coarse
+  // rows, a round's end): one condition for all, so that waiting for one it serves the others. A
+  // notifier changes its state first, then passes through the lock, so no wake-up is lost.
+  struct MainSignal {
+    std::mutex lock;
+    std::condition_variable cv;
+    void notify() {
+      { const std::lock_guard<std::mutex> hold(lock); }
+      cv.notify_all();
+    }
+    template <class Ready> void wait(const Ready& ready) {
+      std::unique_lock<std::mutex> hold(lock);
+      cv.wait(hold, ready);
+    }
+  } main_signal_;
   // The coding rounds' wall time, their workers' busy thread-seconds and delivery, for the build log.
   struct RoundFigures {
     int64_t count = 0;
@@ -1455,6 +1652,7 @@ class StreamingBuilder {
       hold.lock();
       round_.done.store(true, std::memory_order_release);
       round_.finished.notify_all();
+      main_signal_.notify();
     }
   }
 
