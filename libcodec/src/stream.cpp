@@ -265,35 +265,36 @@ namespace {
 
 // The first tile row of chunk c of n: an even split, so that every chunk and its bytes are a function
 // of the image alone (the threads change only who codes them).
-int64_t chunk_first_row(int64_t tiles_y, size_t c, size_t n) { return tiles_y * int64_t(c) / int64_t(n); }
+// First tile (raster order) of chunk c of n over `tiles` tiles.
+int64_t chunk_first_tile(int64_t tiles, size_t c, size_t n) { return tiles * int64_t(c) / int64_t(n); }
 
-// The phase statistics pass over tile rows [ty0, ty1): every non-empty tile coded in the phase mode
+// The phase statistics pass over tiles [k0, k1) (raster order): every non-empty tile coded in the phase mode
 // for its token counts (whether or not the tile ends up in that mode), into the chunk's counts, from
 // which the stream's model is fitted. With `record` (and recon, which then receives each tile's phase
 // reconstruction) the pass also keeps every tile's levels in the chunk's record for the encoder to
 // replay.
-void phase_statistics_of_rows(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
-                              int64_t t, int64_t ty0, int64_t ty1, uint32_t bin_q8, int64_t empty_limit,
-                              EncodeChunk& chunk, bool record, int32_t* recon, ptrdiff_t recon_stride) {
+void phase_statistics_of_tiles(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t height,
+                               int64_t t, int64_t k0, int64_t k1, uint32_t bin_q8, int64_t empty_limit,
+                               EncodeChunk& chunk, bool record, int32_t* recon, ptrdiff_t recon_stride) {
   detail::TileWork& work = chunk.work;
   if (!chunk.counts) chunk.counts = std::make_unique<detail::PhaseCounts>();
   *chunk.counts = detail::PhaseCounts{};
   const int64_t tiles_x = (width + t - 1) / t;
   if (record) chunk.phase_record.clear(size_t(tiles_x * ((height + t - 1) / t)));
-  for (int64_t ty = ty0; ty < ty1; ++ty)
-    for (int64_t tx = 0; tx * t < width; ++tx) {
-      const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
-      const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-      if (within(tile_src, src_stride, tw, th, empty_limit)) continue;
-      if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
-      if (detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
-                                   work.phase_work, chunk.counts.get(),
-                                   record ? &chunk.phase_record : nullptr, size_t(ty * tiles_x + tx)) &&
-          record)
-        for (int y = 0; y < th; ++y)
-          std::copy_n(work.phase_recon.data() + size_t(y) * tw, tw,
-                      recon + (ty * t + y) * recon_stride + tx * t);
-    }
+  for (int64_t k = k0; k < k1; ++k) {
+    const int64_t ty = k / tiles_x, tx = k % tiles_x;
+    const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+    const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+    if (within(tile_src, src_stride, tw, th, empty_limit)) continue;
+    if (work.phase_recon.size() < size_t(tw) * th) work.phase_recon.resize(size_t(tw) * th);
+    if (detail::phase_statistics(tile_src, src_stride, tw, th, bin_q8, work.phase_recon.data(),
+                                 work.phase_work, chunk.counts.get(), record ? &chunk.phase_record : nullptr,
+                                 size_t(k)) &&
+        record)
+      for (int y = 0; y < th; ++y)
+        std::copy_n(work.phase_recon.data() + size_t(y) * tw, tw,
+                    recon + (ty * t + y) * recon_stride + tx * t);
+  }
 }
 
 // Whether [a, a + an) and [b, b + bn) share memory.
@@ -341,16 +342,20 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
   params.max_error = options.bound_max_error ? options.max_error : 0;
   params.phase = options.phase_tiles;
   params.phase_bin_q8 = phase_bin_q8(options.bound_max_error, params.max_error, step_q8);
-  // Tile rows in chunks coded at once (EncodeOptions::threads); chunk 0 on this thread.
+  // Tiles in chunks coded at once (EncodeOptions::threads), runs of whole tiles in raster order: a
+  // band of one or two tile rows still splits into as many chunks as the runner has threads (split
+  // by tile rows, a 16384-column band of 128 rows made two chunks, and a 16-thread build's rounds
+  // idled while its finest bands ran on one thread each). Chunk 0 on this thread.
   const int64_t t = options.tile_size;
-  const size_t chunk_count = size_t(std::clamp<int64_t>(int64_t(options.threads), 1, layout.tiles_y));
+  const int64_t tile_total = layout.tiles_x * layout.tiles_y;
+  const size_t chunk_count = size_t(std::clamp<int64_t>(int64_t(options.threads), 1, tile_total));
   std::vector<std::unique_ptr<EncodeChunk>>& chunks = scratch.impl().chunks;
   if (chunks.size() < chunk_count) chunks.resize(chunk_count);
   for (size_t c = 0; c < chunk_count; ++c)
     if (!chunks[c]) chunks[c] = std::make_unique<EncodeChunk>();
-  const auto rows_of = [&](size_t c) {
-    return std::pair<int64_t, int64_t>{chunk_first_row(layout.tiles_y, c, chunk_count),
-                                       chunk_first_row(layout.tiles_y, c + 1, chunk_count)};
+  const auto tiles_of = [&](size_t c) {
+    return std::pair<int64_t, int64_t>{chunk_first_tile(tile_total, c, chunk_count),
+                                       chunk_first_tile(tile_total, c + 1, chunk_count)};
   };
   detail::PhaseModel model;
   bool given_model = false;
@@ -373,9 +378,9 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
       terrain::fork_join(
           chunk_count,
           [&](size_t c) {
-            const auto [ty0, ty1] = rows_of(c);
-            phase_statistics_of_rows(src, src_stride, width, height, t, ty0, ty1, params.phase_bin_q8,
-                                     params.max_error, *chunks[c], replay, recon, recon_stride);
+            const auto [k0, k1] = tiles_of(c);
+            phase_statistics_of_tiles(src, src_stride, width, height, t, k0, k1, params.phase_bin_q8,
+                                      params.max_error, *chunks[c], replay, recon, recon_stride);
           },
           options.part_runner);
       // Counts add up in any order (integers): the model is the one-pass model.
@@ -409,48 +414,47 @@ Status encode(const int32_t* src, ptrdiff_t src_stride, int64_t width, int64_t h
         size_t pos = 0;
         chunk.any_phase = false;
         chunk.status = Status::Ok;
-        const auto [ty0, ty1] = rows_of(c);
-        for (int64_t ty = ty0; ty < ty1; ++ty)
-          for (int64_t tx = 0; tx < layout.tiles_x; ++tx) {
-            const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
-            const int32_t* tile_src = src + ty * t * src_stride + tx * t;
-            bool empty = within(tile_src, src_stride, tw, th, empty_limit);
-            size_t size = 0;
-            if (!empty) {
-              const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
-              const size_t bound = detail::tile_payload_bound(tw, th);
-              if (out.size() < pos + bound) out.resize(std::max(pos + bound, out.size() * 2));
-              const size_t tile = size_t(ty * layout.tiles_x + tx);
-              const detail::PhaseRecord& record = chunk.phase_record;
-              detail::PhaseReplay rp;
-              if (replay && record.tiles[tile].recorded)
-                rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
-              size = detail::encode_tile(tile_src, src_stride, tw, th, params, work, out.data() + pos,
-                                         out.size() - pos, recon != nullptr || probing,
-                                         rp.record ? &rp : nullptr);
-              if (size == 0) {
-                chunk.status = Status::BufferTooSmall;
-                return;
-              }
-              empty = probing && (all_zero(work.reconstruction.data(), size_t(tw) * th) ||
-                                  not_worth_coding(tile_src, src_stride, tw, th, work.reconstruction.data(),
-                                                   params.lambda, size));
+        const auto [k0, k1] = tiles_of(c);
+        for (int64_t k = k0; k < k1; ++k) {
+          const int64_t ty = k / layout.tiles_x, tx = k % layout.tiles_x;
+          const int tw = tile_extent(width, t, tx), th = tile_extent(height, t, ty);
+          const int32_t* tile_src = src + ty * t * src_stride + tx * t;
+          bool empty = within(tile_src, src_stride, tw, th, empty_limit);
+          size_t size = 0;
+          if (!empty) {
+            const bool probing = probe && within(tile_src, src_stride, tw, th, probe_limit);
+            const size_t bound = detail::tile_payload_bound(tw, th);
+            if (out.size() < pos + bound) out.resize(std::max(pos + bound, out.size() * 2));
+            const size_t tile = size_t(k);
+            const detail::PhaseRecord& record = chunk.phase_record;
+            detail::PhaseReplay rp;
+            if (replay && record.tiles[tile].recorded)
+              rp = detail::PhaseReplay{&record, tile, recon + ty * t * recon_stride + tx * t, recon_stride};
+            size =
+                detail::encode_tile(tile_src, src_stride, tw, th, params, work, out.data() + pos,
+                                    out.size() - pos, recon != nullptr || probing, rp.record ? &rp : nullptr);
+            if (size == 0) {
+              chunk.status = Status::BufferTooSmall;
+              return;
             }
-            sizes[size_t(ty * layout.tiles_x + tx)] = empty ? 0 : uint32_t(size);
-            if (!empty)
-              chunk.any_phase = chunk.any_phase || (params.phase && detail::is_phase_mode(out[pos]));
-            if (!empty) pos += size;
-            if (recon) {
-              int32_t* dst_tile = recon + ty * t * recon_stride + tx * t;
-              for (int y = 0; y < th; ++y) {
-                if (empty)
-                  std::fill_n(dst_tile + y * recon_stride, tw, 0);
-                else
-                  std::memcpy(dst_tile + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
-                              size_t(tw) * sizeof(int32_t));
-              }
+            empty = probing && (all_zero(work.reconstruction.data(), size_t(tw) * th) ||
+                                not_worth_coding(tile_src, src_stride, tw, th, work.reconstruction.data(),
+                                                 params.lambda, size));
+          }
+          sizes[size_t(k)] = empty ? 0 : uint32_t(size);
+          if (!empty) chunk.any_phase = chunk.any_phase || (params.phase && detail::is_phase_mode(out[pos]));
+          if (!empty) pos += size;
+          if (recon) {
+            int32_t* dst_tile = recon + ty * t * recon_stride + tx * t;
+            for (int y = 0; y < th; ++y) {
+              if (empty)
+                std::fill_n(dst_tile + y * recon_stride, tw, 0);
+              else
+                std::memcpy(dst_tile + y * recon_stride, work.reconstruction.data() + size_t(y) * tw,
+                            size_t(tw) * sizeof(int32_t));
             }
           }
+        }
         chunk.size = pos;
       },
       options.part_runner);

@@ -1854,10 +1854,15 @@ class StreamingBuilder {
       for (int64_t k = 0; k < n; ++k)
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
     }
-    // As many parts as the band has rows (the coder splits by whole tile rows, at most that many).
+    // Parts of about kPartSamples (the coder splits by runs of whole tiles), at most two per worker:
+    // small enough that a round's last bands end together, few enough that a part's own scratch and
+    // hand-over stay a small cost.
+    constexpr int64_t kPartSamples = int64_t(1) << 16;
+    const int parts =
+        int(std::clamp<int64_t>((n + kPartSamples - 1) / kPartSamples, 1, 2 * int64_t(opt_.threads)));
     bw.bytes = workers
                    ? coder_.encode_parts(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l,
-                                         l == 0, int(bw.rows), *workers)
+                                         l == 0, parts, *workers)
                    : coder_.encode(bw.res.data(), fs.width, bw.rows, bw.rhat.data(), finest_ - l, l == 0, 1);
     // Four partial sums in a fixed order: deterministic, and no single floating-point add chain.
     double res_sq[4] = {0, 0, 0, 0}, err_sq[4] = {0, 0, 0, 0};

@@ -78,7 +78,7 @@ class PtcResidualCoder final : public ResidualCoder {
   // threads (codec::EncodeOptions::threads; the same bytes).
   std::vector<uint8_t> encode(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
                               int levels_above_finest, bool coarsest, int threads) override;
-  // The band's tile rows in up to `parts` chunks on the runner's threads (the same bytes).
+  // The band's tiles in up to `parts` chunks on the runner's threads (the same bytes).
   std::vector<uint8_t> encode_parts(const int32_t* residual, int64_t w, int64_t h, int32_t* reconstructed,
                                     int levels_above_finest, bool coarsest, int parts,
                                     PartRunner& runner) override;

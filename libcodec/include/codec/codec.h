@@ -102,14 +102,14 @@ struct EncodeOptions {
   // does not open (read_header) is ignored.
   const uint8_t* phase_model_stream = nullptr;
   size_t phase_model_stream_size = 0;
-  // Experimental: threads that encode() codes the image's tile rows on, the calling thread included
-  // (1, the default: the calling thread alone; at most one per tile row). The others are started and
-  // joined within the call. The stream and the reconstruction are the same for any value (the rows
-  // are split evenly and joined in order); the Scratch then keeps a coder state and a payload buffer
-  // per thread.
+  // Experimental: threads that encode() codes the image's tiles on, the calling thread included (1,
+  // the default: the calling thread alone; at most one per tile). The others are started and joined
+  // within the call. The stream and the reconstruction are the same for any value (the tiles, in
+  // raster order, are split into even runs and joined in order); the Scratch then keeps a coder
+  // state and a payload buffer per thread.
   uint32_t threads = 1;
-  // Experimental: runs those chunks of tile rows (threads of them) on the runner's threads instead
-  // of threads started within the call (null, the default). The stream does not depend on it.
+  // Experimental: runs those chunks of tiles (threads of them) on the runner's threads instead of
+  // threads started within the call (null, the default). The stream does not depend on it.
   terrain::PartRunner* part_runner = nullptr;
 };
 
