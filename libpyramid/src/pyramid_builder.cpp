@@ -483,33 +483,47 @@ BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const
   return plan;
 }
 
-// The coding rounds' workers: `threads` threads that take a round's bands one at a time (in the
-// order given: largest first) and the parts the coder splits a band into (chunks of its tile rows,
-// ResidualCoder::encode_parts), parts first, so that a band started is finished soon and no thread
-// idles while any band has work left. Each band went to a fixed share of the threads before: ten
-// bands of four tile rows on 16 threads left a third of the round's thread-time idle (16384^2
-// --step 2 on the 16-core host, 2026-12-06). A part never waits; a band waits only for its own parts.
-class RoundWorkers final : public PartRunner {
+// The coding workers: `threads` threads kept for the whole build that code the bands the
+// scheduler hands them (StreamingBuilder::schedule) and the parts the coder splits a band into
+// (chunks of its tiles, ResidualCoder::encode_parts), parts first, so that a band started is
+// finished soon; among bands, coarser levels first (finer bands wait for their T^ rows). Until
+// 2026-12-07 bands were coded in rounds, one round at a time: a round's finest bands ran while the
+// coarse bands that the next finest ones need waited for the round's end, and the 16-core host's
+// rounds were 58-68 % busy (docs/scale.md). A part never waits; a band waits only for its own parts.
+class CodingPool final : public PartRunner {
  public:
-  // Runs band(i) for i in [0, n) on `threads` threads (this one included) and returns the
-  // thread-seconds they spent in bands and parts, not waiting; the first exception a band threw
-  // (lowest i) is rethrown once all have ended.
-  // deliver() runs on this thread alone, whenever a band has ended since its last call (and last):
-  // the sink's allocations stay on one thread (delivered from every worker, they spread over the
-  // allocator's per-thread arenas: +5 % peak RSS on a 32768^2 build at 64 threads).
-  double run_bands(int threads, size_t n, const std::function<void(size_t)>& band,
-                   const std::function<void()>& deliver) {
+  struct Band {
+    int level;
+    int64_t y0;
+    void* flight;  // the scheduler's
+  };
+  // Starts the workers; code(band) runs on them and must not throw.
+  void start(int threads, std::function<void(const Band&)> code) {
+    code_ = std::move(code);
+    for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { serve(); });
+  }
+  // Joins the workers after the bands and parts they run (those queued are dropped).
+  void stop() {
     {
       const std::lock_guard<std::mutex> hold(lock_);
-      band_ = &band;
-      deliver_ = &deliver;
-      bands_ = n, next_band_ = 0, active_ = 0, busy_ = 0;
-      ended_ = false;
-      errors_.assign(n, nullptr);
+      stop_ = true;
     }
-    detail::parallel_chunks(threads, threads, [&](int w, int64_t, int64_t) { serve(w == 0); });
-    for (const std::exception_ptr& e : errors_)
-      if (e) std::rethrow_exception(e);
+    wake_.notify_all();
+    for (std::thread& t : threads_) t.join();
+    threads_.clear();
+  }
+  ~CodingPool() { stop(); }
+  bool started() const { return !threads_.empty(); }
+  void submit(const Band& band) {
+    {
+      const std::lock_guard<std::mutex> hold(lock_);
+      ready_.push_back(band);
+    }
+    wake_.notify_one();
+  }
+  // The workers' thread-seconds in bands and parts, not waiting (for the build log).
+  double busy() {
+    const std::lock_guard<std::mutex> hold(lock_);
     return busy_;
   }
 
@@ -561,34 +575,24 @@ class RoundWorkers final : public PartRunner {
     if (--job.left == 0) wake_.notify_all();
   }
 
-  void serve(bool delivers) {
+  void serve() {
     std::unique_lock<std::mutex> hold(lock_);
     for (;;) {
-      if (delivers && ended_) {
-        ended_ = false;
-        hold.unlock();
-        (*deliver_)();  // its exceptions: the round's, as a band's
-        hold.lock();
-      } else if (!jobs_.empty()) {
+      if (stop_) return;
+      if (!jobs_.empty()) {
         run_part(*jobs_.front(), hold);
-      } else if (next_band_ < bands_) {
-        const size_t i = next_band_++;
-        ++active_;
+      } else if (!ready_.empty()) {
+        const auto first = std::min_element(ready_.begin(), ready_.end(), [](const Band& a, const Band& b) {
+          return a.level != b.level ? a.level < b.level : a.y0 < b.y0;
+        });
+        const Band band = *first;
+        ready_.erase(first);
         hold.unlock();
         const auto t = Clock::now();
-        try {
-          (*band_)(i);
-        } catch (...) {
-          errors_[i] = std::current_exception();
-        }
+        code_(band);
         const double took = seconds_since(t);
         hold.lock();
         busy_ += took;
-        --active_;
-        ended_ = true;
-        wake_.notify_all();  // the delivering thread, and the others once no band is left
-      } else if (active_ == 0) {
-        return;  // no band left to start, and none running that could add parts
       } else {
         wake_.wait(hold);
       }
@@ -598,12 +602,11 @@ class RoundWorkers final : public PartRunner {
   std::mutex lock_;
   std::condition_variable wake_;
   std::deque<Job*> jobs_;  // jobs with parts not yet taken, oldest first
-  const std::function<void(size_t)>* band_ = nullptr;
-  const std::function<void()>* deliver_ = nullptr;
-  size_t bands_ = 0, next_band_ = 0, active_ = 0;
-  bool ended_ = false;  // a band has ended since deliver() last ran
+  std::vector<Band> ready_;
+  std::function<void(const Band&)> code_;
+  std::vector<std::thread> threads_;
+  bool stop_ = false;
   double busy_ = 0;
-  std::vector<std::exception_ptr> errors_;
 };
 
 // Which part of a stripe's pyramid a builder makes (the striped build's shared coarse levels,
@@ -690,7 +693,9 @@ class StreamingBuilder {
     row_scratch_.resize(size_t(info.width));
     next_band_ = need_lo_;
     figures_.resize(size_t(level_count_));
-    work_.resize(size_t(level_count_));
+    flights_.resize(size_t(level_count_));
+    spare_work_.resize(size_t(level_count_));
+    sched_band_ = need_lo_;
     result_.levels.resize(size_t(level_count_));
     header_.levels = sizes_;
     header_.band_rows = finest_band_rows_;
@@ -710,16 +715,7 @@ class StreamingBuilder {
     result_.memory = memory_;
   }
 
-  ~StreamingBuilder() {
-    if (round_.worker.joinable()) {
-      {
-        const std::lock_guard<std::mutex> hold(round_.lock);
-        round_.stop = true;
-      }
-      round_.wake.notify_one();
-      round_.worker.join();  // after the round in flight, if any
-    }
-  }
+  ~StreamingBuilder() { pool_.stop(); }  // after the bands in flight: they read the builder's rows
   StreamingBuilder(const StreamingBuilder&) = delete;
   StreamingBuilder& operator=(const StreamingBuilder&) = delete;
 
@@ -872,7 +868,9 @@ class StreamingBuilder {
       else
         fill(b.rows32);
     };
+    // The level's spare rows and its store are shared with the workers' commits (sched_).
     const auto take_spares = [&](InputBand& b, int64_t rows) {
+      const std::lock_guard<std::mutex> hold(sched_);
       if (finest_rows.narrow())
         b.rows16 = finest_rows.narrow_rows().take_spares(rows);
       else
@@ -881,6 +879,7 @@ class StreamingBuilder {
     const auto adopt = [&](InputBand& b) {
       // A stripe's first band, with a fixed D: its rows are dropped once the cascade starts.
       if (b.carry) level_rows(b);
+      const std::lock_guard<std::mutex> hold(sched_);
       if (finest_rows.narrow())
         finest_rows.narrow_rows().adopt(b.rows16, b.rows);
       else
@@ -1133,8 +1132,8 @@ class StreamingBuilder {
       const std::lock_guard<std::mutex> hold(fd.lock);
       for (std::vector<int32_t>& c : got) fd.spare.push_back(std::move(c));
     };
-    // What the main thread waits for wakes it also for D's rows and a finished round, which it
-    // serves meanwhile.
+    // What the main thread waits for wakes it also for D's rows (and a failed band), which it serves
+    // meanwhile.
     const auto serve_until = [&](const auto& done) {
       for (;;) {
         if (fd.thread.joinable()) take_coarse();
@@ -1142,8 +1141,7 @@ class StreamingBuilder {
         if (done()) return;
         main_signal_.wait([&] {
           return done() || fd.has_made.load(std::memory_order_acquire) ||
-                 fd.finished.load(std::memory_order_acquire) ||
-                 (round_.active && round_.done.load(std::memory_order_acquire));
+                 fd.finished.load(std::memory_order_acquire) || failed_.load(std::memory_order_acquire);
         });
       }
     };
@@ -1189,6 +1187,7 @@ class StreamingBuilder {
           const auto t_append = Clock::now();
           adopt(cur);
           main_.append += seconds_since(t_append);
+          const std::lock_guard<std::mutex> hold(sched_);
           drop_halo_rows(finest_);
         }
         d_give({cur.ints.data(), in_cascade ? cur.rows : 0, i});
@@ -1210,6 +1209,7 @@ class StreamingBuilder {
           main_.cascade += seconds_since(t_push);
           if (r + n < cur.rows) pump(false);
         }
+        const std::lock_guard<std::mutex> hold(sched_);
         drop_halo_rows(finest_);
       }
       if (filter_ready_) pump(false);
@@ -1284,7 +1284,10 @@ class StreamingBuilder {
     for (int64_t r = 0; r < hk; r += kPushRows) {
       const int64_t n = std::min(kPushRows, hk - r);
       const int32_t* rows = split_.grid->data() + r * wk;
-      levels_[size_t(k)].append(rows, n);
+      {
+        const std::lock_guard<std::mutex> hold(sched_);
+        levels_[size_t(k)].append(rows, n);
+      }
       if (k > 0) engines_[size_t(k)]->push_rows(rows, n, emit_[size_t(k)]);
       pump(false);
     }
@@ -1320,22 +1323,22 @@ class StreamingBuilder {
     // thread reads ahead, converts and runs D; it waits when the coding rounds or the reader are behind.
     std::ostringstream main_thread;
     main_thread.precision(3);
-    // The coding rounds: their wall time, the thread-seconds their workers spent in bands and parts
-    // (the rest is workers idle, waiting for a round's last bands), the time they spent handing
-    // bands to the sink (within the rounds), and the time no round was in flight.
-    std::ostringstream rounds;
-    rounds.precision(3);
-    rounds << "coding rounds: " << rounds_.count << " in " << rounds_.wall << " s, their workers busy "
-           << rounds_.busy_thread_seconds << " thread-seconds of " << rounds_.wall * opt_.threads << " ("
-           << (rounds_.wall > 0 ? 100 * rounds_.busy_thread_seconds / (rounds_.wall * opt_.threads) : 0)
-           << " %, " << rounds_.deliver << " s of it writing bands out); no round in flight for "
-           << std::max(0.0, seconds_since(t_start) - rounds_.wall) << " s, the first after "
-           << std::max(0.0, first_round_at_) << " s";
-    result_.log.push_back(rounds.str());
+    // The coding: the bands, the span from the first band scheduled to the last committed, the
+    // thread-seconds the workers spent in bands and parts (the rest of the span's thread-seconds is
+    // workers idle: no band ready), and the time spent handing bands to the sink (within those).
+    std::ostringstream coding;
+    coding.precision(3);
+    const double busy = opt_.threads > 1 ? pool_.busy() : coding_busy_;
+    coding << "coding: " << rounds_.count << " bands from " << std::max(0.0, first_round_at_) << " s for "
+           << rounds_.wall << " s, the workers busy " << busy << " thread-seconds of "
+           << rounds_.wall * opt_.threads << " ("
+           << (rounds_.wall > 0 ? 100 * busy / (rounds_.wall * opt_.threads) : 0) << " %, " << rounds_.deliver
+           << " s of it writing bands out)";
+    result_.log.push_back(coding.str());
     main_thread << "main thread: reading the input " << wall_read << " s (" << cpu_read
                 << " s CPU; D cascade " << main_.cascade << " s, adopting rows " << main_.append
-                << " s, starting and committing rounds " << main_.pump << " s, waiting " << wait_rounds_
-                << " s for coding rounds and " << wait_reader_ << " s for the reader), then coding the rest "
+                << " s, scheduling bands " << main_.pump << " s, waiting " << wait_rounds_
+                << " s for the coders and " << wait_reader_ << " s for the reader), then coding the rest "
                 << wall_final << " s";
     if (finest_d_busy_ >= 0)
       main_thread << "; D's finest level on its own thread: " << finest_d_busy_
@@ -1428,6 +1431,7 @@ class StreamingBuilder {
         engines_[size_t(finest_)]->push_rows(row_scratch_.data(), 1, emit_[size_t(finest_)]);
       }
     }
+    const std::lock_guard<std::mutex> hold(sched_);
     drop_halo_rows(finest_);
   }
 
@@ -1463,8 +1467,11 @@ class StreamingBuilder {
 
   // The next n rows of level l (made by D, or given): kept for coding, and D's next engine runs on them.
   void take_rows(int l, const int32_t* rows, int64_t n) {
-    levels_[size_t(l)].append(rows, n);
-    drop_halo_rows(l);
+    {
+      const std::lock_guard<std::mutex> hold(sched_);
+      levels_[size_t(l)].append(rows, n);
+      drop_halo_rows(l);
+    }
     if (l > stop_) engines_[size_t(l)]->push_rows(rows, n, emit_[size_t(l)]);
   }
 
@@ -1479,6 +1486,7 @@ class StreamingBuilder {
 
   // A stripe's rows above its first needed band only feed D (its halo): once the cascade has them,
   // the level does not keep them (held, they were a third more memory on the last of two stripes).
+  // sched_ held.
   void drop_halo_rows(int l) {
     levels_[size_t(l)].drop_before(need_lo_[size_t(l)]);
     if (l == finest_) mask_.drop_before(need_lo_[size_t(l)]);
@@ -1496,24 +1504,27 @@ class StreamingBuilder {
     return l == 0 || reconstructed_[size_t(l - 1)].end() >= coarse_rows_needed(l, y0, y0 + rows);
   }
 
-  // One level's bands [gy0, gy1) in a batch, with the coarse rows U needs for them.
-  struct Group {
+  // A band scheduled and not yet committed: its work (recycled per level) and the rows of T^_{l-1}
+  // its U reads, copied when it is scheduled (the level drops them as it moves on).
+  struct Flight {
     int level = 0;
-    int64_t gy0 = 0, gy1 = 0;
-    size_t tasks = 0;  // its bands, in work_[level][0 .. tasks)
-    CoarseWindow window;
+    std::unique_ptr<BandWork> work;
+    std::vector<int32_t> window;
+    CoarseWindow cwin;
+    bool coded = false;
+    std::exception_ptr error;
   };
 
-  // Codes every band that can be coded now, in rounds. A round takes, at every level, the bands
-  // ready at its start (a band whose coarser rows are coded in the same round waits for the next),
-  // at most bands_in_flight of them, and codes all of them at once on `threads` workers, largest
-  // first: the coarse levels' bands run beside the finest level's instead of one at a time between
-  // them. With threads > 1 a round runs in the background while the main thread goes on reading the
-  // input and running the D cascade (the next round's rows), so neither waits for the other; the
-  // main thread commits a round once it has finished, level by level, top to bottom, so the output
-  // and the statistics do not depend on the thread count or on the timing. The finest level codes
-  // in groups of bands_in_flight bands; before the end a partial group waits for more rows (a coarse
-  // level never waits: it would delay all finer ones). final: codes everything that is left.
+  // Codes every band that can be coded now. A band of level l is ready once its rows of T_l exist
+  // and T^_{l-1} is committed as far as its U reads, and each level has at most bands_in_flight
+  // bands scheduled and not committed. With threads > 1 the workers code them in the background
+  // (CodingPool), coarser levels first, and the worker that finishes a band commits every band it
+  // completes in its level's order and schedules the bands that makes ready (advance): no round
+  // waits for its slowest band, and a coarse band coded early unblocks finer ones at once. With
+  // one thread they are coded here, coarser levels first. Bands are committed (delivered, their
+  // T^ rows kept for the finer level) in each level's order whichever thread coded them, so the
+  // output and the statistics do not depend on the thread count or on the timing. final: returns
+  // once everything is coded.
   void pump(bool final) {
     struct Count {  // while the input is read (the final pump is the build log's "coding the rest")
       double* to;
@@ -1522,208 +1533,185 @@ class StreamingBuilder {
         if (to) *to += seconds_since(from);
       }
     } count{final ? nullptr : &main_.pump, Clock::now()};
-    for (;;) {
-      if (round_.active) {
-        if (!final && !round_.done.load(std::memory_order_acquire)) return;
-        finish_round();
-      }
-      std::vector<Group> groups = ready_groups(final);
-      if (groups.empty()) return;
-      start_round(std::move(groups));
-      if (!final && opt_.threads > 1) return;
-    }
-  }
-
-  // Waits for the round in flight (if any) and commits it.
-  void finish_round() {
-    if (!round_.active) return;
-    if (opt_.threads > 1) {
-      std::unique_lock<std::mutex> hold(round_.lock);
-      round_.finished.wait(hold, [&] { return round_.done.load(std::memory_order_acquire); });
-    }
-    round_.active = false;
-    if (round_.error) std::rethrow_exception(std::exchange(round_.error, nullptr));
-    for (const Group& g : round_.groups) commit_group(g);
-  }
-
-  // True while the main thread should not read further: a round is in flight and the finest level
-  // already holds the rows the memory plan allows (the rows of the next group included).
-  bool must_wait_for_round() const {
-    const LevelRows& tm = levels_[size_t(finest_)];
-    return round_.active && tm.end() - next_band_[size_t(finest_)] >= memory_.finest_rows;
-  }
-
-  std::vector<Group> ready_groups(bool final) const {
-    std::vector<Group> groups;
-    for (int l = 0; l < level_count_; ++l) {
-      const int64_t h = sizes_[size_t(l)].height, S = level_band_rows_[size_t(l)];
-      const int64_t y0 = next_band_[size_t(l)], end = need_hi_[size_t(l)];
-      if (y0 >= end) continue;
-      const int limit = memory_.bands_in_flight;
-      int64_t nb = 0;
-      while (nb < limit && y0 + nb * S < end && band_ready(l, y0 + nb * S, std::min(S, h - (y0 + nb * S))))
-        ++nb;
-      const bool more_after = y0 + nb * S < end;
-      if (nb == 0 || (l == finest_ && !final && nb < limit && more_after)) continue;
-      Group g;
-      g.level = l;
-      g.gy0 = y0;
-      g.gy1 = std::min(end, y0 + nb * S);
-      g.tasks = size_t(nb);
-      groups.push_back(g);
-    }
-    return groups;
-  }
-
-  // Takes everything a round's bands read from the level stores (U's coarse windows, the row
-  // pointers), then codes them: in the background with threads > 1, else here.
-  void start_round(std::vector<Group>&& round_groups) {
-    round_.groups = std::move(round_groups);
-    std::vector<Group>& groups = round_.groups;
-    if (windows_.size() < size_t(level_count_)) windows_.resize(size_t(level_count_));
-    // Per level, so that each slot's buffers keep the size of that level's bands.
-    for (const Group& g : groups)
-      if (work_[size_t(g.level)].size() < g.tasks) work_[size_t(g.level)].resize(g.tasks);
-    std::vector<Task>& order = round_.order;
-    order.clear();
-    for (size_t gi = 0; gi < groups.size(); ++gi) {
-      Group& g = groups[gi];
-      const int l = g.level;
-      const GridSize fs = sizes_[size_t(l)];
-      if (l > 0) {
-        const GridSize cs = sizes_[size_t(l - 1)];
-        const Rect need = upsample_required_window(Rect{0, g.gy0, fs.width, g.gy1 - g.gy0}, fs);
-        std::vector<int32_t>& window = windows_[size_t(l)];
-        window.resize(size_t(need.height * cs.width));
-        reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, window.data());
-        g.window = CoarseWindow{window.data(), cs.width, need, cs};
-      } else {
-        g.window = CoarseWindow{nullptr, 0, Rect{0, 0, 0, 0}, GridSize{0, 0}};
-      }
-      const int64_t S = level_band_rows_[size_t(l)];
-      for (size_t b = 0; b < g.tasks; ++b) {
-        const int64_t y0 = g.gy0 + int64_t(b) * S;
-        BandWork& bw = work_[size_t(l)][b];
-        bw.y0 = y0;
-        bw.rows = std::min(S, g.gy1 - y0);
-        bw.src.resize(size_t(bw.rows));
-        bw.src_mask.resize(l == finest_ ? size_t(bw.rows) : 0);
-        for (int64_t r = 0; r < bw.rows; ++r) {
-          bw.src[size_t(r)] = levels_[size_t(l)].row(y0 + r);
-          if (l == finest_) bw.src_mask[size_t(r)] = mask_.row_bits(y0 + r);
-        }
-        order.push_back({gi, int64_t(b), bw.rows * fs.width});
-      }
-    }
-    // Largest bands first, so the small coarse ones fill the gaps at the end.
-    std::stable_sort(order.begin(), order.end(),
-                     [](const Task& a, const Task& b) { return a.samples > b.samples; });
-    if (first_round_at_ < 0) first_round_at_ = seconds_since(build_start_);
-    round_.active = true;
-    round_.done.store(false, std::memory_order_relaxed);
     if (opt_.threads == 1) {
-      code_round();
-      round_.done.store(true, std::memory_order_release);
+      for (;;) {
+        schedule();
+        Flight* next = nullptr;
+        for (int l = 0; l < level_count_ && !next; ++l)
+          for (const std::unique_ptr<Flight>& f : flights_[size_t(l)])
+            if (!f->coded) {
+              next = f.get();
+              break;
+            }
+        if (!next) break;
+        const auto t = Clock::now();
+        code_flight(*next);
+        coding_busy_ += seconds_since(t);
+        next->coded = true;
+        advance();
+        if (sched_error_) std::rethrow_exception(sched_error_);
+      }
       return;
     }
-    if (!round_.worker.joinable()) round_.worker = std::thread([this] { round_loop(); });
     {
-      const std::lock_guard<std::mutex> hold(round_.lock);
-      round_.requested = true;
+      const std::lock_guard<std::mutex> hold(sched_);
+      if (sched_error_) std::rethrow_exception(sched_error_);
+      if (!pool_.started())
+        pool_.start(opt_.threads, [this](const CodingPool::Band& b) { code_on_worker(b); });
+      schedule();
+      if (!final || in_flight_ == 0) return;
     }
-    round_.wake.notify_one();
+    // Every row exists now: once no band is in flight, none can be scheduled (the caller checks
+    // that every level is complete).
+    main_signal_.wait([&] {
+      return settled_in_flight_.load(std::memory_order_acquire) == 0 ||
+             failed_.load(std::memory_order_acquire);
+    });
+    const std::lock_guard<std::mutex> hold(sched_);
+    if (sched_error_) std::rethrow_exception(sched_error_);
   }
 
-  // The rounds' thread, one for the whole build: a thread per round started a fresh pool of
-  // parallel_chunks workers (they are kept per calling thread) for every round, threads - 1 thread
-  // starts a round. Codes each requested round, then waits for the next or for the builder's end.
-  void round_loop() {
-    std::unique_lock<std::mutex> hold(round_.lock);
-    for (;;) {
-      round_.wake.wait(hold, [&] { return round_.requested || round_.stop; });
-      if (!round_.requested) return;
-      round_.requested = false;
-      hold.unlock();
-      try {
-        code_round();
-      } catch (...) {
-        round_.error = std::current_exception();
-      }
-      hold.lock();
-      round_.done.store(true, std::memory_order_release);
-      round_.finished.notify_all();
-      main_signal_.notify();
-    }
+  // Waits until a band is committed after must_wait_for_round looked (or a band failed).
+  void finish_round() {
+    main_signal_.wait([&] {
+      return commits_.load(std::memory_order_acquire) != seen_commits_ ||
+             failed_.load(std::memory_order_acquire);
+    });
+    const std::lock_guard<std::mutex> hold(sched_);
+    if (sched_error_) std::rethrow_exception(sched_error_);
   }
 
-  // Codes the round's bands and their parts on `threads` workers (RoundWorkers) and delivers them.
-  // Touches only the round's BandWork, the windows, the rows the band pointers name (none of which
-  // the main thread changes meanwhile), the level figures and the sink (which the main thread
-  // leaves alone meanwhile).
-  void code_round() {
-    const std::vector<Task>& order = round_.order;
-    const auto t_round = Clock::now();
-    // Bands reach the sink in each level's order as soon as they and the ones above them are coded
-    // (the round's thread delivers them between its tasks): the output's writing overlaps the
-    // round's coding instead of following it. Levels are independent streams, so their
-    // interleaving does not change the file.
-    std::vector<size_t> delivered(round_.groups.size(), 0);
-    std::vector<std::vector<uint8_t>> coded(round_.groups.size());
-    for (size_t gi = 0; gi < round_.groups.size(); ++gi) coded[gi].assign(round_.groups[gi].tasks, 0);
-    std::mutex coded_lock;
-    double deliver_seconds = 0;
-    const auto deliver = [&] {
-      std::unique_lock<std::mutex> hold(coded_lock);
-      for (;;) {
-        size_t g = 0;
-        while (g < coded.size() && !(delivered[g] < coded[g].size() && coded[g][delivered[g]])) ++g;
-        if (g == coded.size()) return;
-        const size_t band = delivered[g]++;
-        hold.unlock();
-        const auto t_deliver = Clock::now();
-        deliver_band(round_.groups[g], band);
-        deliver_seconds += seconds_since(t_deliver);
-        hold.lock();
-      }
-    };
-    const auto code = [&](size_t i) {
-      const Group& g = round_.groups[order[i].group];
-      const int l = g.level;
+  // True while the main thread should not read further: bands are in flight and the finest level
+  // already holds the rows the memory plan allows (the rows of the bands in flight included).
+  bool must_wait_for_round() {
+    const std::lock_guard<std::mutex> hold(sched_);
+    seen_commits_ = commits_.load(std::memory_order_relaxed);
+    const LevelRows& tm = levels_[size_t(finest_)];
+    return in_flight_ > 0 && tm.end() - next_band_[size_t(finest_)] >= memory_.finest_rows;
+  }
+
+  // A worker's band: coded, then committed with whatever it completes (sched_ taken here).
+  void code_on_worker(const CodingPool::Band& b) {
+    Flight& f = *static_cast<Flight*>(b.flight);
+    code_flight(f);
+    {
+      const std::lock_guard<std::mutex> hold(sched_);
+      f.coded = true;
+      advance();
+    }
+    main_signal_.notify();
+  }
+
+  // Codes a scheduled band (its exception kept for the scheduler, which rethrows it on the main thread).
+  void code_flight(Flight& f) {
+    try {
+      const int l = f.level;
       const int64_t fw = sizes_[size_t(l)].width;
       const bool finest = l == finest_;
-      BandWork& bw = work_[size_t(l)][size_t(order[i].band)];
+      BandWork& bw = *f.work;
       const int64_t n = bw.rows * fw;
       bw.res.resize(size_t(n)), bw.rhat.resize(size_t(n));
       bw.valid.resize(finest ? size_t(n) : 0);
       if (finest)
         for (int64_t r = 0; r < bw.rows; ++r)
           MaskRows::unpack(*bw.src_mask[size_t(r)], fw, bw.valid.data() + r * fw);
-      code_band(l, g.window, bw, opt_.threads > 1 ? &round_.workers : nullptr);
-      const std::lock_guard<std::mutex> hold(coded_lock);
-      coded[order[i].group][size_t(order[i].band)] = 1;
-    };
-    double busy = 0;
-    if (opt_.threads > 1) {
-      busy = round_.workers.run_bands(opt_.threads, order.size(), code, deliver);
-    } else {
-      for (size_t i = 0; i < order.size(); ++i) code(i);
-      deliver();
-      busy = seconds_since(t_round);
+      code_band(l, f.cwin, bw, opt_.threads > 1 ? &pool_ : nullptr);
+    } catch (...) {
+      f.error = std::current_exception();
     }
-    const double round_wall = seconds_since(t_round);
-    rounds_.count += 1;
-    rounds_.wall += round_wall;
-    rounds_.busy_thread_seconds += busy;
-    rounds_.deliver += deliver_seconds;
   }
 
-  // Hands band b of a group to the sink, with its figures. code_round calls it on the round's thread
-  // (the output's writing stays off the main thread), each level's bands in order.
-  void deliver_band(const Group& g, size_t b) {
-    const int l = g.level;
+  // Schedules every ready band (sched_ held with threads > 1).
+  void schedule() {
+    if (failed_.load(std::memory_order_relaxed)) return;
+    for (int l = 0; l < level_count_; ++l) {
+      const GridSize fs = sizes_[size_t(l)];
+      const int64_t h = fs.height, S = level_band_rows_[size_t(l)], end = need_hi_[size_t(l)];
+      std::deque<std::unique_ptr<Flight>>& q = flights_[size_t(l)];
+      while (int(q.size()) < memory_.bands_in_flight) {
+        const int64_t y0 = sched_band_[size_t(l)];
+        if (y0 >= end || !band_ready(l, y0, std::min(S, h - y0))) break;
+        auto f = std::make_unique<Flight>();
+        f->level = l;
+        std::vector<std::unique_ptr<BandWork>>& spare = spare_work_[size_t(l)];
+        if (spare.empty()) {
+          f->work = std::make_unique<BandWork>();
+        } else {
+          f->work = std::move(spare.back());
+          spare.pop_back();
+        }
+        BandWork& bw = *f->work;
+        bw.y0 = y0;
+        bw.rows = std::min(S, end - y0);
+        bw.src.resize(size_t(bw.rows));
+        bw.src_mask.resize(l == finest_ ? size_t(bw.rows) : 0);
+        for (int64_t r = 0; r < bw.rows; ++r) {
+          bw.src[size_t(r)] = levels_[size_t(l)].row(y0 + r);
+          if (l == finest_) bw.src_mask[size_t(r)] = mask_.row_bits(y0 + r);
+        }
+        if (l > 0) {
+          const GridSize cs = sizes_[size_t(l - 1)];
+          const Rect need = upsample_required_window(Rect{0, y0, fs.width, bw.rows}, fs);
+          f->window.resize(size_t(need.height * cs.width));
+          reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, f->window.data());
+          f->cwin = CoarseWindow{f->window.data(), cs.width, need, cs};
+        } else {
+          f->cwin = CoarseWindow{nullptr, 0, Rect{0, 0, 0, 0}, GridSize{0, 0}};
+        }
+        sched_band_[size_t(l)] = y0 + bw.rows;
+        if (first_round_at_ < 0) first_round_at_ = seconds_since(build_start_);
+        Flight* raw = f.get();
+        q.push_back(std::move(f));
+        ++in_flight_;
+        if (opt_.threads > 1) pool_.submit({l, y0, raw});
+      }
+    }
+    settled_in_flight_.store(in_flight_, std::memory_order_release);
+  }
+
+  // Commits the coded bands at the head of each level's queue, in order, then schedules what that
+  // makes ready (sched_ held with threads > 1). A failed band stops the build: its error is rethrown
+  // on the main thread, and nothing more is scheduled.
+  void advance() {
+    if (failed_.load(std::memory_order_relaxed)) return;
+    bool committed = false;
+    for (int l = 0; l < level_count_; ++l) {
+      std::deque<std::unique_ptr<Flight>>& q = flights_[size_t(l)];
+      while (!q.empty() && q.front()->coded) {
+        Flight& f = *q.front();
+        if (f.error) {
+          sched_error_ = f.error;
+          failed_.store(true, std::memory_order_release);
+          return;
+        }
+        const auto t = Clock::now();
+        try {
+          deliver_band(l, *f.work);  // the sink's errors (a full disk) are the build's
+        } catch (...) {
+          sched_error_ = std::current_exception();
+          failed_.store(true, std::memory_order_release);
+          return;
+        }
+        rounds_.deliver += seconds_since(t);
+        commit_band(l, *f.work);
+        spare_work_[size_t(l)].push_back(std::move(f.work));
+        q.pop_front();
+        --in_flight_;
+        ++rounds_.count;
+        committed = true;
+      }
+    }
+    if (!committed) return;
+    rounds_.wall = seconds_since(build_start_) - first_round_at_;
+    commits_.fetch_add(1, std::memory_order_release);
+    schedule();
+  }
+
+  // Hands a coded band to the sink, with its figures (sched_ held: one sink call at a time, each
+  // level's bands in order).
+  void deliver_band(int l, BandWork& bw) {
     const int64_t fw = sizes_[size_t(l)].width;
     const bool finest = l == finest_;
-    BandWork& bw = work_[size_t(l)][b];
     // A stripe's halo bands are coded only for the T^ rows finer bands read.
     if (bw.y0 >= own_lo_[size_t(l)] && bw.y0 < own_hi_[size_t(l)]) {
       if (finest) sink_.mask_rows(bw.y0, bw.rows, bw.valid.data());
@@ -1735,23 +1723,18 @@ class StreamingBuilder {
     bw.bytes = {};
   }
 
-  // Takes a delivered group's T^ rows and drops the rows nothing needs any more (main thread).
-  void commit_group(const Group& g) {
-    const int l = g.level;
+  // Takes a delivered band's T^ rows and drops the rows nothing needs any more.
+  void commit_band(int l, const BandWork& bw) {
     const GridSize fs = sizes_[size_t(l)];
-    const int64_t fw = fs.width;
+    const int64_t fw = fs.width, gy1 = bw.y0 + bw.rows;
     const bool finest = l == finest_;
-    if (!finest)
-      for (size_t b = 0; b < g.tasks; ++b) {
-        const BandWork& bw = work_[size_t(l)][b];
-        reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
-      }
-    next_band_[size_t(l)] = g.gy1;
-    levels_[size_t(l)].drop_before(g.gy1);
-    if (finest) mask_.drop_before(g.gy1);
+    if (!finest) reconstructed_[size_t(l)].append(bw.rhat.data(), bw.rows);
+    next_band_[size_t(l)] = gy1;
+    levels_[size_t(l)].drop_before(gy1);
+    if (finest) mask_.drop_before(gy1);
     if (l > 0) {
-      const int64_t keep = g.gy1 < fs.height ? upsample_required_window(Rect{0, g.gy1, fw, 1}, fs).y0
-                                             : reconstructed_[size_t(l - 1)].end();
+      const int64_t keep = gy1 < fs.height ? upsample_required_window(Rect{0, gy1, fw, 1}, fs).y0
+                                           : reconstructed_[size_t(l - 1)].end();
       reconstructed_[size_t(l - 1)].drop_before(keep);
     }
   }
@@ -1798,7 +1781,7 @@ class StreamingBuilder {
   }
 
   // Codes one band; its parts on `workers` (null: on this thread alone).
-  void code_band(int l, const CoarseWindow& cwin, BandWork& bw, RoundWorkers* workers) {
+  void code_band(int l, const CoarseWindow& cwin, BandWork& bw, CodingPool* workers) {
     const GridSize fs = sizes_[size_t(l)];
     const int64_t n = bw.rows * fs.width;
     const bool with_mask = l == finest_;
@@ -1934,26 +1917,22 @@ class StreamingBuilder {
   int64_t fine_lo_ = 0, fine_hi_ = 0, fed_ = 0;
   bool fed_fine_ = false;
   std::vector<LevelFigures> figures_;
-  std::vector<std::vector<BandWork>> work_;    // per level: one per band of a round (grown as needed)
-  std::vector<std::vector<int32_t>> windows_;  // per level: the coarse rows U reads for its group
-  // The round being coded (at most one at a time).
-  struct Task {
-    size_t group;
-    int64_t band;
-    int64_t samples;
-  };
-  struct Round {
-    bool active = false;
-    std::atomic<bool> done{false};
-    std::thread worker;  // round_loop, started with the first round coded in the background
-    std::mutex lock;     // guards requested and stop; done is also set under it (finished's wait)
-    std::condition_variable wake, finished;
-    bool requested = false, stop = false;
-    std::exception_ptr error;
-    std::vector<Group> groups;
-    std::vector<Task> order;
-    RoundWorkers workers;
-  } round_;
+  // The scheduler's state (pump): sched_ guards it, the levels' and the mask's rows, T^ rows,
+  // next_band_ and the figures while workers run (threads > 1); the main thread takes it to append
+  // or drop rows.
+  std::mutex sched_;
+  std::vector<std::deque<std::unique_ptr<Flight>>> flights_;  // per level: bands not committed, in order
+  std::vector<std::vector<std::unique_ptr<BandWork>>> spare_work_;  // per level: recycled band work
+  std::vector<int64_t> sched_band_;                                 // per level: first row not scheduled
+  int64_t in_flight_ = 0;
+  // in_flight_ as schedule() leaves it (advance() passes 0 between its commits and its schedule).
+  std::atomic<int64_t> settled_in_flight_{0};
+  std::exception_ptr sched_error_;
+  std::atomic<bool> failed_{false};
+  std::atomic<uint64_t> commits_{0};
+  uint64_t seen_commits_ = 0;  // commits_ when must_wait_for_round last looked (main thread)
+  double coding_busy_ = 0;     // one thread: seconds coding bands
+  CodingPool pool_;            // threads > 1, started with the first band; stopped first in ~StreamingBuilder
   BuildResult result_;
 };
 
