@@ -1134,8 +1134,10 @@ class StreamingBuilder {
     };
     // What the main thread waits for wakes it also for D's rows (and a failed band), which it serves
     // meanwhile.
+    // It looks first: D's thread waits for the band the main thread is waiting for.
     const auto serve_until = [&](const auto& done) {
       for (;;) {
+        if (done()) return;
         if (fd.thread.joinable()) take_coarse();
         if (filter_ready_) pump(false);
         if (done()) return;
@@ -1183,6 +1185,8 @@ class StreamingBuilder {
         adopt(cur);
         if (levels_[size_t(finest_)].end() >= fit_rows_) start_cascade();
       } else if (fd.thread.joinable()) {
+        // D's thread first (it reads the band's int32 rows, the level adopts its own copy).
+        d_give({cur.ints.data(), in_cascade ? cur.rows : 0, i});
         if (in_cascade) {
           const auto t_append = Clock::now();
           adopt(cur);
@@ -1190,7 +1194,6 @@ class StreamingBuilder {
           const std::lock_guard<std::mutex> hold(sched_);
           drop_halo_rows(finest_);
         }
-        d_give({cur.ints.data(), in_cascade ? cur.rows : 0, i});
         take_coarse();
       } else if (in_cascade) {
         const auto t_append = Clock::now();
@@ -1549,6 +1552,7 @@ class StreamingBuilder {
         coding_busy_ += seconds_since(t);
         next->coded = true;
         advance();
+        deliver_committed();
         if (sched_error_) std::rethrow_exception(sched_error_);
       }
       return;
@@ -1559,12 +1563,13 @@ class StreamingBuilder {
       if (!pool_.started())
         pool_.start(opt_.threads, [this](const CodingPool::Band& b) { code_on_worker(b); });
       schedule();
-      if (!final || in_flight_ == 0) return;
+      if (!final || (in_flight_ == 0 && undelivered_.load(std::memory_order_acquire) == 0)) return;
     }
     // Every row exists now: once no band is in flight, none can be scheduled (the caller checks
     // that every level is complete).
     main_signal_.wait([&] {
-      return settled_in_flight_.load(std::memory_order_acquire) == 0 ||
+      return (settled_in_flight_.load(std::memory_order_acquire) == 0 &&
+              undelivered_.load(std::memory_order_acquire) == 0) ||
              failed_.load(std::memory_order_acquire);
     });
     const std::lock_guard<std::mutex> hold(sched_);
@@ -1599,7 +1604,47 @@ class StreamingBuilder {
       f.coded = true;
       advance();
     }
+    deliver_committed();
     main_signal_.notify();
+  }
+
+  // Hands the committed bands to the sink in commit order, one call at a time, outside sched_ (the
+  // sink's writing held the main thread's row appends and the other workers' commits before). A
+  // thread that finds another delivering leaves its bands to it: the deliverer looks again after
+  // letting go.
+  void deliver_committed() {
+    for (;;) {
+      std::unique_lock<std::mutex> delivering(delivering_, std::try_to_lock);
+      if (!delivering.owns_lock()) return;
+      for (;;) {
+        Delivery d;
+        {
+          const std::lock_guard<std::mutex> hold(deliveries_lock_);
+          if (deliveries_.empty()) break;
+          d = std::move(deliveries_.front());
+          deliveries_.pop_front();
+        }
+        if (!failed_.load(std::memory_order_acquire)) {
+          const auto t = Clock::now();
+          try {
+            deliver_band(d.level, *d.work);  // the sink's errors (a full disk) are the build's
+          } catch (...) {
+            const std::lock_guard<std::mutex> hold(sched_);
+            if (!sched_error_) sched_error_ = std::current_exception();
+            failed_.store(true, std::memory_order_release);
+          }
+          rounds_.deliver += seconds_since(t);
+        }
+        {
+          const std::lock_guard<std::mutex> hold(deliveries_lock_);
+          spare_work_[size_t(d.level)].push_back(std::move(d.work));
+        }
+        undelivered_.fetch_sub(1, std::memory_order_release);
+      }
+      delivering.unlock();
+      const std::lock_guard<std::mutex> hold(deliveries_lock_);
+      if (deliveries_.empty()) return;
+    }
   }
 
   // Codes a scheduled band (its exception kept for the scheduler, which rethrows it on the main thread).
@@ -1633,13 +1678,15 @@ class StreamingBuilder {
         if (y0 >= end || !band_ready(l, y0, std::min(S, h - y0))) break;
         auto f = std::make_unique<Flight>();
         f->level = l;
-        std::vector<std::unique_ptr<BandWork>>& spare = spare_work_[size_t(l)];
-        if (spare.empty()) {
-          f->work = std::make_unique<BandWork>();
-        } else {
-          f->work = std::move(spare.back());
-          spare.pop_back();
+        {
+          const std::lock_guard<std::mutex> hold(deliveries_lock_);
+          std::vector<std::unique_ptr<BandWork>>& spare = spare_work_[size_t(l)];
+          if (!spare.empty()) {
+            f->work = std::move(spare.back());
+            spare.pop_back();
+          }
         }
+        if (!f->work) f->work = std::make_unique<BandWork>();
         BandWork& bw = *f->work;
         bw.y0 = y0;
         bw.rows = std::min(S, end - y0);
@@ -1684,17 +1731,12 @@ class StreamingBuilder {
           failed_.store(true, std::memory_order_release);
           return;
         }
-        const auto t = Clock::now();
-        try {
-          deliver_band(l, *f.work);  // the sink's errors (a full disk) are the build's
-        } catch (...) {
-          sched_error_ = std::current_exception();
-          failed_.store(true, std::memory_order_release);
-          return;
-        }
-        rounds_.deliver += seconds_since(t);
         commit_band(l, *f.work);
-        spare_work_[size_t(l)].push_back(std::move(f.work));
+        {
+          const std::lock_guard<std::mutex> hold(deliveries_lock_);
+          deliveries_.push_back({l, std::move(f.work)});
+        }
+        undelivered_.fetch_add(1, std::memory_order_relaxed);
         q.pop_front();
         --in_flight_;
         ++rounds_.count;
@@ -1922,8 +1964,16 @@ class StreamingBuilder {
   // or drop rows.
   std::mutex sched_;
   std::vector<std::deque<std::unique_ptr<Flight>>> flights_;  // per level: bands not committed, in order
-  std::vector<std::vector<std::unique_ptr<BandWork>>> spare_work_;  // per level: recycled band work
-  std::vector<int64_t> sched_band_;                                 // per level: first row not scheduled
+  std::vector<std::vector<std::unique_ptr<BandWork>>> spare_work_;  // per level: recycled (deliveries_lock_)
+  // Bands committed and not yet delivered, in commit order (deliver_committed).
+  struct Delivery {
+    int level = 0;
+    std::unique_ptr<BandWork> work;
+  };
+  std::mutex deliveries_lock_, delivering_;  // the queue and the spares; the one thread delivering
+  std::deque<Delivery> deliveries_;
+  std::atomic<int64_t> undelivered_{0};
+  std::vector<int64_t> sched_band_;  // per level: first row not scheduled
   int64_t in_flight_ = 0;
   // in_flight_ as schedule() leaves it (advance() passes 0 between its commits and its schedule).
   std::atomic<int64_t> settled_in_flight_{0};
