@@ -695,6 +695,7 @@ class StreamingBuilder {
     figures_.resize(size_t(level_count_));
     flights_.resize(size_t(level_count_));
     spare_work_.resize(size_t(level_count_));
+    work_out_.assign(size_t(level_count_), 0);
     sched_band_ = need_lo_;
     result_.levels.resize(size_t(level_count_));
     header_.levels = sizes_;
@@ -1568,9 +1569,9 @@ class StreamingBuilder {
     // Every row exists now: once no band is in flight, none can be scheduled (the caller checks
     // that every level is complete).
     main_signal_.wait([&] {
-      return (settled_in_flight_.load(std::memory_order_acquire) == 0 &&
-              undelivered_.load(std::memory_order_acquire) == 0) ||
-             failed_.load(std::memory_order_acquire);
+      if (failed_.load(std::memory_order_acquire)) return true;
+      const std::lock_guard<std::mutex> hold(sched_);  // no notifier holds it (code_on_worker)
+      return in_flight_ == 0 && undelivered_.load(std::memory_order_acquire) == 0;
     });
     const std::lock_guard<std::mutex> hold(sched_);
     if (sched_error_) std::rethrow_exception(sched_error_);
@@ -1613,6 +1614,7 @@ class StreamingBuilder {
   // thread that finds another delivering leaves its bands to it: the deliverer looks again after
   // letting go.
   void deliver_committed() {
+    int64_t returned = 0;
     for (;;) {
       std::unique_lock<std::mutex> delivering(delivering_, std::try_to_lock);
       if (!delivering.owns_lock()) return;
@@ -1638,10 +1640,21 @@ class StreamingBuilder {
         {
           const std::lock_guard<std::mutex> hold(deliveries_lock_);
           spare_work_[size_t(d.level)].push_back(std::move(d.work));
+          --work_out_[size_t(d.level)];
         }
-        undelivered_.fetch_sub(1, std::memory_order_release);
+        ++returned;
       }
       delivering.unlock();
+      if (returned > 0) {
+        // The band work given back may be what a ready band waits for; the bands count as
+        // undelivered until that is scheduled, so that pump(true) does not stop in between.
+        {
+          const std::lock_guard<std::mutex> hold(sched_);
+          schedule();
+        }
+        undelivered_.fetch_sub(returned, std::memory_order_release);
+        returned = 0;
+      }
       const std::lock_guard<std::mutex> hold(deliveries_lock_);
       if (deliveries_.empty()) return;
     }
@@ -1673,13 +1686,16 @@ class StreamingBuilder {
       const GridSize fs = sizes_[size_t(l)];
       const int64_t h = fs.height, S = level_band_rows_[size_t(l)], end = need_hi_[size_t(l)];
       std::deque<std::unique_ptr<Flight>>& q = flights_[size_t(l)];
-      while (int(q.size()) < memory_.bands_in_flight) {
+      for (;;) {
         const int64_t y0 = sched_band_[size_t(l)];
         if (y0 >= end || !band_ready(l, y0, std::min(S, h - y0))) break;
         auto f = std::make_unique<Flight>();
         f->level = l;
         {
+          // At most bands_in_flight bands' work per level, delivered or not (the memory plan's).
           const std::lock_guard<std::mutex> hold(deliveries_lock_);
+          if (work_out_[size_t(l)] >= memory_.bands_in_flight) break;
+          ++work_out_[size_t(l)];
           std::vector<std::unique_ptr<BandWork>>& spare = spare_work_[size_t(l)];
           if (!spare.empty()) {
             f->work = std::move(spare.back());
@@ -1713,7 +1729,6 @@ class StreamingBuilder {
         if (opt_.threads > 1) pool_.submit({l, y0, raw});
       }
     }
-    settled_in_flight_.store(in_flight_, std::memory_order_release);
   }
 
   // Commits the coded bands at the head of each level's queue, in order, then schedules what that
@@ -1973,10 +1988,9 @@ class StreamingBuilder {
   std::mutex deliveries_lock_, delivering_;  // the queue and the spares; the one thread delivering
   std::deque<Delivery> deliveries_;
   std::atomic<int64_t> undelivered_{0};
+  std::vector<int> work_out_;        // per level: band work taken and not yet given back (deliveries_lock_)
   std::vector<int64_t> sched_band_;  // per level: first row not scheduled
   int64_t in_flight_ = 0;
-  // in_flight_ as schedule() leaves it (advance() passes 0 between its commits and its schedule).
-  std::atomic<int64_t> settled_in_flight_{0};
   std::exception_ptr sched_error_;
   std::atomic<bool> failed_{false};
   std::atomic<uint64_t> commits_{0};
