@@ -177,7 +177,7 @@ class InputConverter {
 // Per-band state of the closed loop, reused across band groups.
 struct BandWork {
   int64_t y0 = 0, rows = 0;
-  // Its rows of T_l and validity as the level holds them, taken when the round starts: the coder
+  // Its rows of T_l and validity as the level holds them, taken when the band is scheduled: the coder
   // threads read them while the main thread appends rows (each row is a buffer of its own, which
   // neither appending nor dropping other rows moves).
   std::vector<const void*> src;
@@ -251,7 +251,7 @@ template <class T> class RowRing {
       free_.push_back(std::move(rows_.front()));
       rows_.pop_front();
     }
-    // Spare rows up to the peak: a round drops hundreds of finest rows at once, and freeing all but a
+    // Spare rows up to the peak: a commit drops a band of finest rows at once, and freeing all but a
     // few of them made the main thread fault fresh pages in for the next ones (1 % of a 16-thread
     // build's samples); rows held plus spares never exceed the peak the memory plan counts.
     const size_t spare = size_t(std::max<int64_t>(64, peak_ - (end_ - first_)));
@@ -404,8 +404,8 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   // rows, the finer ones for its T^), D's reach (5 rows a level, doubled per level up: 5 * 2^m),
   // U's (2 coarse rows a level), the coarse engines' batches (about 32 input rows each), the group
   // of c bands the finest level codes at once (with threads > 1 twice: the next group's rows
-  // arrive while a round is coded) and one fill band (with threads > 1 also those D's finest thread
-  // has not reached); at least D's fit rows. The main thread does not read beyond it while a round
+  // arrive while a group is coded) and one fill band (with threads > 1 also those D's finest thread
+  // has not reached); at least D's fit rows. The main thread does not read beyond it while a band
   // is in flight.
   const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
   const double input_bands = opt.threads > 1 ? kInputSlots : 1;
@@ -1013,7 +1013,7 @@ class StreamingBuilder {
     // D's finest engine on a thread of its own (threads > 1), fed whole input bands: on the main
     // thread its batches were a fork-join among the busy coders, 1.2-1.7 s of a 2.8-3.3 s 16-thread
     // build on the 16-core host (docs/scale.md). Its coarse rows come back through `made`, taken by
-    // the main thread (take_coarse), which runs the coarser engines and the rounds as before, in the
+    // the main thread (take_coarse), which runs the coarser engines and schedules bands as before, in the
     // same order: the same rows, so the same bytes. Declared after the reader and the bands, so that
     // it stops first: its jobs read the bands' rows and report to the reader.
     struct FinestD {
@@ -1168,10 +1168,10 @@ class StreamingBuilder {
       const bool in_cascade = cur.y + cur.rows > read_a_ && cur.y < read_b_;
       if (in_cascade) result_.void_count += cur.voids;
       // The coders are behind: holding more rows would exceed the memory plan.
-      while (must_wait_for_round()) {
+      while (must_wait_for_coders()) {
         const auto t_wait = Clock::now();
-        finish_round();
-        wait_rounds_ += seconds_since(t_wait);
+        wait_for_commit();
+        wait_coders_ += seconds_since(t_wait);
         pump(false);
       }
       if (filter_ready_ && d_thread_wanted && !fd.thread.joinable() && engines_[size_t(finest_)]) {
@@ -1200,8 +1200,8 @@ class StreamingBuilder {
         const auto t_append = Clock::now();
         adopt(cur);
         main_.append += seconds_since(t_append);
-        // A few rows at a time, starting the next coding round as soon as one has finished: a round
-        // that ended while the main thread ran D on a whole fill band left the workers idle.
+        // A few rows at a time, scheduling the bands they make ready as they come (bands made ready
+        // early in a fill band would wait for D to run on all of it).
         constexpr int64_t kPushRows = 8;
         for (int64_t r = 0; r < cur.rows; r += kPushRows) {
           const int64_t n = std::min(kPushRows, cur.rows - r);
@@ -1271,7 +1271,7 @@ class StreamingBuilder {
   }
 
   // Coarse: codes levels 0..k from the whole T_k (split_.grid) with the stripes' fixed filter, through
-  // the same engines and rounds as the whole build, so the same bands.
+  // the same engines and scheduler as the whole build, so the same bands.
   BuildResult run_coarse() {
     const auto t_start = Clock::now();
     build_start_ = t_start;
@@ -1324,7 +1324,7 @@ class StreamingBuilder {
       held << " " << levels_[size_t(l)].peak() << "/" << reconstructed_[size_t(l)].peak();
     result_.log.push_back(held.str());
     // Where a many-thread build's wall time goes (docs/scale.md): while the input is read, the main
-    // thread reads ahead, converts and runs D; it waits when the coding rounds or the reader are behind.
+    // thread reads ahead, converts and runs D; it waits when the coders or the reader are behind.
     std::ostringstream main_thread;
     main_thread.precision(3);
     // The coding: the bands, the span from the first band scheduled to the last committed, the
@@ -1333,15 +1333,15 @@ class StreamingBuilder {
     std::ostringstream coding;
     coding.precision(3);
     const double busy = opt_.threads > 1 ? pool_.busy() : coding_busy_;
-    coding << "coding: " << rounds_.count << " bands from " << std::max(0.0, first_round_at_) << " s for "
-           << rounds_.wall << " s, the workers busy " << busy << " thread-seconds of "
-           << rounds_.wall * opt_.threads << " ("
-           << (rounds_.wall > 0 ? 100 * busy / (rounds_.wall * opt_.threads) : 0) << " %, " << rounds_.deliver
+    coding << "coding: " << coding_.count << " bands from " << std::max(0.0, first_band_at_) << " s for "
+           << coding_.wall << " s, the workers busy " << busy << " thread-seconds of "
+           << coding_.wall * opt_.threads << " ("
+           << (coding_.wall > 0 ? 100 * busy / (coding_.wall * opt_.threads) : 0) << " %, " << coding_.deliver
            << " s of it writing bands out)";
     result_.log.push_back(coding.str());
     main_thread << "main thread: reading the input " << wall_read << " s (" << cpu_read
                 << " s CPU; D cascade " << main_.cascade << " s, adopting rows " << main_.append
-                << " s, scheduling bands " << main_.pump << " s, waiting " << wait_rounds_
+                << " s, scheduling bands " << main_.pump << " s, waiting " << wait_coders_
                 << " s for the coders and " << wait_reader_ << " s for the reader), then coding the rest "
                 << wall_final << " s";
     if (finest_d_busy_ >= 0)
@@ -1359,11 +1359,11 @@ class StreamingBuilder {
   // 6: the 5 wrong rows and one to spare; at the coarsest level it costs 6 * 2^m input rows of D
   // per stripe edge, most of a stripe's extra work.
   static constexpr int64_t kDHalo = 6;
-  double wait_rounds_ = 0, wait_reader_ = 0;  // the main thread's waits, for the build log
+  double wait_coders_ = 0, wait_reader_ = 0;  // the main thread's waits, for the build log
   // D's finest thread: its seconds in the engine, and the main thread's wait for its last rows.
   double finest_d_busy_ = -1, finest_d_wait_ = 0;
   // Wakes the main thread when anything it waits for happens (the reader's next band, D's coarse
-  // rows, a round's end): one condition for all, so that waiting for one it serves the others. A
+  // rows, a band committed): one condition for all, so that waiting for one it serves the others. A
   // notifier changes its state first, then passes through the lock, so no wake-up is lost.
   struct MainSignal {
     std::mutex lock;
@@ -1377,17 +1377,17 @@ class StreamingBuilder {
       cv.wait(hold, ready);
     }
   } main_signal_;
-  // The coding rounds' wall time, their workers' busy thread-seconds and delivery, for the build log.
-  struct RoundFigures {
+  // The coding's bands, span (first band scheduled to last committed) and delivery, for the build log.
+  struct CodingFigures {
     int64_t count = 0;
-    double wall = 0, busy_thread_seconds = 0, deliver = 0;
-  } rounds_;
+    double wall = 0, deliver = 0;
+  } coding_;
   // The main thread's wall time in each of its jobs while the input is read, for the build log.
   struct MainFigures {
     double append = 0, cascade = 0, pump = 0;
   } main_;
   Clock::time_point build_start_;
-  double first_round_at_ = -1;
+  double first_band_at_ = -1;
 
   // Fits D on the top fit_rows rows (all still held: nothing is coded before the filter exists),
   // then starts the D cascade with every row received so far.
@@ -1577,8 +1577,8 @@ class StreamingBuilder {
     if (sched_error_) std::rethrow_exception(sched_error_);
   }
 
-  // Waits until a band is committed after must_wait_for_round looked (or a band failed).
-  void finish_round() {
+  // Waits until a band is committed after must_wait_for_coders looked (or a band failed).
+  void wait_for_commit() {
     main_signal_.wait([&] {
       return commits_.load(std::memory_order_acquire) != seen_commits_ ||
              failed_.load(std::memory_order_acquire);
@@ -1589,7 +1589,7 @@ class StreamingBuilder {
 
   // True while the main thread should not read further: bands are in flight and the finest level
   // already holds the rows the memory plan allows (the rows of the bands in flight included).
-  bool must_wait_for_round() {
+  bool must_wait_for_coders() {
     const std::lock_guard<std::mutex> hold(sched_);
     seen_commits_ = commits_.load(std::memory_order_relaxed);
     const LevelRows& tm = levels_[size_t(finest_)];
@@ -1635,7 +1635,7 @@ class StreamingBuilder {
             if (!sched_error_) sched_error_ = std::current_exception();
             failed_.store(true, std::memory_order_release);
           }
-          rounds_.deliver += seconds_since(t);
+          coding_.deliver += seconds_since(t);
         }
         {
           const std::lock_guard<std::mutex> hold(deliveries_lock_);
@@ -1722,7 +1722,7 @@ class StreamingBuilder {
           f->cwin = CoarseWindow{nullptr, 0, Rect{0, 0, 0, 0}, GridSize{0, 0}};
         }
         sched_band_[size_t(l)] = y0 + bw.rows;
-        if (first_round_at_ < 0) first_round_at_ = seconds_since(build_start_);
+        if (first_band_at_ < 0) first_band_at_ = seconds_since(build_start_);
         Flight* raw = f.get();
         q.push_back(std::move(f));
         ++in_flight_;
@@ -1754,12 +1754,12 @@ class StreamingBuilder {
         undelivered_.fetch_add(1, std::memory_order_relaxed);
         q.pop_front();
         --in_flight_;
-        ++rounds_.count;
+        ++coding_.count;
         committed = true;
       }
     }
     if (!committed) return;
-    rounds_.wall = seconds_since(build_start_) - first_round_at_;
+    coding_.wall = seconds_since(build_start_) - first_band_at_;
     commits_.fetch_add(1, std::memory_order_release);
     schedule();
   }
@@ -1895,7 +1895,7 @@ class StreamingBuilder {
         if (!bw.valid[size_t(k)]) bw.res[size_t(k)] = 0;
     }
     // Parts of about kPartSamples (the coder splits by runs of whole tiles), at most two per worker:
-    // small enough that a round's last bands end together, few enough that a part's own scratch and
+    // small enough that the last bands of a level end together, few enough that a part's own scratch and
     // hand-over stay a small cost.
     constexpr int64_t kPartSamples = int64_t(1) << 16;
     const int parts =
@@ -1994,7 +1994,7 @@ class StreamingBuilder {
   std::exception_ptr sched_error_;
   std::atomic<bool> failed_{false};
   std::atomic<uint64_t> commits_{0};
-  uint64_t seen_commits_ = 0;  // commits_ when must_wait_for_round last looked (main thread)
+  uint64_t seen_commits_ = 0;  // commits_ when must_wait_for_coders last looked (main thread)
   double coding_busy_ = 0;     // one thread: seconds coding bands
   CodingPool pool_;            // threads > 1, started with the first band; stopped first in ~StreamingBuilder
   BuildResult result_;
