@@ -186,6 +186,8 @@ struct BandWork {
   std::vector<int32_t> res, rhat;
   std::vector<int32_t> pred_row;  // U of one row, where T_l - R does not give it back
   std::vector<uint8_t> valid, bytes;
+  // The rows of T^_{l-1} its U reads, copied when it is scheduled (the level drops them as it moves on).
+  std::vector<int32_t> window;
   UpsampleScratch scratch;
   BandFigures figures;
 };
@@ -1508,12 +1510,11 @@ class StreamingBuilder {
     return l == 0 || reconstructed_[size_t(l - 1)].end() >= coarse_rows_needed(l, y0, y0 + rows);
   }
 
-  // A band scheduled and not yet committed: its work (recycled per level) and the rows of T^_{l-1}
-  // its U reads, copied when it is scheduled (the level drops them as it moves on).
+  // A band scheduled and not yet committed: its work (recycled per level, with its buffers and its
+  // copy of the T^_{l-1} rows U reads, which cwin names).
   struct Flight {
     int level = 0;
     std::unique_ptr<BandWork> work;
-    std::vector<int32_t> window;
     CoarseWindow cwin;
     bool coded = false;
     std::exception_ptr error;
@@ -1715,9 +1716,9 @@ class StreamingBuilder {
         if (l > 0) {
           const GridSize cs = sizes_[size_t(l - 1)];
           const Rect need = upsample_required_window(Rect{0, y0, fs.width, bw.rows}, fs);
-          f->window.resize(size_t(need.height * cs.width));
-          reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, f->window.data());
-          f->cwin = CoarseWindow{f->window.data(), cs.width, need, cs};
+          bw.window.resize(size_t(need.height * cs.width));
+          reconstructed_[size_t(l - 1)].copy_rows(need.y0, need.height, bw.window.data());
+          f->cwin = CoarseWindow{bw.window.data(), cs.width, need, cs};
         } else {
           f->cwin = CoarseWindow{nullptr, 0, Rect{0, 0, 0, 0}, GridSize{0, 0}};
         }
