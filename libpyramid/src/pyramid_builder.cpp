@@ -976,6 +976,7 @@ class StreamingBuilder {
       bool stop = false;
       std::atomic<bool> failed{false};
       std::exception_ptr error;
+      double busy = 0, waited = 0;  // its thread's seconds producing bands, waiting for a free slot
       std::thread thread;
       ~Reader() {
         if (!thread.joinable()) return;
@@ -991,6 +992,7 @@ class StreamingBuilder {
     if (ahead)
       reader.thread = std::thread([&] {
         for (int64_t i = 1; i < n_bands; ++i) {
+          const auto t_wait = Clock::now();
           {
             std::unique_lock<std::mutex> hold(reader.lock);
             reader.wake.wait(hold, [&] {
@@ -998,8 +1000,11 @@ class StreamingBuilder {
             });
             if (reader.stop) return;
           }
+          const auto t_produce = Clock::now();
+          reader.waited += std::chrono::duration<double>(t_produce - t_wait).count();
           try {
             produce(bands[i % kSlots], band_y(i));
+            reader.busy += seconds_since(t_produce);
           } catch (...) {
             const std::lock_guard<std::mutex> hold(reader.lock);
             reader.error = std::current_exception();
@@ -1045,6 +1050,7 @@ class StreamingBuilder {
       }
     } fd;
     const bool d_thread_wanted = ahead && !fed_fine_ && finest_ > stop_ && entry_ == finest_;
+    d_on_thread_ = d_thread_wanted;
     const auto d_loop = [&] {
       detail::DownsampleEngine& engine = *engines_[size_t(finest_)];
       const int64_t cw = sizes_[size_t(finest_ - 1)].width;
@@ -1250,6 +1256,8 @@ class StreamingBuilder {
       }
     const auto t_final = Clock::now();
     const double cpu_read = thread_cpu_seconds() - cpu_start, wall_read = seconds_since(t_start);
+    if (ahead) reader_busy_ = reader.busy, reader_waited_ = reader.waited;
+    busy_when_read_ = opt_.threads > 1 ? pool_.busy() : coding_busy_;
     pump(true);
     const double wall_final = seconds_since(t_final);
     for (int l = 0; l < level_count_; ++l)
@@ -1339,13 +1347,16 @@ class StreamingBuilder {
            << coding_.wall << " s, the workers busy " << busy << " thread-seconds of "
            << coding_.wall * opt_.threads << " ("
            << (coding_.wall > 0 ? 100 * busy / (coding_.wall * opt_.threads) : 0) << " %, " << coding_.deliver
-           << " s of it writing bands out)";
+           << " s of it writing bands out; " << busy_when_read_ << " of them by the input's end)";
     result_.log.push_back(coding.str());
     main_thread << "main thread: reading the input " << wall_read << " s (" << cpu_read
                 << " s CPU; D cascade " << main_.cascade << " s, adopting rows " << main_.append
                 << " s, scheduling bands " << main_.pump << " s, waiting " << wait_coders_
                 << " s for the coders and " << wait_reader_ << " s for the reader), then coding the rest "
                 << wall_final << " s";
+    if (reader_busy_ >= 0)
+      main_thread << "; the reader thread: " << reader_busy_ << " s reading and converting, "
+                  << reader_waited_ << " s waiting for a free slot";
     if (finest_d_busy_ >= 0)
       main_thread << "; D's finest level on its own thread: " << finest_d_busy_
                   << " s in the engine, its last rows waited for " << finest_d_wait_ << " s";
@@ -1362,6 +1373,10 @@ class StreamingBuilder {
   // per stripe edge, most of a stripe's extra work.
   static constexpr int64_t kDHalo = 6;
   double wait_coders_ = 0, wait_reader_ = 0;  // the main thread's waits, for the build log
+  // The reader thread's seconds producing bands and waiting for a free slot (-1: no reader thread),
+  // and the coders' busy thread-seconds when the input was all read (for the build log).
+  double reader_busy_ = -1, reader_waited_ = 0, busy_when_read_ = 0;
+  bool d_on_thread_ = false;  // D's finest engine runs on a thread of its own (run)
   // D's finest thread: its seconds in the engine, and the main thread's wait for its last rows.
   double finest_d_busy_ = -1, finest_d_wait_ = 0;
   // Wakes the main thread when anything it waits for happens (the reader's next band, D's coarse
@@ -1457,8 +1472,14 @@ class StreamingBuilder {
       }
       // Coarse engines emit in small batches for the same reason as the band heights.
       const int64_t batch = std::max<int64_t>(1, int64_t(32) >> std::min(62, finest_ - l));
+      // With D's finest engine on a thread of its own the coders have every core, and the engines'
+      // workers only take cores from them and from the reader: two for the finest engine, none for
+      // the coarser ones (a quarter of its rows and less; on the main thread). On the 16-core host
+      // at 16 threads: 16 each 0.89-0.91 s a build, these 0.86-0.88 s and a third of the context
+      // switches (docs/scale.md).
+      const int workers = !d_on_thread_ ? opt_.threads : std::min(opt_.threads, l == finest_ ? 2 : 1);
       engines_[size_t(l)] = std::make_unique<detail::DownsampleEngine>(
-          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, opt_.threads, batch, true);
+          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, workers, batch, true);
       cascade_height = coarse_extent(cascade_height);
       emit_[size_t(l)] = [this, l](int64_t, int64_t n, const double* rows) {
         const int64_t cw = sizes_[size_t(l - 1)].width;
