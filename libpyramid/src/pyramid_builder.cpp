@@ -485,6 +485,25 @@ BuildMemoryPlan plan_memory(const GridInfo& info, const BuildOptions& opt, const
   return plan;
 }
 
+// A helper thread of StreamingBuilder::run and what it waits on: `stop` (under `lock`, with `wake`
+// notified) asks it to return. Its owner's destructor calls halt(), so that the thread is joined
+// before the owner's members that it reads are destroyed.
+struct StoppableThread {
+  std::mutex lock;
+  std::condition_variable wake;
+  bool stop = false;
+  std::thread thread;
+  void halt() {
+    if (!thread.joinable()) return;
+    {
+      const std::lock_guard<std::mutex> hold(lock);
+      stop = true;
+    }
+    wake.notify_all();
+    thread.join();
+  }
+};
+
 // The coding workers: `threads` threads kept for the whole build that code the bands the
 // scheduler hands them (StreamingBuilder::schedule) and the parts the coder splits a band into
 // (chunks of its tiles, ResidualCoder::encode_parts), parts first, so that a band started is
@@ -966,27 +985,15 @@ class StreamingBuilder {
     for (int64_t i = 0; i < std::min<int64_t>(kSlots, n_bands); ++i)
       take_spares(bands[i % kSlots], std::min(B, H - band_y(i)));
     produce(bands[0], 0);
-    struct Reader {
-      std::mutex lock;
-      std::condition_variable wake;
+    struct Reader : StoppableThread {
       // Bands [0, produced) ready; [0, consumed) done with by the main thread, [0, d_consumed) by
       // the finest D's thread (while it has bands: their int32 rows are read there).
       std::atomic<int64_t> produced{1};
       int64_t consumed = 0, d_consumed = std::numeric_limits<int64_t>::max();
-      bool stop = false;
       std::atomic<bool> failed{false};
       std::exception_ptr error;
       double busy = 0, waited = 0;  // its thread's seconds producing bands, waiting for a free slot
-      std::thread thread;
-      ~Reader() {
-        if (!thread.joinable()) return;
-        {
-          const std::lock_guard<std::mutex> hold(lock);
-          stop = true;
-        }
-        wake.notify_all();
-        thread.join();
-      }
+      ~Reader() { halt(); }
     } reader;
     const bool ahead = opt_.threads > 1 && n_bands > 1;
     if (ahead)
@@ -1023,31 +1030,20 @@ class StreamingBuilder {
     // the main thread (take_coarse), which runs the coarser engines and schedules bands as before, in the
     // same order: the same rows, so the same bytes. Declared after the reader and the bands, so that
     // it stops first: its jobs read the bands' rows and report to the reader.
-    struct FinestD {
+    struct FinestD : StoppableThread {
       struct Job {
         const int32_t* rows;
         int64_t n;     // 0: a band outside the cascade, only counted
         int64_t band;  // its index, for the reader
       };
-      std::mutex lock;
-      std::condition_variable wake;
       std::deque<Job> jobs;
-      bool finish = false, stop = false;
+      bool finish = false;
       std::atomic<bool> finished{false}, has_made{false};
       std::vector<std::vector<int32_t>> made, spare;  // coarse rows for the main thread, buffers
       std::vector<int64_t> made_rows;
       std::exception_ptr error;
       double busy = 0;  // its thread's seconds in the engine
-      std::thread thread;
-      ~FinestD() {
-        if (!thread.joinable()) return;
-        {
-          const std::lock_guard<std::mutex> hold(lock);
-          stop = true;
-        }
-        wake.notify_all();
-        thread.join();
-      }
+      ~FinestD() { halt(); }
     } fd;
     const bool d_thread_wanted = ahead && !fed_fine_ && finest_ > stop_ && entry_ == finest_;
     d_on_thread_ = d_thread_wanted;
