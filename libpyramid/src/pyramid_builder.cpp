@@ -366,6 +366,7 @@ int64_t fit_rows_held(const BuildOptions& opt, int64_t height) {
 // Input bands the builder holds: the one the main thread works on, those the reader thread makes
 // ahead of it and (threads > 1) those D's finest thread has not yet read (one, usually).
 constexpr int kInputSlots = 4;
+int input_slots(int threads) { return threads > 1 ? kInputSlots : 1; }
 
 // Smallest band height of a coarse level (one codec macroblock row), where the lag allows it.
 constexpr int64_t kMinCoarseBandRows = 16;
@@ -410,7 +411,7 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   // has not reached); at least D's fit rows. The main thread does not read beyond it while a band
   // is in flight.
   const double groups = opt.threads > 1 ? 2 * c - 1 : c - 1;
-  const double input_bands = opt.threads > 1 ? kInputSlots : 1;
+  const double input_bands = input_slots(opt.threads);
   double lag =
       7 * scale(first) + 32.0 * (m + 1 - first) + groups * double(band_rows[size_t(m)]) + input_bands * B;
   for (int l = first; l <= m; ++l) lag += double(band_rows[size_t(l)]) * scale(l);
@@ -445,8 +446,8 @@ double estimate_bytes(const GridInfo& info, const BuildOptions& opt, const std::
   }
   // The input bands (level integers and validity, 8 rows of samples as read), the rows of those the
   // reader works on ahead as the level keeps them (made on the reader's thread), D's fit windows.
-  bytes += kInputSlots * (B * W * 5 + std::min(B, 8.0) * W * 8) +
-           (kInputSlots - 1) * B * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8) + W * 4;
+  bytes += input_bands * (B * W * 5 + std::min(B, 8.0) * W * 8) +
+           (input_bands - 1) * B * (W * (narrow ? 2 : 4) + std::ceil(W / 64) * 8) + W * 4;
   if (!opt.use_fixed_filter)
     bytes += double(opt.fit.max_windows) * double(opt.fit.window * opt.fit.window) * 16;
   return bytes;
@@ -912,9 +913,12 @@ class StreamingBuilder {
     // each) are converted kReadRows rows at a time, so that they are not held for the whole band:
     // the two bands were most of a wide input's memory. The fill still sees the whole band.
     constexpr int64_t kReadRows = 8;
+    // One slot without a reader thread (one-thread builds): the others would be 5 bytes a sample of
+    // a band each, unused (21 MiB at 16384 columns).
     InputBand bands[kInputSlots];
-    constexpr int64_t kSlots = kInputSlots;
-    for (InputBand& b : bands) {
+    const int64_t slots = input_slots(opt_.threads);
+    for (int64_t k = 0; k < slots; ++k) {
+      InputBand& b = bands[k];
       b.values.resize(size_t(std::min(B, kReadRows) * W));
       b.valid.resize(size_t(B * W));
       b.ints.resize(size_t(B * W));
@@ -977,13 +981,13 @@ class StreamingBuilder {
       level_rows(b);
     };
     // The bands with rows below `stop`: band 0 here, the others on a reader thread kept for the whole
-    // read (threads > 1) that works up to kSlots - 1 bands ahead of this one. A thread started per
+    // read (threads > 1) that works up to slots - 1 bands ahead of this one. A thread started per
     // band had to be scheduled among the busy coding threads before it read anything, and this thread
     // waited 0.4-0.5 s of a 16-thread build for it (docs/scale.md).
     const int64_t n_bands = std::max<int64_t>(1, (stop + B - 1) / B);
     const auto band_y = [&](int64_t i) { return i * B; };
-    for (int64_t i = 0; i < std::min<int64_t>(kSlots, n_bands); ++i)
-      take_spares(bands[i % kSlots], std::min(B, H - band_y(i)));
+    for (int64_t i = 0; i < std::min<int64_t>(slots, n_bands); ++i)
+      take_spares(bands[i % slots], std::min(B, H - band_y(i)));
     produce(bands[0], 0);
     struct Reader : StoppableThread {
       // Bands [0, produced) ready; [0, consumed) done with by the main thread, [0, d_consumed) by
@@ -1003,14 +1007,14 @@ class StreamingBuilder {
           {
             std::unique_lock<std::mutex> hold(reader.lock);
             reader.wake.wait(hold, [&] {
-              return reader.stop || i < std::min(reader.consumed, reader.d_consumed) + kSlots;
+              return reader.stop || i < std::min(reader.consumed, reader.d_consumed) + slots;
             });
             if (reader.stop) return;
           }
           const auto t_produce = Clock::now();
           reader.waited += std::chrono::duration<double>(t_produce - t_wait).count();
           try {
-            produce(bands[i % kSlots], band_y(i));
+            produce(bands[i % slots], band_y(i));
             reader.busy += seconds_since(t_produce);
           } catch (...) {
             const std::lock_guard<std::mutex> hold(reader.lock);
@@ -1153,7 +1157,7 @@ class StreamingBuilder {
       }
     };
     for (int64_t i = 0; i < n_bands; ++i) {
-      InputBand& cur = bands[i % kSlots];
+      InputBand& cur = bands[i % slots];
       if (i > 0 && ahead) {
         const auto t_wait = Clock::now();
         serve_until([&] {
@@ -1222,7 +1226,7 @@ class StreamingBuilder {
       }
       if (filter_ready_) pump(false);
       // The slot's next band: its row buffers are allocated here (RowRing::take_spares says why).
-      if (i + kSlots < n_bands) take_spares(cur, std::min(B, H - band_y(i + kSlots)));
+      if (i + slots < n_bands) take_spares(cur, std::min(B, H - band_y(i + slots)));
       if (ahead) {
         {
           const std::lock_guard<std::mutex> hold(reader.lock);
