@@ -74,122 +74,6 @@ class CoarseSink final : public PyramidSink {
   int64_t width_;
 };
 
-// A stripe's input rows as pass 1 read them (BandReader::read_rows_int32), kept for its pass 2,
-// which read and converted the same rows again: at 2 ranks on the 2-core VM, 0.5 s of a rank's 5.7
-// (docs/scale.md). Samples as int16 for int16 grids (else int32); validity only for rows
-// with a void.
-struct KeptInput {
-  int64_t first = 0, rows = 0, width = 0;
-  bool narrow = false;
-  std::vector<int16_t> narrow_values;
-  std::vector<int32_t> wide_values;
-  std::vector<std::vector<uint8_t>> valid;  // per row; empty: every sample valid
-  static double bytes_per_sample(SampleType t) { return t == SampleType::Int16 ? 2.0 : 4.0; }
-};
-
-// Passes every call to `inner` and keeps the rows of [first, end) that read_rows_int32 returns in
-// order from `first` on (a gap ends the keeping: the replay serves only what is kept).
-class RecordingReader final : public BandReader {
- public:
-  RecordingReader(BandReader& inner, int64_t first, int64_t end, KeptInput& out)
-      : inner_(inner), end_(end), out_(out) {
-    out_ = KeptInput{};
-    out_.first = first;
-    out_.width = inner.info().width;
-    out_.narrow = KeptInput::bytes_per_sample(inner.info().sample_type) == 2.0;
-    const size_t samples = size_t(std::max<int64_t>(0, end - first) * out_.width);
-    if (out_.narrow)
-      out_.narrow_values.reserve(samples);
-    else
-      out_.wide_values.reserve(samples);
-  }
-  const GridInfo& info() const override { return inner_.info(); }
-  int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
-    return moved(inner_.read_rows(rows, values, valid));
-  }
-  int64_t skip_rows(int64_t rows) override { return moved(inner_.skip_rows(rows)); }
-  bool reads_int32() const override { return inner_.reads_int32(); }
-  int64_t read_rows_int32(int64_t rows, int32_t* values, uint8_t* valid) override {
-    const int64_t at = rows_read_, n = moved(inner_.read_rows_int32(rows, values, valid));
-    const int64_t w = out_.width;
-    for (int64_t r = 0; r < n; ++r) {
-      if (at + r != out_.first + out_.rows || at + r >= end_) continue;
-      const int32_t* v = values + r * w;
-      const uint8_t* ok = valid + r * w;
-      if (out_.narrow)
-        out_.narrow_values.insert(out_.narrow_values.end(), v, v + w);  // int16 storage: exact
-      else
-        out_.wide_values.insert(out_.wide_values.end(), v, v + w);
-      out_.valid.emplace_back();
-      if (std::memchr(ok, 0, size_t(w))) out_.valid.back().assign(ok, ok + w);
-      ++out_.rows;
-    }
-    return n;
-  }
-
- private:
-  int64_t moved(int64_t n) {
-    rows_read_ += n;
-    return n;
-  }
-  BandReader& inner_;
-  int64_t end_;
-  KeptInput& out_;
-};
-
-// Serves the kept rows from memory and every other row from a reader opened when first needed
-// (positioned by skip_rows). The same rows and validity as the file's reader gives.
-class ReplayReader final : public BandReader {
- public:
-  ReplayReader(const std::function<std::unique_ptr<BandReader>()>& open, const GridInfo& info,
-               const KeptInput& kept)
-      : open_(open), info_(info), kept_(kept) {}
-  const GridInfo& info() const override { return info_; }
-  bool reads_int32() const override { return true; }  // kept only where pass 1 read that way
-  int64_t read_rows(int64_t rows, double* values, uint8_t* valid) override {
-    return moved(file().read_rows(rows, values, valid));
-  }
-  int64_t skip_rows(int64_t rows) override {
-    return moved(std::clamp<int64_t>(rows, 0, info_.height - rows_read_));
-  }
-  int64_t read_rows_int32(int64_t rows, int32_t* values, uint8_t* valid) override {
-    const int64_t at = rows_read_, end = kept_.first + kept_.rows, w = info_.width;
-    if (at < kept_.first || at >= end) return moved(file().read_rows_int32(rows, values, valid));
-    const int64_t n = std::min(rows, end - at);
-    for (int64_t r = 0; r < n; ++r) {
-      const size_t k = size_t(at + r - kept_.first);
-      if (kept_.narrow)
-        std::copy_n(kept_.narrow_values.begin() + ptrdiff_t(k * size_t(w)), w, values + r * w);
-      else
-        std::copy_n(kept_.wide_values.begin() + ptrdiff_t(k * size_t(w)), w, values + r * w);
-      if (kept_.valid[k].empty())
-        std::fill_n(valid + r * w, w, uint8_t(1));
-      else
-        std::copy_n(kept_.valid[k].begin(), w, valid + r * w);
-    }
-    return moved(n);
-  }
-
- private:
-  // The file's reader at this reader's row.
-  BandReader& file() {
-    if (!file_) file_ = open_();
-    const int64_t behind = rows_read_ - file_->rows_read();
-    if (behind < 0) throw std::logic_error("stripe build: replayed input read backwards");
-    if (behind > 0 && file_->skip_rows(behind) != behind)
-      throw Error(ErrorCode::Truncated, "stripe build: input ended before row " + std::to_string(rows_read_));
-    return *file_;
-  }
-  int64_t moved(int64_t n) {
-    rows_read_ += n;
-    return n;
-  }
-  const std::function<std::unique_ptr<BandReader>()>& open_;
-  GridInfo info_;
-  const KeptInput& kept_;
-  std::unique_ptr<BandReader> file_;
-};
-
 // Runs run(stripe) seeking past the rows above the stripe, and again reading them where a void
 // fill turns out to need its carry from there (BuildStripe::seek_above): each stripe read its way
 // down the input from row 0, which with four stripes was 7 % of the build's CPU (docs/scale.md).
@@ -642,14 +526,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   const bool keeps_fine_rows =
       split >= 0 && split < levels - 2 && !todo.empty() &&
       (options.memory_budget == 0 || shared_bytes + fine_bytes <= double(options.memory_budget) / 2);
-  // And the stripes' input rows as pass 1 read them, where those fit the same half as well.
-  const double input_bytes =
-      double(todo_rows) * double(info.width) * KeptInput::bytes_per_sample(info.sample_type);
-  const bool keeps_input =
-      keeps_fine_rows && (options.memory_budget == 0 ||
-                          shared_bytes + fine_bytes + input_bytes <= double(options.memory_budget) / 2);
-  const double held_bytes =
-      shared_bytes + (keeps_fine_rows ? fine_bytes : 0.0) + (keeps_input ? input_bytes : 0.0);
+  const double held_bytes = shared_bytes + (keeps_fine_rows ? fine_bytes : 0.0);
   int concurrency = int(std::clamp<size_t>(mine.size(), 1, size_t(threads)));
   const auto concurrent_options = [&](int c) {
     BuildOptions o = stripe_options;
@@ -684,7 +561,6 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   // Shared coarse levels: every stripe's rows of T_k (pass 1), exchanged, then levels 0..k once.
   std::vector<int32_t> coarse_reconstruction;
   std::vector<StripeLevelRows> kept;  // per stripe: the T_{m-1} rows its first pass kept
-  std::vector<KeptInput> kept_input;  // per stripe: the input rows its first pass read
   if (split >= 0) {
     bool coarse_done = true;
     if (rank == 0 && !error) {
@@ -698,9 +574,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       std::vector<uint8_t> blob;
       const auto t_rows = Clock::now();
       kept.resize(size_t(K));
-      kept_input.resize(size_t(K));
       std::vector<StripeLevelRows> made(mine.size());
-      std::vector<KeptInput> read(mine.size());
       try {
         if (error) std::rethrow_exception(error);
         const auto make = [&](size_t i, const BuildOptions& o) {
@@ -709,10 +583,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
           const bool keep = keeps_fine_rows && std::find(todo.begin(), todo.end(), k) != todo.end();
           BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
             auto reader = open_input();
-            if (!(keep && keeps_input))
-              return build_stripe_level_rows(*reader, o, s, split, coder, made[i], keep);
-            RecordingReader recording(*reader, stripe_rows(k), stripe_rows(k + 1), read[i]);
-            return build_stripe_level_rows(recording, o, s, split, coder, made[i], keep);
+            return build_stripe_level_rows(*reader, o, s, split, coder, made[i], keep);
           });
           const std::lock_guard<std::mutex> hold(result_lock);
           keep_filter(std::move(r));
@@ -728,7 +599,6 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
           std::memcpy(blob.data() + at + 16, rows.rows.data(), rows.rows.size() * 4);
           rows.rows = {};
           kept[size_t(k)] = std::move(rows);
-          kept_input[size_t(k)] = std::move(read[i]);
         }
       } catch (...) {
         error = std::current_exception();
@@ -787,13 +657,9 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
     const auto code = [&](size_t i, const BuildOptions& o) {
       const int k = todo[i];
       const auto t_stripe = Clock::now();
-      bool replayed = false;
       BuildResult r = seeking(BuildStripe{stripe_rows(k), stripe_rows(k + 1)}, [&](const BuildStripe& s) {
         PartWriter part(part_path(so.directory, K, k), fp, k, K, info.width);
-        const bool replay = k < int(kept_input.size()) && kept_input[size_t(k)].rows > 0;
-        replayed = replay;
-        std::unique_ptr<BandReader> reader =
-            replay ? std::make_unique<ReplayReader>(open_input, info, kept_input[size_t(k)]) : open_input();
+        auto reader = open_input();
         BuildResult built = split >= 0 ? build_pyramid_stripe_fine_levels(
                                              *reader, o, s, split, coarse_reconstruction, coder, part,
                                              k < int(kept.size()) ? &kept[size_t(k)] : nullptr)
@@ -802,13 +668,11 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
         return built;
       });
       if (k < int(kept.size())) kept[size_t(k)] = {};
-      if (k < int(kept_input.size())) kept_input[size_t(k)] = {};
       // Per stripe, for the balance between stripes (an interior one carries two halos).
       std::ostringstream line;
       line.precision(3);
       line << "stripe " << k << " of " << K << ": rows " << stripe_rows(k) << "-" << stripe_rows(k + 1)
-           << " coded in " << seconds(t_stripe, Clock::now()) << " s"
-           << (replayed ? " (its input kept from pass 1)" : "");
+           << " coded in " << seconds(t_stripe, Clock::now()) << " s";
       const std::lock_guard<std::mutex> hold(result_lock);
       stripe_lines.push_back(line.str());
       keep_filter(std::move(r));
