@@ -512,7 +512,7 @@ struct StoppableThread {
 // 2026-12-07 bands were coded in rounds, one round at a time: a round's finest bands ran while the
 // coarse bands that the next finest ones need waited for the round's end, and the 16-core host's
 // rounds were 58-68 % busy (docs/scale.md). A part never waits; a band waits only for its own parts.
-class CodingPool final : public PartRunner {
+class CodingPool final : public PartRunner, detail::PoolThreads {
  public:
   struct Band {
     int level;
@@ -525,15 +525,7 @@ class CodingPool final : public PartRunner {
     for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { serve(); });
   }
   // Joins the workers after the bands and parts they run (those queued are dropped).
-  void stop() {
-    {
-      const std::lock_guard<std::mutex> hold(lock_);
-      stop_ = true;
-    }
-    wake_.notify_all();
-    for (std::thread& t : threads_) t.join();
-    threads_.clear();
-  }
+  void stop() { stop_threads(); }
   ~CodingPool() { stop(); }
   bool started() const { return !threads_.empty(); }
   void submit(const Band& band) {
@@ -621,13 +613,9 @@ class CodingPool final : public PartRunner {
     }
   }
 
-  std::mutex lock_;
-  std::condition_variable wake_;
   std::deque<Job*> jobs_;  // jobs with parts not yet taken, oldest first
   std::vector<Band> ready_;
   std::function<void(const Band&)> code_;
-  std::vector<std::thread> threads_;
-  bool stop_ = false;
   double busy_ = 0;
 };
 

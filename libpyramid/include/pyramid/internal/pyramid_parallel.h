@@ -14,20 +14,33 @@
 
 namespace terrain::detail {
 
-// Workers kept by one calling thread for its parallel_chunks calls (thread_local: the builder's main
-// thread runs D's batches one after another, hundreds per level, and starting fresh threads for
-// each was part of its serial time). Grows to the largest worker count asked; joined when the
-// calling thread exits. Not reentrant from inside a chunk.
-class ChunkPool {
- public:
-  ~ChunkPool() {
+// The threads a pool keeps, and how they stop: stop_ set under lock_, wake_ notified, every thread
+// joined. A pool's destructor calls stop_threads(), so that its threads are joined before the pool's
+// own members, which they read, are destroyed.
+class PoolThreads {
+ protected:
+  void stop_threads() {
     {
       const std::lock_guard<std::mutex> hold(lock_);
       stop_ = true;
     }
     wake_.notify_all();
     for (std::thread& t : threads_) t.join();
+    threads_.clear();
   }
+  std::vector<std::thread> threads_;
+  std::mutex lock_;
+  std::condition_variable wake_;
+  bool stop_ = false;
+};
+
+// Workers kept by one calling thread for its parallel_chunks calls (thread_local: the builder's main
+// thread runs D's batches one after another, hundreds per level, and starting fresh threads for
+// each was part of its serial time). Grows to the largest worker count asked; joined when the
+// calling thread exits. Not reentrant from inside a chunk.
+class ChunkPool : PoolThreads {
+ public:
+  ~ChunkPool() { stop_threads(); }
   // Runs job(w) for w = 1 .. workers - 1 on the pool and job(0) here; returns when all are done.
   void run(int workers, const std::function<void(int)>& job) {
     while (int(threads_.size()) < workers - 1) {
@@ -68,13 +81,10 @@ class ChunkPool {
     }
   }
 
-  std::vector<std::thread> threads_;
-  std::mutex lock_;
-  std::condition_variable wake_, done_;
+  std::condition_variable done_;
   const std::function<void(int)>* job_ = nullptr;
   uint64_t generation_ = 0;
   int active_ = 0, pending_ = 0;
-  bool stop_ = false;
 };
 
 // Calls body(worker, begin, end) for `workers` contiguous chunks of [0, n); worker 0 runs on the
@@ -108,16 +118,9 @@ template <class Body> void parallel_chunks(int workers, int64_t n, Body&& body) 
 // The builder's D cascade runs hundreds of short batches per level beside the busy coding threads;
 // with fixed chunks each one waited for its last chunk's thread to be scheduled (docs/scale.md,
 // "where the 16-thread build loses"). Not reentrant from inside an item.
-class ClaimPool {
+class ClaimPool : PoolThreads {
  public:
-  ~ClaimPool() {
-    {
-      const std::lock_guard<std::mutex> hold(lock_);
-      stop_ = true;
-    }
-    wake_.notify_all();
-    for (std::thread& t : threads_) t.join();
-  }
+  ~ClaimPool() { stop_threads(); }
   // Calls item(slot, i) for every i in [0, n), each once, on this thread (slot 0) and on at most
   // workers - 1 pool threads (slots 1 .. workers - 1, each slot used by one thread at a time);
   // returns when every item is done. The first exception is rethrown after that; items not yet
@@ -184,12 +187,9 @@ class ClaimPool {
     }
   }
 
-  std::vector<std::thread> threads_;
-  std::mutex lock_;
-  std::condition_variable wake_, done_;
+  std::condition_variable done_;
   Batch* batch_ = nullptr;
   uint64_t generation_ = 0;
-  bool stop_ = false;
 };
 
 // Calls item(slot, i) for i in [0, n), claimed one at a time by the calling thread (slot 0) and up
