@@ -8,8 +8,9 @@
 // transform or the lapped transform, RLGR). The coded levels are then read back out of every band's
 // real stream (read_header / read_tile_index, then each tile payload parsed with libcodec's own
 // gamma_decode and rlgr_decode and its start states), so the coefficients are exactly the ones RLGR
-// coded, dead zone and per-tile transform choice included. Each tile is checked by dequantising and
-// inverse-transforming the parsed levels: the result must equal the builder's reconstruction
+// coded, dead zone and per-tile transform choice included (building and parsing: level_streams.h,
+// shared with experiments/rlgr_start). Each tile is checked by dequantising and inverse-transforming
+// the parsed levels: the result must equal the builder's reconstruction
 // T^_l - U(T^_{l-1}) ("check" in the output counts the samples that differ: 0 expected).
 //
 // Every coefficient of level l >= 1 (the coarsest level, coded as values, is left as it is) gets:
@@ -62,37 +63,23 @@
 #include <map>
 #include <vector>
 
-#include "build/ptc_coder.h"
-#include "codec/codec.h"
-#include "codec/internal/bitio.h"
 #include "codec/internal/lapped_transform.h"
 #include "codec/internal/lifting_transform.h"
 #include "codec/internal/quantizer.h"
-#include "codec/internal/rlgr.h"
 #include "codec/internal/tile_coder.h"
-#include "pyramid/builder.h"
-#include "pyramid/downsample.h"
-#include "pyramid/memory_pyramid.h"
+#include "level_streams.h"
 #include "pyramid/upsample.h"
-#include "readers/heightmap.h"
 #include "token_model.h"
 
 using namespace terrain;
 using namespace codec::detail;
+using experiments::kGroupDc;
+using experiments::kGroupHp;
+using experiments::kGroupLp;
+using experiments::kGroups;
 
 namespace {
 
-// libcodec's start states (tile_coder.cpp; the decoder needs them to parse a tile).
-constexpr RlgrState kLpStart[2] = {{0, 40}, {8, 8}};
-constexpr RlgrState kDcStart[2] = {{0, 16}, {0, 48}};
-constexpr RlgrState kLiftingStart[2] = {{8, 8}, {64, 8}};
-RlgrState hp_start(int lp_flag, bool lp_zero) {
-  if (lp_flag && lp_zero) return RlgrState{64, 8};
-  if (lp_flag) return RlgrState{40, 8};
-  return RlgrState{};
-}
-
-constexpr int kGroups = 7;  // LL, HL, LH, HH, DC, LP, HP
 constexpr int kNb = 5, kCoarse = 6;
 constexpr int kVariants = 8;
 const char* const kVariantName[kVariants] = {"none",    "curv",      "par",      "curv x par",
@@ -231,21 +218,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   const Heightmap map = read_heightmap(argv[1]);
-  PtcCoderOptions co;
-  co.step = std::atof(argv[2]);
-  co.coarse_step_ratio = argc > 3 ? std::atof(argv[3]) : 1.0;
-  co.tile_size = argc > 4 ? uint32_t(std::atoi(argv[4])) : 32;
+  const PtcCoderOptions co = experiments::coder_options(argc, argv);
   const int box = std::getenv("BOX") ? std::atoi(std::getenv("BOX")) : 1;
   const bool per_level = std::getenv("LEVELS") != nullptr;
 
-  BuildOptions bo;
-  bo.threads = 1;
-  bo.use_fixed_filter = true;
-  bo.fixed_filter = DownsampleFilter::wavelet();
-  PtcResidualCoder coder(co);
   MemoryPyramid mem;
   mem.keep_reconstruction = true;
-  const BuildResult built = build_pyramid(map, bo, coder, mem);
+  const BuildResult built = experiments::build_wavelet_pyramid(map, co, mem);
   const uint64_t total_bytes = mem.total_bytes();
   const int levels = int(mem.header.levels.size());
   const double finest_n = double(map.info.width) * double(map.info.height);
@@ -292,174 +271,129 @@ int main(int argc, char** argv) {
     std::vector<std::vector<Coefficient>> level_tiles;
     double level_rlgr = 0;
 
-    for (const MemoryPyramid::Band& band : mem.bands[size_t(l)]) {
-      if (band.bytes.empty()) continue;
-      codec::HeaderInfo hi;
-      std::vector<codec::TileEntry> entries;
-      std::vector<codec::RowChecksum> rows;
-      if (codec::read_header(band.bytes.data(), band.bytes.size(), &hi) != codec::Status::Ok ||
-          codec::read_tile_index(band.bytes.data(), band.bytes.size(), hi, &entries, &rows) !=
-              codec::Status::Ok) {
-        std::fprintf(stderr, "level %d: band at %lld does not open\n", l, (long long)band.y0);
-        return 1;
-      }
-      const uint32_t step_q8 = uint32_t(std::lround(hi.step * 256));
-      const int F = hi.fraction_bits;
-      const double step = hi.step;
-      const BandSteps lift_steps = stream_band_steps(step_q8, F, true);
-      const BandSteps lap_steps = stream_band_steps(step_q8, F, false);
-      const bool residual_stream = hi.transform == codec::Transform::Residual;
-      const int T = int(hi.tile_size);
-      for (const codec::TileEntry& e : entries) {
-        if (e.size == 0) continue;
-        const int64_t t = e.first_tile;
-        const int tx = int(t % hi.tiles_x) * T, ty = int(t / hi.tiles_x) * T;
-        const int w = int(std::min<int64_t>(T, hi.width - tx)), h = int(std::min<int64_t>(T, hi.height - ty));
-        const int64_t fy0 = band.y0 + ty;  // the tile's first row in the level
-        level_rlgr += 8.0 * e.size;
-        BitReader in(band.bytes.data() + e.offset, e.size);
-        bool lifting = false;
-        if (residual_stream) {
-          in.refill();
-          lifting = in.take(1) == 0;
-        }
-        std::vector<Coefficient> coefs;
-        std::vector<int32_t> recon;  // the tile's decoded residual (check)
-        const auto coarse_classes = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1, Coefficient& k) {
-          k.cc = uint8_t(coarse_class(curv_map.mean(x0 - box, y0 - box, x1 + box, y1 + box), step));
-          k.pc =
-              uint8_t(l >= 2 ? coarse_class(par_map.mean(x0 - box, y0 - box, x1 + box, y1 + box), step) : 0);
-        };
-        if (lifting) {
-          ++lifting_tiles;
-          std::vector<int32_t> tile(size_t(w) * h, 0);
-          const LiftingBands lb = lifting_bands(w, h);
-          for (int k = 0; k < kLiftingBandCount; ++k) {
-            const bool ox = k & 1, oy = k & 2;
-            const int x0 = ox ? lb.even_w : 0, y0 = oy ? lb.even_h : 0, x1 = ox ? w : lb.even_w,
-                      y1 = oy ? h : lb.even_h;
-            const int bw = x1 - x0, bh = y1 - y0;
-            const size_t n = size_t(bw) * size_t(std::max(0, bh));
-            if (bw <= 0 || bh <= 0) continue;
-            in.refill();
-            RlgrState st = kLiftingStart[in.take(1)];
-            std::vector<int32_t> v(n);
-            if (!rlgr_decode(in, v.data(), n, st)) {
-              std::fprintf(stderr, "level %d: a tile does not parse\n", l);
-              return 1;
+    const bool parsed = experiments::for_each_tile(
+        mem, l,
+        [&](const codec::HeaderInfo& hi, const codec::TileEntry& e, const experiments::LevelTile& pt) {
+          const uint32_t step_q8 = uint32_t(std::lround(hi.step * 256));
+          const int F = hi.fraction_bits;
+          const double step = hi.step;
+          const BandSteps lift_steps = stream_band_steps(step_q8, F, true);
+          const BandSteps lap_steps = stream_band_steps(step_q8, F, false);
+          const int tx = pt.tx, w = pt.w, h = pt.h;
+          const int64_t fy0 = pt.y0;  // the tile's first row in the level
+          level_rlgr += 8.0 * e.size;
+          std::vector<Coefficient> coefs;
+          std::vector<int32_t> recon;  // the tile's decoded residual (check)
+          const auto coarse_classes = [&](int64_t x0, int64_t y0, int64_t x1, int64_t y1, Coefficient& k) {
+            k.cc = uint8_t(coarse_class(curv_map.mean(x0 - box, y0 - box, x1 + box, y1 + box), step));
+            k.pc = uint8_t(l >= 2 ? coarse_class(par_map.mean(x0 - box, y0 - box, x1 + box, y1 + box), step)
+                                  : 0);
+          };
+          if (pt.lifting) {
+            ++lifting_tiles;
+            std::vector<int32_t> tile(size_t(w) * h, 0);
+            for (const experiments::TileBand& b : pt.bands) {
+              const int k = b.group, x0 = b.x0, y0 = b.y0, bw = b.w, bh = b.h;
+              const std::vector<int32_t>& v = b.values;
+              for (int j = 0; j < bh; ++j)
+                for (int i = 0; i < bw; ++i) {
+                  const int32_t q = v[size_t(j) * bw + i];
+                  Coefficient cf{uint8_t(k), 0, 0, 0, q};
+                  const uint32_t left = i > 0 ? uint32_t(std::abs(v[size_t(j) * bw + i - 1])) : 0;
+                  const uint32_t top = j > 0 ? uint32_t(std::abs(v[size_t(j - 1) * bw + i])) : 0;
+                  cf.nb = uint8_t(nb_class(left + top));
+                  const int64_t cx = tx / 2 + i, cy = fy0 / 2 + j;
+                  coarse_classes(cx, cy, cx + 1, cy + 1, cf);
+                  coefs.push_back(cf);
+                  tile[size_t(y0 + j) * w + x0 + i] = int32_t(dequantize(q, lift_steps.q8[k]));
+                }
             }
-            for (int j = 0; j < bh; ++j)
-              for (int i = 0; i < bw; ++i) {
-                const int32_t q = v[size_t(j) * bw + i];
-                Coefficient cf{uint8_t(k), 0, 0, 0, q};
-                const uint32_t left = i > 0 ? uint32_t(std::abs(v[size_t(j) * bw + i - 1])) : 0;
-                const uint32_t top = j > 0 ? uint32_t(std::abs(v[size_t(j - 1) * bw + i])) : 0;
-                cf.nb = uint8_t(nb_class(left + top));
-                const int64_t cx = tx / 2 + i, cy = fy0 / 2 + j;
-                coarse_classes(cx, cy, cx + 1, cy + 1, cf);
-                coefs.push_back(cf);
-                tile[size_t(y0 + j) * w + x0 + i] = int32_t(dequantize(q, lift_steps.q8[k]));
-              }
-          }
-          lift_scratch.resize(lifting_scratch_size(w, h));
-          inverse_lifting(tile.data(), w, h, lift_scratch.data());
-          recon = std::move(tile);
-        } else {
-          ++lapped_tiles;
-          const int pw = padded_side(w), ph = padded_side(h), mbx = pw / 16, mby = ph / 16;
-          const size_t mbs = size_t(mbx) * mby, lp_count = mbs * 15,
-                       hp_count = size_t(pw) * ph - mbs - lp_count;
-          std::vector<int32_t> dc(mbs), lp(lp_count), hp(hp_count);
-          bool ok = gamma_decode(in, &dc[0]);
-          in.refill();
-          RlgrState st = kDcStart[in.take(1)];
-          ok = ok && rlgr_decode(in, dc.data() + 1, mbs - 1, st);
-          in.refill();
-          const int lp_flag = int(in.take(1));
-          st = kLpStart[lp_flag];
-          ok = ok && rlgr_decode(in, lp.data(), lp_count, st);
-          st = hp_start(lp_flag, std::all_of(lp.begin(), lp.end(), [](int32_t x) { return x == 0; }));
-          ok = ok && rlgr_decode(in, hp.data(), hp_count, st);
-          if (!ok) {
-            std::fprintf(stderr, "level %d: a lapped tile does not parse\n", l);
-            return 1;
-          }
-          std::vector<int32_t> tile(size_t(pw) * ph, 0);
-          // DC: MED residuals in macroblock raster order.
-          for (int my = 0, i = 0; my < mby; ++my)
-            for (int mx = 0; mx < mbx; ++mx, ++i) {
-              Coefficient cf{4, 0, 0, 0, dc[size_t(i)]};
-              const uint32_t left = mx > 0 ? uint32_t(std::abs(dc[size_t(i - 1)])) : 0;
-              const uint32_t top = my > 0 ? uint32_t(std::abs(dc[size_t(i - mbx)])) : 0;
-              cf.nb = uint8_t(nb_class(left + top));
-              coarse_classes(tx / 2 + 8 * mx, fy0 / 2 + 8 * my, tx / 2 + 8 * mx + 8, fy0 / 2 + 8 * my + 8,
-                             cf);
-              coefs.push_back(cf);
-              tile[size_t(my) * 16 * pw + size_t(mx) * 16] =
-                  int32_t(experiments::dc_prediction(tile.data(), pw, mx, my) + dc[size_t(i)]);
-            }
-          for (int my = 0; my < mby; ++my)
-            for (int mx = 0; mx < mbx; ++mx) {
-              int32_t& d = tile[size_t(my) * 16 * pw + size_t(mx) * 16];
-              d = int32_t(dequantize(d, lap_steps.q8[0]));
-            }
-          // LP: per scan position, macroblocks in raster order.
-          size_t n = 0;
-          for (int s = 0; s < 15; ++s) {
-            const experiments::Pos pos = experiments::kScan[s];
-            for (int my = 0; my < mby; ++my)
-              for (int mx = 0; mx < mbx; ++mx, ++n) {
-                Coefficient cf{5, 0, 0, 0, lp[n]};
-                const uint32_t left = mx > 0 ? uint32_t(std::abs(lp[n - 1])) : 0;
-                const uint32_t top = my > 0 ? uint32_t(std::abs(lp[n - size_t(mbx)])) : 0;
+            lift_scratch.resize(lifting_scratch_size(w, h));
+            inverse_lifting(tile.data(), w, h, lift_scratch.data());
+            recon = std::move(tile);
+          } else {
+            ++lapped_tiles;
+            const int pw = pt.pw, ph = pt.ph, mbx = pt.mbx, mby = pt.mby;
+            // The parsed DC residuals after the first, LP and HP; dc[0] the gamma-coded first DC.
+            std::vector<int32_t> dc{pt.dc0};
+            dc.insert(dc.end(), pt.bands[0].values.begin(), pt.bands[0].values.end());
+            const std::vector<int32_t>&lp = pt.bands[1].values, &hp = pt.bands[2].values;
+            std::vector<int32_t> tile(size_t(pw) * ph, 0);
+            // DC: MED residuals in macroblock raster order.
+            for (int my = 0, i = 0; my < mby; ++my)
+              for (int mx = 0; mx < mbx; ++mx, ++i) {
+                Coefficient cf{kGroupDc, 0, 0, 0, dc[size_t(i)]};
+                const uint32_t left = mx > 0 ? uint32_t(std::abs(dc[size_t(i - 1)])) : 0;
+                const uint32_t top = my > 0 ? uint32_t(std::abs(dc[size_t(i - mbx)])) : 0;
                 cf.nb = uint8_t(nb_class(left + top));
                 coarse_classes(tx / 2 + 8 * mx, fy0 / 2 + 8 * my, tx / 2 + 8 * mx + 8, fy0 / 2 + 8 * my + 8,
                                cf);
                 coefs.push_back(cf);
-                tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u] =
-                    int32_t(dequantize(lp[n], lap_steps.q8[lp_band(pos.v * 4 + pos.u)]));
+                tile[size_t(my) * 16 * pw + size_t(mx) * 16] =
+                    int32_t(experiments::dc_prediction(tile.data(), pw, mx, my) + dc[size_t(i)]);
               }
-          }
-          // HP: per scan position, macroblocks in raster order, their 16 blocks in raster order.
-          n = 0;
-          const int bxn = pw / 4;
-          std::vector<int32_t> plane(size_t(bxn) * (ph / 4));
-          for (int s = 0; s < 15; ++s) {
-            const experiments::Pos pos = experiments::kScan[s];
             for (int my = 0; my < mby; ++my)
-              for (int mx = 0; mx < mbx; ++mx)
-                for (int by = 0; by < 4; ++by)
-                  for (int bx = 0; bx < 4; ++bx, ++n) {
-                    const int gx = 4 * mx + bx, gy = 4 * my + by;
-                    Coefficient cf{6, 0, 0, 0, hp[n]};
-                    // left / top block at this position (coded before it in this order)
-                    const uint32_t left = gx > 0 ? uint32_t(std::abs(plane[size_t(gy) * bxn + gx - 1])) : 0;
-                    const uint32_t top = gy > 0 ? uint32_t(std::abs(plane[size_t(gy - 1) * bxn + gx])) : 0;
-                    plane[size_t(gy) * bxn + gx] = hp[n];
-                    cf.nb = uint8_t(nb_class(left + top));
-                    coarse_classes(tx / 2 + 2 * gx, fy0 / 2 + 2 * gy, tx / 2 + 2 * gx + 2,
-                                   fy0 / 2 + 2 * gy + 2, cf);
-                    coefs.push_back(cf);
-                    tile[size_t(4 * gy + pos.v) * pw + 4 * gx + pos.u] =
-                        int32_t(dequantize(hp[n], lap_steps.q8[hp_band(pos.v * 4 + pos.u)]));
-                  }
+              for (int mx = 0; mx < mbx; ++mx) {
+                int32_t& d = tile[size_t(my) * 16 * pw + size_t(mx) * 16];
+                d = int32_t(dequantize(d, lap_steps.q8[0]));
+              }
+            // LP: per scan position, macroblocks in raster order.
+            size_t n = 0;
+            for (int s = 0; s < 15; ++s) {
+              const experiments::Pos pos = experiments::kScan[s];
+              for (int my = 0; my < mby; ++my)
+                for (int mx = 0; mx < mbx; ++mx, ++n) {
+                  Coefficient cf{kGroupLp, 0, 0, 0, lp[n]};
+                  const uint32_t left = mx > 0 ? uint32_t(std::abs(lp[n - 1])) : 0;
+                  const uint32_t top = my > 0 ? uint32_t(std::abs(lp[n - size_t(mbx)])) : 0;
+                  cf.nb = uint8_t(nb_class(left + top));
+                  coarse_classes(tx / 2 + 8 * mx, fy0 / 2 + 8 * my, tx / 2 + 8 * mx + 8, fy0 / 2 + 8 * my + 8,
+                                 cf);
+                  coefs.push_back(cf);
+                  tile[size_t(16 * my + 4 * pos.v) * pw + 16 * mx + 4 * pos.u] =
+                      int32_t(dequantize(lp[n], lap_steps.q8[lp_band(pos.v * 4 + pos.u)]));
+                }
+            }
+            // HP: per scan position, macroblocks in raster order, their 16 blocks in raster order.
+            n = 0;
+            const int bxn = pw / 4;
+            std::vector<int32_t> plane(size_t(bxn) * (ph / 4));
+            for (int s = 0; s < 15; ++s) {
+              const experiments::Pos pos = experiments::kScan[s];
+              for (int my = 0; my < mby; ++my)
+                for (int mx = 0; mx < mbx; ++mx)
+                  for (int by = 0; by < 4; ++by)
+                    for (int bx = 0; bx < 4; ++bx, ++n) {
+                      const int gx = 4 * mx + bx, gy = 4 * my + by;
+                      Coefficient cf{kGroupHp, 0, 0, 0, hp[n]};
+                      // left / top block at this position (coded before it in this order)
+                      const uint32_t left = gx > 0 ? uint32_t(std::abs(plane[size_t(gy) * bxn + gx - 1])) : 0;
+                      const uint32_t top = gy > 0 ? uint32_t(std::abs(plane[size_t(gy - 1) * bxn + gx])) : 0;
+                      plane[size_t(gy) * bxn + gx] = hp[n];
+                      cf.nb = uint8_t(nb_class(left + top));
+                      coarse_classes(tx / 2 + 2 * gx, fy0 / 2 + 2 * gy, tx / 2 + 2 * gx + 2,
+                                     fy0 / 2 + 2 * gy + 2, cf);
+                      coefs.push_back(cf);
+                      tile[size_t(4 * gy + pos.v) * pw + 4 * gx + pos.u] =
+                          int32_t(dequantize(hp[n], lap_steps.q8[hp_band(pos.v * 4 + pos.u)]));
+                    }
+            }
+            inverse_lapped(tile.data(), pw, ph, F > 0);
+            recon.assign(size_t(w) * h, 0);
+            for (int y = 0; y < h; ++y)
+              for (int x = 0; x < w; ++x) recon[size_t(y) * w + x] = tile[size_t(y) * pw + x];
           }
-          inverse_lapped(tile.data(), pw, ph, F > 0);
-          recon.assign(size_t(w) * h, 0);
+          // Check: the parsed levels reconstruct the builder's residual exactly.
           for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x) recon[size_t(y) * w + x] = tile[size_t(y) * pw + x];
-        }
-        // Check: the parsed levels reconstruct the builder's residual exactly.
-        for (int y = 0; y < h; ++y)
-          for (int x = 0; x < w; ++x) {
-            const int32_t v = recon[size_t(y) * w + x];
-            const int32_t r = F ? int32_t(uint32_t(v) + (1u << (F - 1))) >> F : v;
-            const size_t at = size_t((fy0 + y) * fine.width + tx + x);
-            if (r != mem.recon[size_t(l)][at] - up[at]) ++mismatches;
-          }
-        level_tiles.push_back(std::move(coefs));
-      }
-    }
+            for (int x = 0; x < w; ++x) {
+              const int32_t v = recon[size_t(y) * w + x];
+              const int32_t r = F ? int32_t(uint32_t(v) + (1u << (F - 1))) >> F : v;
+              const size_t at = size_t((fy0 + y) * fine.width + tx + x);
+              if (r != mem.recon[size_t(l)][at] - up[at]) ++mismatches;
+            }
+          level_tiles.push_back(std::move(coefs));
+        });
+    if (!parsed) return 1;
     // Model A2's priors: each context's share of zeros and mean |q| - 1 of non-zeros over the level.
     std::vector<Prior> prior(size_t(kVariants * kGroups * kContexts));
     for (const auto& coefs : level_tiles)

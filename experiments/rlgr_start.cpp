@@ -2,9 +2,10 @@
 // in each tile, and what would a better start state per band save? Format unchanged: this program
 // re-encodes the coded levels with libcodec's rlgr_encode and counts bits.
 //
-// The pyramid is built as experiments/coarse_context builds it (the same code): as pyramid-build builds
-// an rms or step target with the wavelet D (the library's builder, DownsampleFilter::wavelet(),
-// PtcResidualCoder with the given finest step and coarse step ratio, tile 32, its default bands;
+// The pyramid is built as experiments/coarse_context builds it (the same code, level_streams.h): as
+// pyramid-build builds an rms or step target with the wavelet D (the library's builder,
+// DownsampleFilter::wavelet(), PtcResidualCoder with the given finest step and coarse step ratio, tile
+// 32, its default bands;
 // levels coded by libcodec format 5: per tile the residual lifting transform or the lapped transform,
 // RLGR). Every tile of the levels above the coarsest is parsed out of its band's real stream
 // (read_header / read_tile_index, gamma_decode and rlgr_decode from libcodec's start states), which
@@ -49,47 +50,24 @@
 #include <cstdlib>
 #include <vector>
 
-#include "build/ptc_coder.h"
-#include "codec/codec.h"
 #include "codec/internal/bitio.h"
-#include "codec/internal/lapped_transform.h"
-#include "codec/internal/lifting_transform.h"
 #include "codec/internal/rlgr.h"
-#include "codec/internal/tile_coder.h"
-#include "pyramid/builder.h"
-#include "pyramid/downsample.h"
-#include "pyramid/memory_pyramid.h"
+#include "level_streams.h"
 
 using namespace terrain;
 using namespace codec::detail;
+using experiments::kGroupName;
+using experiments::kGroups;
+using experiments::TileBand;
 
 namespace {
 
-// libcodec's start states (tile_coder.cpp; the decoder needs them to parse a tile).
-constexpr RlgrState kLpStart[2] = {{0, 40}, {8, 8}};
-constexpr RlgrState kDcStart[2] = {{0, 16}, {0, 48}};
-constexpr RlgrState kLiftingStart[2] = {{8, 8}, {64, 8}};
-RlgrState hp_start(int lp_flag, bool lp_zero) {
-  if (lp_flag && lp_zero) return RlgrState{64, 8};
-  if (lp_flag) return RlgrState{40, 8};
-  return RlgrState{};
-}
-
-constexpr int kGroups = 7;  // LL, HL, LH, HH, DC, LP, HP
-const char* const kGroupName[kGroups] = {"LL", "HL", "LH", "HH", "DC", "LP", "HP"};
 constexpr int kGridStep = 4, kGridSide = 80 / kGridStep + 1, kCandidates = kGridSide * kGridSide;
 constexpr double kStateBits = 10;  // a stored state: kp / 4 and krp / 4 in 5 bits each
 constexpr int kSetSizes[] = {1, 2, 4, 8};
 constexpr int kSets = 4;
 
 RlgrState candidate(int c) { return RlgrState{(c / kGridSide) * kGridStep, (c % kGridSide) * kGridStep}; }
-
-struct TileBand {
-  int group;
-  std::vector<int32_t> values;
-  RlgrState start;  // today's
-  int flag_bits;    // today's
-};
 
 std::vector<uint8_t> g_buffer(1 << 20);
 // Bits of rlgr_encode(values) from state s; s becomes the end state.
@@ -111,19 +89,11 @@ int main(int argc, char** argv) {
     return 2;
   }
   const Heightmap map = read_heightmap(argv[1]);
-  PtcCoderOptions co;
-  co.step = std::atof(argv[2]);
-  co.coarse_step_ratio = argc > 3 ? std::atof(argv[3]) : 1.0;
-  co.tile_size = argc > 4 ? uint32_t(std::atoi(argv[4])) : 32;
+  const PtcCoderOptions co = experiments::coder_options(argc, argv);
   const bool per_level = std::getenv("LEVELS") != nullptr;
 
-  BuildOptions bo;
-  bo.threads = 1;
-  bo.use_fixed_filter = true;
-  bo.fixed_filter = DownsampleFilter::wavelet();
-  PtcResidualCoder coder(co);
   MemoryPyramid mem;
-  const BuildResult built = build_pyramid(map, bo, coder, mem);
+  const BuildResult built = experiments::build_wavelet_pyramid(map, co, mem);
   const uint64_t total_bytes = mem.total_bytes();
   const int levels = int(mem.header.levels.size());
   const double finest_n = double(map.info.width) * double(map.info.height);
@@ -136,94 +106,26 @@ int main(int argc, char** argv) {
   for (int l = 1; l < levels; ++l) {
     std::vector<TileBand> bands;  // the level's tile bands in raster order
     double level_today = 0, level_payload = 0;
-    for (const MemoryPyramid::Band& band : mem.bands[size_t(l)]) {
-      if (band.bytes.empty()) continue;
-      codec::HeaderInfo hi;
-      std::vector<codec::TileEntry> entries;
-      std::vector<codec::RowChecksum> rows;
-      if (codec::read_header(band.bytes.data(), band.bytes.size(), &hi) != codec::Status::Ok ||
-          codec::read_tile_index(band.bytes.data(), band.bytes.size(), hi, &entries, &rows) !=
-              codec::Status::Ok) {
-        std::fprintf(stderr, "level %d: band at %lld does not open\n", l, (long long)band.y0);
-        return 1;
-      }
-      const bool residual_stream = hi.transform == codec::Transform::Residual;
-      const int T = int(hi.tile_size);
-      for (const codec::TileEntry& e : entries) {
-        if (e.size == 0) continue;
-        ++tiles;
-        const int64_t t = e.first_tile;
-        const int tx = int(t % hi.tiles_x) * T, ty = int(t / hi.tiles_x) * T;
-        const int w = int(std::min<int64_t>(T, hi.width - tx)), h = int(std::min<int64_t>(T, hi.height - ty));
-        level_payload += 8.0 * e.size;
-        double tile_bits = 0;  // today's bits of this tile, re-encoded
-        BitReader in(band.bytes.data() + e.offset, e.size);
-        bool lifting = false;
-        if (residual_stream) {
-          in.refill();
-          lifting = in.take(1) == 0;
-          overhead_bits += 1, tile_bits += 1;
-        }
-        const size_t first = bands.size();
-        if (lifting) {
-          const LiftingBands lb = lifting_bands(w, h);
-          for (int k = 0; k < kLiftingBandCount; ++k) {
-            const bool ox = k & 1, oy = k & 2;
-            const int bw = (ox ? w : lb.even_w) - (ox ? lb.even_w : 0),
-                      bh = (oy ? h : lb.even_h) - (oy ? lb.even_h : 0);
-            if (bw <= 0 || bh <= 0) continue;
-            const size_t n = size_t(bw) * size_t(bh);
-            in.refill();
-            TileBand tb{k, std::vector<int32_t>(n), kLiftingStart[in.take(1)], 1};
-            RlgrState st = tb.start;
-            if (!rlgr_decode(in, tb.values.data(), n, st)) {
-              std::fprintf(stderr, "level %d: a tile does not parse\n", l);
-              return 1;
-            }
-            bands.push_back(std::move(tb));
-          }
-        } else {
-          const int pw = padded_side(w), ph = padded_side(h), mbx = pw / 16, mby = ph / 16;
-          const size_t mbs = size_t(mbx) * mby, lp_count = mbs * 15,
-                       hp_count = size_t(pw) * ph - mbs - lp_count;
-          int32_t dc0 = 0;
-          bool ok = gamma_decode(in, &dc0);
-          {
+    const bool parsed = experiments::for_each_tile(
+        mem, l, [&](const codec::HeaderInfo&, const codec::TileEntry& e, experiments::LevelTile& tile) {
+          ++tiles;
+          level_payload += 8.0 * e.size;
+          double tile_bits = 0;  // today's bits of this tile, re-encoded
+          if (tile.transform_bits) overhead_bits += 1, tile_bits += 1;
+          if (!tile.lifting) {
             BitWriter g(g_buffer.data(), g_buffer.size());
-            gamma_encode(g, dc0);
+            gamma_encode(g, tile.dc0);
             overhead_bits += double(g.bit_count()), tile_bits += double(g.bit_count());
           }
-          in.refill();
-          TileBand dc{4, std::vector<int32_t>(mbs - 1), kDcStart[in.take(1)], 1};
-          RlgrState st = dc.start;
-          ok = ok && rlgr_decode(in, dc.values.data(), mbs - 1, st);
-          in.refill();
-          const int lp_flag = int(in.take(1));
-          TileBand lp{5, std::vector<int32_t>(lp_count), kLpStart[lp_flag], 1};
-          st = lp.start;
-          ok = ok && rlgr_decode(in, lp.values.data(), lp_count, st);
-          const bool lp_zero =
-              std::all_of(lp.values.begin(), lp.values.end(), [](int32_t x) { return x == 0; });
-          TileBand hp{6, std::vector<int32_t>(hp_count), hp_start(lp_flag, lp_zero), 0};
-          st = hp.start;
-          ok = ok && rlgr_decode(in, hp.values.data(), hp_count, st);
-          if (!ok) {
-            std::fprintf(stderr, "level %d: a lapped tile does not parse\n", l);
-            return 1;
+          for (TileBand& tb : tile.bands) {
+            RlgrState s = tb.start;
+            tile_bits += tb.flag_bits + rlgr_bits(tb.values, s);
+            bands.push_back(std::move(tb));
           }
-          // A tile with one macroblock has no DC residual after the first: its flag is still coded.
-          bands.push_back(std::move(dc));
-          bands.push_back(std::move(lp));
-          bands.push_back(std::move(hp));
-        }
-        for (size_t i = first; i < bands.size(); ++i) {
-          RlgrState s = bands[i].start;
-          tile_bits += bands[i].flag_bits + rlgr_bits(bands[i].values, s);
-        }
-        if (tile_bits > 8.0 * e.size || tile_bits <= 8.0 * e.size - 8) ++bad_tiles;
-        level_today += tile_bits;
-      }
-    }
+          if (tile_bits > 8.0 * e.size || tile_bits <= 8.0 * e.size - 8) ++bad_tiles;
+          level_today += tile_bits;
+        });
+    if (!parsed) return 1;
     payload_bits += level_payload;
     today_bits += level_today;
 
