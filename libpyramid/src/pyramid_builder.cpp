@@ -1335,7 +1335,7 @@ class StreamingBuilder {
            << coding_.wall << " s, the workers busy " << busy << " thread-seconds of "
            << coding_.wall * opt_.threads << " ("
            << (coding_.wall > 0 ? 100 * busy / (coding_.wall * opt_.threads) : 0) << " %, " << coding_.deliver
-           << " s of it writing bands out; " << busy_when_read_ << " of them by the input's end)";
+           << " s of it writing bands out; " << busy_when_read_ << " thread-seconds busy by the input's end)";
     result_.log.push_back(coding.str());
     main_thread << "main thread: reading the input " << wall_read << " s (" << cpu_read
                 << " s CPU; D cascade " << main_.cascade << " s, adopting rows " << main_.append
