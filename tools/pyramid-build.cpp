@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "build/pyramid_build.h"
+#include "core/cores.h"
 #ifdef TERRAIN_HAVE_MPI
 #include "build/mpi_group.h"
 #endif
@@ -105,7 +106,10 @@ int run(int argc, char** argv) {
                   o.tile_size = uint32_t(cli::parse_int("--tile", v, 16, 1024));
                   if (o.tile_size % 16) throw cli::UsageError("--tile must be a multiple of 16");
                 });
-  parser.option("--threads", "N", "worker threads (default: all cores; output is identical for any N)",
+  parser.option("--threads", "N",
+                "worker threads (default: the cores this process may run on, its CPU affinity as taskset, a "
+                "cpuset or mpirun's binding leave it; under mpirun at most the host's cores divided by its "
+                "ranks; output is identical for any N)",
                 [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
   o.memory_bytes = int64_t(1) << 30;
   parser.option("--memory", "SIZE",
@@ -162,10 +166,13 @@ int run(int argc, char** argv) {
   if (group) {
     rank = group->rank(), ranks = group->size();
     o.group = group.get();
-    // The host's cores shared among its ranks (each rank's builder has its own threads).
+    // The host's cores shared among its ranks (each rank's builder has its own threads), and no
+    // more than the cores the launcher bound this rank to: Open MPI binds each rank to one core at
+    // -np 2 and below, where a share of the host put all of it on that core.
     if (o.threads == 0)
-      o.threads =
-          std::max(1, int(std::thread::hardware_concurrency()) / terrain::build::local_process_count());
+      o.threads = std::max(
+          1, std::min(terrain::usable_cores(), int(std::max(1u, std::thread::hardware_concurrency())) /
+                                                   terrain::build::local_process_count()));
     if (rank != 0) common.quiet = true, json_path.clear();  // rank 0 reports
   }
 #else
@@ -242,8 +249,7 @@ int run(int argc, char** argv) {
         .field("memory_estimate_bytes", r.memory.estimated_bytes + r.memory_outside_builder)
         .field("memory_minimum_bytes", r.memory.minimum_bytes + r.memory_outside_builder)
         .field("bands_in_flight", int64_t(r.memory.bands_in_flight))
-        .field("threads",
-               int64_t(o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()))));
+        .field("threads", int64_t(o.threads > 0 ? o.threads : terrain::usable_cores()));
     j.field("stripes", int64_t(r.stripes)).field("processes", int64_t(ranks));
     j.field("stripes_resumed", int64_t(r.stripes_resumed));
     j.key("levels").begin_array();

@@ -17,6 +17,7 @@
 #include "build/ptc_coder.h"
 #include "codec/codec.h"
 #include "container/pyramid_file.h"
+#include "core/cores.h"
 #include "core/file.h"
 #include "core/text.h"
 
@@ -342,7 +343,7 @@ BuildFileResult build_file(const std::string& input, const ReadOptions& read_opt
   BuildOptions bo;
   bo.level_count = o.levels;
   bo.value_scale = units.value_scale;
-  bo.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  bo.threads = o.threads > 0 ? o.threads : usable_cores();
   DownsampleChoice d = resolved_downsample(o);  // at an rms target, Auto is settled by the calibration
   use_fixed_filter(bo, d);
 

@@ -40,7 +40,7 @@ struct BuildFileOptions {
   double quantum_metres = 0;  // level unit for float input (0: 0.01 m); integer input uses its own unit
   int levels = 0;             // 0: automatic
   uint32_t tile_size = 32;    // libcodec tile side: 32 keeps a 255x255 window under 1.3x its area
-  int threads = 0;            // 0: all cores
+  int threads = 0;            // 0: the cores this process may run on (usable_cores(), core/cores.h)
   // Bytes the whole build may hold (pyramid-build --memory): the builder gets this less what the
   // process holds besides it, and codes fewer bands at once when that is tight (the same bytes).
   // 0: no budget. A budget below the input's minimum fails at the start (std::invalid_argument).
