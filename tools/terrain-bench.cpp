@@ -86,7 +86,8 @@ std::optional<int> parse_args(int argc, char** argv, Options& o) {
            [&](const std::string& v) { o.peer_names = split_commas(v); });
   bool no_pyramid = false;
   p.flag("--no-pyramid", "peers only (the former codec-bench)", &no_pyramid);
-  p.option("--threads", "N", "pyramid build threads (default: all cores); decoding is single-threaded",
+  p.option("--threads", "N",
+           "pyramid build threads (default: the cores it may run on); decoding is single-threaded",
            [&](const std::string& v) { o.threads = int(cli::parse_int("--threads", v, 1, 256)); });
   p.option("--work-dir", "DIR", "where the pyramid files are built (default $TMPDIR or /tmp); removed after",
            &o.work_dir);
