@@ -495,13 +495,7 @@ struct StoppableThread {
   bool stop = false;
   std::thread thread;
   void halt() {
-    if (!thread.joinable()) return;
-    {
-      const std::lock_guard<std::mutex> hold(lock);
-      stop = true;
-    }
-    wake.notify_all();
-    thread.join();
+    if (thread.joinable()) detail::stop_and_join(lock, wake, stop, {&thread, 1});
   }
 };
 
@@ -999,8 +993,8 @@ class StreamingBuilder {
             });
             if (reader.stop) return;
           }
+          reader.waited += seconds_since(t_wait);
           const auto t_produce = Clock::now();
-          reader.waited += std::chrono::duration<double>(t_produce - t_wait).count();
           try {
             produce(bands[i % slots], band_y(i));
             reader.busy += seconds_since(t_produce);
@@ -1245,7 +1239,7 @@ class StreamingBuilder {
     const auto t_final = Clock::now();
     const double cpu_read = thread_cpu_seconds() - cpu_start, wall_read = seconds_since(t_start);
     if (ahead) reader_busy_ = reader.busy, reader_waited_ = reader.waited;
-    busy_when_read_ = opt_.threads > 1 ? pool_.busy() : coding_busy_;
+    busy_when_read_ = coders_busy();
     pump(true);
     const double wall_final = seconds_since(t_final);
     for (int l = 0; l < level_count_; ++l)
@@ -1330,7 +1324,7 @@ class StreamingBuilder {
     // workers idle: no band ready), and the time spent handing bands to the sink (within those).
     std::ostringstream coding;
     coding.precision(3);
-    const double busy = opt_.threads > 1 ? pool_.busy() : coding_busy_;
+    const double busy = coders_busy();
     coding << "coding: " << coding_.count << " bands from " << std::max(0.0, first_band_at_) << " s for "
            << coding_.wall << " s, the workers busy " << busy << " thread-seconds of "
            << coding_.wall * opt_.threads << " ("
@@ -2006,7 +2000,9 @@ class StreamingBuilder {
   std::atomic<uint64_t> commits_{0};
   uint64_t seen_commits_ = 0;  // commits_ when must_wait_for_coders last looked (main thread)
   double coding_busy_ = 0;     // one thread: seconds coding bands
-  CodingPool pool_;            // threads > 1, started with the first band; stopped first in ~StreamingBuilder
+  // The coders' thread-seconds in bands and parts so far (the pool's workers, or this thread alone).
+  double coders_busy() { return opt_.threads > 1 ? pool_.busy() : coding_busy_; }
+  CodingPool pool_;  // threads > 1, started with the first band; stopped first in ~StreamingBuilder
   BuildResult result_;
 };
 

@@ -9,23 +9,29 @@
 #include <exception>
 #include <functional>
 #include <mutex>
+#include <span>
 #include <thread>
 #include <vector>
 
 namespace terrain::detail {
 
-// The threads a pool keeps, and how they stop: stop_ set under lock_, wake_ notified, every thread
-// joined. A pool's destructor calls stop_threads(), so that its threads are joined before the pool's
-// own members, which they read, are destroyed.
+// How the pools below and the builder's helper threads end: `stop` set under `lock`, every waiter on
+// `wake` notified, `threads` joined. Their owners call it before the members the threads read die.
+inline void stop_and_join(std::mutex& lock, std::condition_variable& wake, bool& stop,
+                          std::span<std::thread> threads) {
+  {
+    const std::lock_guard<std::mutex> hold(lock);
+    stop = true;
+  }
+  wake.notify_all();
+  for (std::thread& t : threads) t.join();
+}
+
+// The threads a pool keeps, and what they wait on. A pool's destructor calls stop_threads().
 class PoolThreads {
  protected:
   void stop_threads() {
-    {
-      const std::lock_guard<std::mutex> hold(lock_);
-      stop_ = true;
-    }
-    wake_.notify_all();
-    for (std::thread& t : threads_) t.join();
+    stop_and_join(lock_, wake_, stop_, threads_);
     threads_.clear();
   }
   std::vector<std::thread> threads_;
