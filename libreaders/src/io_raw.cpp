@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <vector>
@@ -202,14 +203,14 @@ class RawStreamReader final : public BandReader {
   // (valid's bytes could otherwise alias the layout), so that it vectorises: per sample it was a
   // fifth of a 16-thread build's input thread.
   template <typename T, bool kBigEndian, bool kNodata, typename Out>
-  static void decode_ints(const uint8_t* __restrict src, int64_t w, double nodata, Out* __restrict values,
+  static void decode_ints(const uint8_t* __restrict src, int64_t w, T nodata, Out* __restrict values,
                           uint8_t* __restrict valid) {
     for (int64_t x = 0; x < w; ++x) {
       T v;
       std::memcpy(&v, src + x * int64_t(sizeof(T)), sizeof(T));
       if constexpr (kBigEndian && sizeof(T) == 2) v = T(__builtin_bswap16(uint16_t(v)));
       if constexpr (kBigEndian && sizeof(T) == 4) v = T(__builtin_bswap32(uint32_t(v)));
-      const bool is_void = kNodata && double(v) == nodata;
+      const bool is_void = kNodata && v == nodata;
       values[x] = is_void ? Out(0) : Out(v);
       valid[x] = is_void ? 0 : 1;
     }
@@ -219,14 +220,20 @@ class RawStreamReader final : public BandReader {
   void decode_ints_row(const uint8_t* src, Out* values, uint8_t* valid) const {
     static_assert(std::endian::native == std::endian::little);
     const int64_t w = layout_.info.width;
+    // Compared as T (a sample equals the nodata value exactly when the value is a whole number in
+    // T's range, and then as T), not each sample converted to double: 4x the work at SSE2.
     const double nodata = layout_.info.nodata.value_or(0.0);
-    const bool big = layout_.big_endian && sizeof(T) > 1, has = layout_.info.nodata.has_value();
+    const bool big = layout_.big_endian && sizeof(T) > 1,
+               has = layout_.info.nodata.has_value() && nodata == std::floor(nodata) &&
+                     nodata >= double(std::numeric_limits<T>::min()) &&
+                     nodata <= double(std::numeric_limits<T>::max());
+    const T nodata_t = has ? T(nodata) : T(0);
     if (big)
-      has ? decode_ints<T, true, true, Out>(src, w, nodata, values, valid)
-          : decode_ints<T, true, false, Out>(src, w, nodata, values, valid);
+      has ? decode_ints<T, true, true, Out>(src, w, nodata_t, values, valid)
+          : decode_ints<T, true, false, Out>(src, w, nodata_t, values, valid);
     else
-      has ? decode_ints<T, false, true, Out>(src, w, nodata, values, valid)
-          : decode_ints<T, false, false, Out>(src, w, nodata, values, valid);
+      has ? decode_ints<T, false, true, Out>(src, w, nodata_t, values, valid)
+          : decode_ints<T, false, false, Out>(src, w, nodata_t, values, valid);
   }
 
   uint32_t load_u32(const uint8_t* p) const {

@@ -168,6 +168,31 @@ TEST_CASE("band reader matches whole reads on raw", "[io][band]") {
       check_bands_match(ints);
     }
 
+  // The nodata test compares stored integers: a value that no sample of the type can hold (a
+  // fraction, or outside the type's range) voids nothing; an integral one voids exactly its samples.
+  for (const double nodata : {100.5, 70000.0, -1.0, 1234.0})
+    for (bool big : {false, true}) {
+      INFO("nodata " << nodata << " big-endian " << big);
+      terrain::Heightmap g = grid_of(53, 29, terrain::SampleType::UInt16,
+                                     [](int64_t i) { return double(i % 97 == 0 ? 1234 : i % 3000); });
+      g.info.nodata = nodata;
+      std::string nd_path = dir.file("nodata.raw");
+      terrain::write_raw(nd_path, g, big);
+      auto nd_reader = terrain::open_band_reader(nd_path);
+      std::vector<int32_t> ints(size_t(53 * 29));
+      std::vector<uint8_t> valid(ints.size());
+      REQUIRE(nd_reader->read_rows_int32(29, ints.data(), valid.data()) == 29);
+      int64_t voids = 0, expected = 0;
+      for (size_t i = 0; i < ints.size(); ++i) {
+        voids += valid[i] == 0;
+        expected += double(g.values[i]) == nodata;
+        if (valid[i]) CHECK(ints[i] == int32_t(g.values[i]));
+      }
+      CHECK(voids == expected);
+      CHECK(expected == (nodata == 1234.0 ? 17 : 0));  // 16 multiples of 97, and i = 1234
+      check_bands_match(nd_path);
+    }
+
   // A file cut short after it was opened (the probe checks its size): seeking past its end is
   // refused as reading would be, naming the file.
   std::string cut = dir.file("cut.raw");
