@@ -139,6 +139,34 @@ DownsampleFilter DownsampleFilter::box2x2() {
 
 namespace detail {
 
+void round_row(double* out, int64_t n) {
+  // Every |x| below 2^30 (always, for D of int16 levels): the exponent fields, read as integers,
+  // checked in one pass the compiler vectorises (a bit set at 2^63 where a biased exponent reaches
+  // 1053; NaN and infinities too).
+  uint64_t far = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    uint64_t b;
+    std::memcpy(&b, out + i, sizeof b);
+    far |= (b & 0x7ff0000000000000ull) + (uint64_t(2048 - 1053) << 52);
+  }
+  if (far >> 63) {
+    for (int64_t i = 0; i < n; ++i) out[i] = double(round_to_int32(out[i]));
+    return;
+  }
+  // Then x + 1.5 2^52 - 1.5 2^52 is x rounded to nearest, ties to even (exact below 2^51), and a tie
+  // that went towards zero steps away from it: round_to_int32 in double arithmetic only, vectorised
+  // (it was a call and two branches per sample, a third of the D engine's time).
+  constexpr double kMagic = 6755399441055744.0;
+  for (int64_t i = 0; i < n; ++i) {
+    const double x = out[i];
+    const double r = (x + kMagic) - kMagic;
+    const double d = x - r;
+    const double up = (d == 0.5) & (x > 0) ? 1.0 : 0.0;
+    const double down = (d == -0.5) & (x < 0) ? 1.0 : 0.0;
+    out[i] = r + up - down;
+  }
+}
+
 int32_t round_to_int32(double x) {
   // std::round(x), saturated, without the libm call std::round is without SSE4.1 (the D engine alone
   // on 8192^2: 0.195-0.200 -> 0.175-0.181 s): truncate, then step away from zero when the dropped
@@ -251,8 +279,7 @@ void DownsampleEngine::compute(int64_t j0, int64_t j1, const Emit& emit) {
   parallel_items(workers, j1 - j0, [&](int slot, int64_t j) {
     double* out = out_.data() + j * cw;
     compute_row(j0 + j, scratch_[size_t(slot)], out);
-    if (rounded_)
-      for (int64_t i = 0; i < cw; ++i) out[i] = double(round_to_int32(out[i]));
+    if (rounded_) round_row(out, cw);
   });
   emit(j0, j1 - j0, out_.data());
 }

@@ -6,6 +6,7 @@
 #include <map>
 #include <random>
 
+#include "pyramid/internal/filter_downsample.h"
 #include "pyramid/pyramid.h"
 #include "shared_data.h"
 
@@ -401,4 +402,54 @@ TEST_CASE("degenerate D inputs fall back to the default filter without NaN") {
   CHECK(report.rms_optimal < report.rms_default);
   CHECK(report.rms_optimal < report.rms_impulse);
   CHECK(d.kind == DownsampleFilter::Kind::Optimal);
+}
+
+TEST_CASE("D's row rounding equals round_to_int32 on every kind of value") {
+  // The vectorised path (every |x| < 2^30) and the fallback (a row with one value beyond) must both
+  // give round_to_int32's result: halves either side of zero, the 2^30 and int32 limits, infinities,
+  // NaN, and random values at every scale.
+  std::vector<double> values = {0.0,
+                                -0.0,
+                                0.5,
+                                -0.5,
+                                1.5,
+                                -1.5,
+                                2.5,
+                                -2.5,
+                                0.49999999999999994,
+                                -0.49999999999999994,
+                                1073741823.5,
+                                -1073741823.5,
+                                1073741824.0,
+                                -1073741824.0,
+                                2147483646.5,
+                                2147483647.5,
+                                -2147483647.5,
+                                -2147483648.5,
+                                4e9,
+                                -4e9,
+                                1e300,
+                                -1e300,
+                                INFINITY,
+                                -INFINITY,
+                                NAN};
+  std::mt19937_64 rng(11);
+  for (int k = 0; k < 200000; ++k) {
+    const double scale = std::ldexp(1.0, int(rng() % 34) - 3);
+    const double x = (double(rng() >> 11) / 9007199254740992.0 - 0.5) * scale;
+    values.push_back(x);
+    values.push_back(std::floor(x) + 0.5);  // halves
+  }
+  const auto check = [](std::vector<double> row) {
+    std::vector<double> expected(row.size());
+    for (size_t i = 0; i < row.size(); ++i) expected[i] = double(detail::round_to_int32(row[i]));
+    detail::round_row(row.data(), int64_t(row.size()));
+    for (size_t i = 0; i < row.size(); ++i) REQUIRE(row[i] == expected[i]);
+  };
+  check(values);  // the fallback: the row holds values beyond 2^30
+  std::vector<double> small;
+  for (double v : values)
+    if (std::fabs(v) < 1073741824.0) small.push_back(v);
+  REQUIRE(small.size() > 300000);
+  check(small);  // the vectorised path
 }

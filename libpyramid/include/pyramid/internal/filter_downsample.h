@@ -74,6 +74,8 @@ class DownsampleEngine {
 
 // round(x) half away from zero, saturated to int32.
 int32_t round_to_int32(double x);
+// out[i] = double(round_to_int32(out[i])) for i in [0, n), vectorised where every |out[i]| < 2^30.
+void round_row(double* out, int64_t n);
 
 // Real-valued D over a whole in-memory grid (filter design).
 void downsample_real(const DownsampleFilter& filter, const int32_t* fine, GridSize fine_level, double* coarse,
