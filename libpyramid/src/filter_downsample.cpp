@@ -161,8 +161,8 @@ void round_row(double* out, int64_t n) {
     const double x = out[i];
     const double r = (x + kMagic) - kMagic;
     const double d = x - r;
-    const double up = (d == 0.5) & (x > 0) ? 1.0 : 0.0;
-    const double down = (d == -0.5) & (x < 0) ? 1.0 : 0.0;
+    const double up = ((d == 0.5) & (x > 0)) ? 1.0 : 0.0;
+    const double down = ((d == -0.5) & (x < 0)) ? 1.0 : 0.0;
     out[i] = r + up - down;
   }
 }
