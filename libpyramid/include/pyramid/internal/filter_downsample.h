@@ -39,9 +39,9 @@ class DownsampleEngine {
   struct Scratch {
     std::vector<double> fold, even, odd, acc;
   };
-  // Fine row as int32, unpadded: the rows go in with a copy (the caller's thread, serially), and the
-  // workers convert and reflect what they read (a fifth of a 16-thread build's main thread was
-  // converting every fine row to padded doubles here).
+  // Fine row as int32, unpadded: a held row, or during push_rows one of the caller's; the workers
+  // convert and reflect what they read (a fifth of a 16-thread build's main thread was converting
+  // every fine row to padded doubles here).
   const int32_t* fine_row(int64_t fine_row) const;
   // dst[0 .. padded_width_) = double(row) with D's mirror padding.
   void pad_row(const int32_t* row, double* dst) const;
@@ -67,6 +67,10 @@ class DownsampleEngine {
   int64_t padded_width_;
   std::vector<int32_t> rows_;  // capacity_ fine rows, ring-free: rows base_.. base_+count_-1
   int64_t capacity_ = 0, base_ = 0, count_ = 0, pushed_ = 0, next_coarse_ = 0;
+  // During push_rows: the caller's rows, fine rows block_first_ .. pushed_ - 1 (the held rows end at
+  // block_first_).
+  const int32_t* block_ = nullptr;
+  int64_t block_first_ = 0;
   int64_t needed_from_ = -1, needed_to_ = -1, needed_rows_ = 0;  // rows_needed_through's last answer
   std::vector<Scratch> scratch_;
   std::vector<double> out_;
