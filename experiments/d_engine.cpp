@@ -43,7 +43,8 @@ int main(int argc, char** argv) {
     check += chunk[0];
   };
   const auto t0 = std::chrono::steady_clock::now();
-  for (int64_t y = 0; y < h; y += 128) engine.push_rows(rows.data() + y * w, std::min<int64_t>(128, h - y), emit);
+  for (int64_t y = 0; y < h; y += 128)
+    engine.push_rows(rows.data() + y * w, std::min<int64_t>(128, h - y), emit);
   engine.finish(emit);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("threads %d: %lld coarse rows in %.3f s (check %lld)\n", threads, (long long)emitted, s,
