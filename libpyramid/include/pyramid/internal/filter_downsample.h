@@ -30,6 +30,9 @@ class DownsampleEngine {
   // rounded on the workers that compute them rather than by the caller, one thread.
   DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows = 32,
                    bool rounded = false);
+  // The next `count` fine rows (count x fine width, row-major), read during the call only: the coarse
+  // rows they complete are emitted before it returns, and the rows later ones need are kept. Throws
+  // std::invalid_argument past the grid's height.
   void push_rows(const int32_t* rows, int64_t count, const Emit& emit);
   // Emits the remaining coarse rows; every fine row must have been pushed.
   void finish(const Emit& emit);
