@@ -1,8 +1,9 @@
 // D's engine alone, as the builder runs its finest level (the wavelet D, rounded, batches of 32
-// coarse rows, bands of 128 fine rows pushed), on the first ROWS rows of a little-endian int16 grid
-// WIDTH samples wide, with THREADS threads; prints the seconds. The rows are converted to int32
-// before the clock starts, and the emitted rows are cast to int32 as the builder's D thread does.
-// Usage: d_engine GRID.raw WIDTH ROWS THREADS   (docs/scale.md: pin with taskset, alternate builds)
+// coarse rows, bands of 128 fine rows pushed, samples known to be int16), on the first ROWS rows of a
+// little-endian int16 grid WIDTH samples wide, with THREADS threads; prints the seconds. The rows are
+// converted to int32 before the clock starts, and the emitted rows are cast to int32 as the builder's D
+// thread does. Usage: d_engine GRID.raw WIDTH ROWS THREADS   (docs/scale.md: pin with taskset, alternate
+// builds)
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -32,7 +33,7 @@ int main(int argc, char** argv) {
   std::fclose(f);
   const std::vector<int32_t> rows(raw.begin(), raw.end());
   terrain::detail::DownsampleEngine engine(terrain::DownsampleFilter::wavelet(), terrain::GridSize{w, h},
-                                           threads, 32, true);
+                                           threads, 32, true, 32768);
   const int64_t cw = engine.coarse().width;
   std::vector<int32_t> chunk;
   int64_t emitted = 0, check = 0;

@@ -79,16 +79,24 @@ constexpr double kH0 = kWaveletTaps[5] / kWaveletSum, kH1 = kWaveletTaps[6] / kW
                  kH2 = kWaveletTaps[7] / kWaveletSum, kH3 = kWaveletTaps[8] / kWaveletSum,
                  kH4 = kWaveletTaps[9] / kWaveletSum;
 
-// v[p] = the column taps over rows rp[1 .. 9] (rp[5] the centre), p in [0, w).
-void wavelet_columns(const int32_t* const* rp, int64_t w, double* v) {
+// v[p] = the column taps over rows rp[1 .. 9] (rp[5] the centre), p in [0, w). kIntPairs: the
+// samples are known to lie below 2^30 in magnitude, so each symmetric pair is added as int32 and converted
+// once: the same doubles (both sums are exact), four conversions and adds fewer per sample.
+template <bool kIntPairs> void wavelet_columns(const int32_t* const* rp, int64_t w, double* v) {
   const int32_t *c0 = rp[5], *u1 = rp[4], *d1 = rp[6], *u2 = rp[3], *d2 = rp[7], *u3 = rp[2], *d3 = rp[8],
                 *u4 = rp[1], *d4 = rp[9];
+  const auto pair = [](int32_t a, int32_t b) {
+    if constexpr (kIntPairs)
+      return double(a + b);
+    else
+      return double(a) + double(b);
+  };
   for (int64_t p = 0; p < w; ++p) {
     double x = kH0 * double(c0[p]);
-    x += kH1 * (double(u1[p]) + double(d1[p]));
-    x += kH2 * (double(u2[p]) + double(d2[p]));
-    x += kH3 * (double(u3[p]) + double(d3[p]));
-    x += kH4 * (double(u4[p]) + double(d4[p]));
+    x += kH1 * pair(u1[p], d1[p]);
+    x += kH2 * pair(u2[p], d2[p]);
+    x += kH3 * pair(u3[p], d3[p]);
+    x += kH4 * pair(u4[p], d4[p]);
     v[p] = x;
   }
 }
@@ -180,10 +188,11 @@ int32_t round_to_int32(double x) {
 }
 
 DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads,
-                                   int64_t batch_rows, bool rounded)
+                                   int64_t batch_rows, bool rounded, int64_t max_abs)
     : filter_(filter),
       symmetric_(filter.symmetric8()),
       separable_(filter.is_wavelet()),
+      int_pairs_(max_abs > 0 && max_abs < (int64_t(1) << 30)),
       rounded_(rounded),
       fine_(fine),
       coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},
@@ -194,6 +203,15 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
   capacity_ = std::min(fine.height, 2 * batch_ + 16);
   rows_.resize(size_t(capacity_ * fine.width));
   scratch_.resize(size_t(threads_));
+}
+
+int64_t DownsampleEngine::coarse_bound(const DownsampleFilter& filter, int64_t max_abs) {
+  if (max_abs <= 0) return 0;
+  double gain = 0;
+  for (double t : filter.taps) gain += std::fabs(t);
+  // |D(x)| <= gain * max_abs; 1e-9 of it and 1 more cover the sum's rounding and round_to_int32.
+  const double bound = std::ceil(gain * double(max_abs) * (1 + 1e-9)) + 1;
+  return bound <= std::ldexp(1.0, 40) ? int64_t(bound) : 0;
 }
 
 const int32_t* DownsampleEngine::fine_row(int64_t row) const {
@@ -326,7 +344,10 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
     // Columns first (the fold of rows 2j +- k), then the same taps along the row.
     const double* src[9] = {source(0), source(1),  source(-1), source(2), source(-2),
                             source(3), source(-3), source(4),  source(-4)};
-    wavelet_columns(rp, w, fold + R);
+    if (int_pairs_)
+      wavelet_columns<true>(rp, w, fold + R);
+    else
+      wavelet_columns<false>(rp, w, fold + R);
     reflect_padding(fold);
     split(fold);
     wavelet_rows(src, cw, acc);

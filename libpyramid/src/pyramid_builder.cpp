@@ -1460,7 +1460,12 @@ class StreamingBuilder {
     // build: the input); read_a_ is a multiple of 2^(m - stop_), so level l's rows start at
     // read_a_ >> (m - l).
     int64_t cascade_height = read_b_ - read_a_;
-    for (int l = finest_; l > stop_ && cascade_height > 0; --l) {
+    // Level l's samples lie within +-bound (int16 input: the finest level as read and filled, less
+    // the integer offset; each coarser one D's gain times more): lets the wavelet D add pairs as
+    // integers.
+    int64_t bound = levels_[size_t(finest_)].narrow() ? 32768 + int64_t(std::abs(opt_.value_offset)) : 0;
+    for (int l = finest_; l > stop_ && cascade_height > 0;
+         --l, bound = detail::DownsampleEngine::coarse_bound(filter_, bound)) {
       if (l > entry_) {
         cascade_height = coarse_extent(cascade_height);
         continue;
@@ -1474,7 +1479,7 @@ class StreamingBuilder {
       // switches (docs/scale.md).
       const int workers = !d_on_thread_ ? opt_.threads : std::min(opt_.threads, l == finest_ ? 2 : 1);
       engines_[size_t(l)] = std::make_unique<detail::DownsampleEngine>(
-          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, workers, batch, true);
+          filter_, GridSize{sizes_[size_t(l)].width, cascade_height}, workers, batch, true, bound);
       cascade_height = coarse_extent(cascade_height);
       emit_[size_t(l)] = [this, l](int64_t, int64_t n, const double* rows) {
         const int64_t cw = sizes_[size_t(l - 1)].width;

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstring>
 #include <iostream>
 #include <map>
 #include <random>
@@ -452,4 +453,35 @@ TEST_CASE("D's row rounding equals round_to_int32 on every kind of value") {
     if (std::fabs(v) < 1073741824.0) small.push_back(v);
   REQUIRE(small.size() > 300000);
   check(small);  // the vectorised path
+}
+
+TEST_CASE("D engine: the integer-pair path gives the double path's rows, extremes included") {
+  // max_abs lets the wavelet D add symmetric pairs as int32; the doubles must not change. Rows at the
+  // bound (int16's limits, 2^30 - 1; 2^30 itself takes the double path) and random ones.
+  for (const int64_t bound : {int64_t(32768), (int64_t(1) << 30) - 1, int64_t(1) << 30})
+    for (const GridSize fine : {GridSize{37, 29}, GridSize{130, 70}, GridSize{16, 16}}) {
+      std::mt19937_64 rng(uint64_t(bound + fine.width));
+      std::vector<int32_t> grid(size_t(fine.width * fine.height));
+      for (size_t i = 0; i < grid.size(); ++i) {
+        const int64_t r = int64_t(rng() % uint64_t(2 * bound + 1)) - bound;
+        grid[i] = int32_t(i % 7 == 0 ? (i % 2 ? bound : -bound) : r);
+      }
+      const auto run = [&](int64_t max_abs) {
+        detail::DownsampleEngine engine(DownsampleFilter::wavelet(), fine, 2, 4, false, max_abs);
+        std::vector<double> out;
+        const auto emit = [&](int64_t, int64_t n, const double* rows) {
+          out.insert(out.end(), rows, rows + n * engine.coarse().width);
+        };
+        for (int64_t y = 0; y < fine.height; y += 5)
+          engine.push_rows(grid.data() + y * fine.width, std::min<int64_t>(5, fine.height - y), emit);
+        engine.finish(emit);
+        return out;
+      };
+      INFO("bound " << bound << " grid " << fine.width << "x" << fine.height);
+      const std::vector<double> plain = run(0), pairs = run(bound);
+      REQUIRE(plain.size() == size_t(coarse_extent(fine.width) * coarse_extent(fine.height)));
+      CHECK(std::memcmp(plain.data(), pairs.data(), plain.size() * sizeof(double)) == 0);
+    }
+  CHECK(detail::DownsampleEngine::coarse_bound(DownsampleFilter::wavelet(), 32768) > 32768 * 2.6);
+  CHECK(detail::DownsampleEngine::coarse_bound(DownsampleFilter::wavelet(), 0) == 0);
 }

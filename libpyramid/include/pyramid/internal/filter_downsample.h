@@ -28,8 +28,13 @@ class DownsampleEngine {
 
   // rounded: the coarse rows come out as round_to_int32 of D (still doubles, each an exact int32),
   // rounded on the workers that compute them rather than by the caller, one thread.
+  // max_abs: a bound on every pushed sample's magnitude (0: none known); below 2^30 it lets the
+  // wavelet D add sample pairs as integers (the same results, less work).
   DownsampleEngine(const DownsampleFilter& filter, GridSize fine, int threads, int64_t batch_rows = 32,
-                   bool rounded = false);
+                   bool rounded = false, int64_t max_abs = 0);
+  // A bound on the magnitude of the coarse samples that `filter` makes from samples within +-max_abs,
+  // rounded (0: none, when max_abs is 0 or the bound passes 2^40).
+  static int64_t coarse_bound(const DownsampleFilter& filter, int64_t max_abs);
   // The next `count` fine rows (count x fine width, row-major), read during the call only: the coarse
   // rows they complete are emitted before it returns, and the rows later ones need are kept. Throws
   // std::invalid_argument past the grid's height.
@@ -63,6 +68,7 @@ class DownsampleEngine {
   // The wavelet D (its taps exactly): rows then columns with the 1-D taps, a quarter of the 2-D
   // folded path's arithmetic; chosen by the taps alone, so every caller gets the same samples.
   bool separable_;
+  bool int_pairs_;  // separable_ with samples below 2^30 in magnitude: wavelet_columns<true>
   bool rounded_;
   GridSize fine_, coarse_;
   int threads_;
