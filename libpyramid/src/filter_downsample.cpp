@@ -101,17 +101,28 @@ template <bool kIntPairs> void wavelet_columns(const int32_t* const* rp, int64_t
   }
 }
 
-// out[i] = the row taps, src[0] the centre and src[2m - 1] / src[2m] the pair at distance m.
-void wavelet_rows(const double* const* src, int64_t cw, double* out) {
-  const double *a0 = src[0], *a1 = src[1], *b1 = src[2], *a2 = src[3], *b2 = src[4], *a3 = src[5],
-               *b3 = src[6], *a4 = src[7], *b4 = src[8];
+// out[i] = the row taps centred on padded position 2i + 5 of `padded`, read at stride 2 where they
+// lie (no split of the row into its even and odd samples, no copy out of a scratch row).
+// kRound: rounded as round_row's fast path does, for outputs known to lie below 2^30 in magnitude
+// (no range check; the rounding was a third of the engine's instructions as a pass of its own).
+template <bool kRound> void wavelet_rows(const double* padded, int64_t cw, double* out) {
+  constexpr double kMagic = 6755399441055744.0;  // 1.5 2^52
   for (int64_t i = 0; i < cw; ++i) {
-    double x = kH0 * a0[i];
-    x += kH1 * (a1[i] + b1[i]);
-    x += kH2 * (a2[i] + b2[i]);
-    x += kH3 * (a3[i] + b3[i]);
-    x += kH4 * (a4[i] + b4[i]);
-    out[i] = x;
+    const double* c = padded + 2 * i + 5;
+    double x = kH0 * c[0];
+    x += kH1 * (c[1] + c[-1]);
+    x += kH2 * (c[2] + c[-2]);
+    x += kH3 * (c[3] + c[-3]);
+    x += kH4 * (c[4] + c[-4]);
+    if constexpr (kRound) {
+      const double r = (x + kMagic) - kMagic;
+      const double d = x - r;
+      const double up = ((d == 0.5) & (x > 0)) ? 1.0 : 0.0;
+      const double down = ((d == -0.5) & (x < 0)) ? 1.0 : 0.0;
+      out[i] = r + up - down;
+    } else {
+      out[i] = x;
+    }
   }
 }
 
@@ -194,6 +205,8 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
       separable_(filter.is_wavelet()),
       int_pairs_(max_abs > 0 && max_abs < (int64_t(1) << 30)),
       rounded_(rounded),
+      fused_round_(separable_ && rounded && int_pairs_ && coarse_bound(filter, max_abs) > 0 &&
+                   coarse_bound(filter, max_abs) < (int64_t(1) << 30)),
       fine_(fine),
       coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},
       threads_(std::max(1, threads)),
@@ -308,7 +321,7 @@ void DownsampleEngine::compute(int64_t j0, int64_t j1, const Emit& emit) {
   parallel_items(workers, j1 - j0, [&](int slot, int64_t j) {
     double* out = out_.data() + j * cw;
     compute_row(j0 + j, scratch_[size_t(slot)], out);
-    if (rounded_) round_row(out, cw);
+    if (rounded_ && !fused_round_) round_row(out, cw);
   });
   emit(j0, j1 - j0, out_.data());
 }
@@ -319,11 +332,8 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
   const int64_t half_even = (pw + 1) / 2, half_odd = pw / 2;
   const int32_t* rp[DownsampleFilter::kSize];
   for (int dy = -R; dy <= R; ++dy) rp[dy + R] = fine_row(reflect_index(2 * j + dy, fine_.height));
-  // The separable path writes every output; the others accumulate into zeros.
-  if (separable_)
-    s.acc.resize(size_t(cw));
-  else
-    s.acc.assign(size_t(cw), 0.0);
+  // The separable path writes the output itself; the others accumulate into zeros.
+  if (!separable_) s.acc.assign(size_t(cw), 0.0);
   s.even.resize(size_t(half_even));
   s.odd.resize(size_t(std::max<int64_t>(half_odd, 1)));
   s.fold.resize(size_t(pw));
@@ -342,15 +352,16 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
   // Columns are independent: combining rows and then padding the result gives the padded result.
   if (separable_) {
     // Columns first (the fold of rows 2j +- k), then the same taps along the row.
-    const double* src[9] = {source(0), source(1),  source(-1), source(2), source(-2),
-                            source(3), source(-3), source(4),  source(-4)};
     if (int_pairs_)
       wavelet_columns<true>(rp, w, fold + R);
     else
       wavelet_columns<false>(rp, w, fold + R);
     reflect_padding(fold);
-    split(fold);
-    wavelet_rows(src, cw, acc);
+    if (fused_round_)
+      wavelet_rows<true>(fold, cw, out);
+    else
+      wavelet_rows<false>(fold, cw, out);
+    return;
   } else if (symmetric_) {
     for (int k = 0; k <= R; ++k) {
       const int32_t* row = rp[R + k];

@@ -455,7 +455,8 @@ TEST_CASE("D's row rounding equals round_to_int32 on every kind of value") {
   check(small);  // the vectorised path
 }
 
-TEST_CASE("D engine: the integer-pair path gives the double path's rows, extremes included") {
+TEST_CASE(
+    "D engine: the integer-pair and fused-rounding paths give the double path's rows, extremes included") {
   // max_abs lets the wavelet D add symmetric pairs as int32; the doubles must not change. Rows at the
   // bound (int16's limits, 2^30 - 1; 2^30 itself takes the double path) and random ones.
   for (const int64_t bound : {int64_t(32768), (int64_t(1) << 30) - 1, int64_t(1) << 30})
@@ -466,8 +467,8 @@ TEST_CASE("D engine: the integer-pair path gives the double path's rows, extreme
         const int64_t r = int64_t(rng() % uint64_t(2 * bound + 1)) - bound;
         grid[i] = int32_t(i % 7 == 0 ? (i % 2 ? bound : -bound) : r);
       }
-      const auto run = [&](int64_t max_abs) {
-        detail::DownsampleEngine engine(DownsampleFilter::wavelet(), fine, 2, 4, false, max_abs);
+      const auto run = [&](int64_t max_abs, bool rounded) {
+        detail::DownsampleEngine engine(DownsampleFilter::wavelet(), fine, 2, 4, rounded, max_abs);
         std::vector<double> out;
         const auto emit = [&](int64_t, int64_t n, const double* rows) {
           out.insert(out.end(), rows, rows + n * engine.coarse().width);
@@ -478,9 +479,13 @@ TEST_CASE("D engine: the integer-pair path gives the double path's rows, extreme
         return out;
       };
       INFO("bound " << bound << " grid " << fine.width << "x" << fine.height);
-      const std::vector<double> plain = run(0), pairs = run(bound);
-      REQUIRE(plain.size() == size_t(coarse_extent(fine.width) * coarse_extent(fine.height)));
-      CHECK(std::memcmp(plain.data(), pairs.data(), plain.size() * sizeof(double)) == 0);
+      // Rounded too: with int16-range samples the rows round inside the row taps (fused), else after.
+      for (const bool rounded : {false, true}) {
+        INFO("rounded " << rounded);
+        const std::vector<double> plain = run(0, rounded), pairs = run(bound, rounded);
+        REQUIRE(plain.size() == size_t(coarse_extent(fine.width) * coarse_extent(fine.height)));
+        CHECK(std::memcmp(plain.data(), pairs.data(), plain.size() * sizeof(double)) == 0);
+      }
     }
   CHECK(detail::DownsampleEngine::coarse_bound(DownsampleFilter::wavelet(), 32768) > 32768 * 2.6);
   CHECK(detail::DownsampleEngine::coarse_bound(DownsampleFilter::wavelet(), 0) == 0);
