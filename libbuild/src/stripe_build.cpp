@@ -720,18 +720,20 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
           throw Error(ErrorCode::CorruptData, part_path(so.directory, K, source) + ": record at byte " +
                                                   std::to_string(r.offset) + " has rows outside level " +
                                                   std::to_string(l));
-        if (l == levels - 1 && bits.empty()) {
-          // No voids: one row of ones handed over row by row, not a band of them written each time.
-          valid.assign(size_t(W), 1);
-          for (int64_t y = r.y0; y < r.y0 + r.rows; ++y) writer->mask_rows(y, 1, valid.data());
-        } else if (l == levels - 1) {
-          if (bits.size() != size_t((r.rows * W + 7) / 8))
-            throw Error(ErrorCode::CorruptData,
-                        part_path(so.directory, K, source) + ": mask of the wrong size");
-          valid.resize(size_t(r.rows * W));
-          for (int64_t i = 0; i < r.rows * W; ++i) valid[size_t(i)] = (bits[size_t(i / 8)] >> (i % 8)) & 1;
-          voids += int64_t(std::count(valid.begin(), valid.end(), uint8_t(0)));
-          writer->mask_rows(r.y0, r.rows, valid.data());
+        if (l == levels - 1) {
+          if (bits.empty()) {
+            // No voids: one row of ones handed over row by row, not a band of them written each time.
+            valid.assign(size_t(W), 1);
+            for (int64_t y = r.y0; y < r.y0 + r.rows; ++y) writer->mask_rows(y, 1, valid.data());
+          } else {
+            if (bits.size() != size_t((r.rows * W + 7) / 8))
+              throw Error(ErrorCode::CorruptData,
+                          part_path(so.directory, K, source) + ": mask of the wrong size");
+            valid.resize(size_t(r.rows * W));
+            for (int64_t i = 0; i < r.rows * W; ++i) valid[size_t(i)] = (bits[size_t(i / 8)] >> (i % 8)) & 1;
+            voids += int64_t(std::count(valid.begin(), valid.end(), uint8_t(0)));
+            writer->mask_rows(r.y0, r.rows, valid.data());
+          }
         }
         figures[size_t(l)].add(r.figures, data.size());
         writer->band(l, r.y0, r.rows, std::move(data));

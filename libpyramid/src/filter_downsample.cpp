@@ -101,12 +101,23 @@ template <bool kIntPairs> void wavelet_columns(const int32_t* const* rp, int64_t
   }
 }
 
+// round_to_int32(x) for |x| below 2^30, in double arithmetic only, so that loops over it vectorise:
+// x + 1.5 2^52 - 1.5 2^52 is x rounded to nearest, ties to even (exact below 2^51), and a tie that
+// went towards zero steps away from it.
+inline double round_half_away_small(double x) {
+  constexpr double kMagic = 6755399441055744.0;  // 1.5 2^52
+  const double r = (x + kMagic) - kMagic;
+  const double d = x - r;
+  const double up = ((d == 0.5) & (x > 0)) ? 1.0 : 0.0;
+  const double down = ((d == -0.5) & (x < 0)) ? 1.0 : 0.0;
+  return r + up - down;
+}
+
 // out[i] = the row taps centred on padded position 2i + 5 of `padded`, read at stride 2 where they
 // lie (no split of the row into its even and odd samples, no copy out of a scratch row).
 // kRound: rounded as round_row's fast path does, for outputs known to lie below 2^30 in magnitude
 // (no range check; the rounding was a third of the engine's instructions as a pass of its own).
 template <bool kRound> void wavelet_rows(const double* padded, int64_t cw, double* out) {
-  constexpr double kMagic = 6755399441055744.0;  // 1.5 2^52
   for (int64_t i = 0; i < cw; ++i) {
     const double* c = padded + 2 * i + 5;
     double x = kH0 * c[0];
@@ -114,15 +125,7 @@ template <bool kRound> void wavelet_rows(const double* padded, int64_t cw, doubl
     x += kH2 * (c[2] + c[-2]);
     x += kH3 * (c[3] + c[-3]);
     x += kH4 * (c[4] + c[-4]);
-    if constexpr (kRound) {
-      const double r = (x + kMagic) - kMagic;
-      const double d = x - r;
-      const double up = ((d == 0.5) & (x > 0)) ? 1.0 : 0.0;
-      const double down = ((d == -0.5) & (x < 0)) ? 1.0 : 0.0;
-      out[i] = r + up - down;
-    } else {
-      out[i] = x;
-    }
+    out[i] = kRound ? round_half_away_small(x) : x;
   }
 }
 
@@ -172,18 +175,9 @@ void round_row(double* out, int64_t n) {
     for (int64_t i = 0; i < n; ++i) out[i] = double(round_to_int32(out[i]));
     return;
   }
-  // Then x + 1.5 2^52 - 1.5 2^52 is x rounded to nearest, ties to even (exact below 2^51), and a tie
-  // that went towards zero steps away from it: round_to_int32 in double arithmetic only, vectorised
-  // (it was a call and two branches per sample, a third of the D engine's time).
-  constexpr double kMagic = 6755399441055744.0;
-  for (int64_t i = 0; i < n; ++i) {
-    const double x = out[i];
-    const double r = (x + kMagic) - kMagic;
-    const double d = x - r;
-    const double up = ((d == 0.5) & (x > 0)) ? 1.0 : 0.0;
-    const double down = ((d == -0.5) & (x < 0)) ? 1.0 : 0.0;
-    out[i] = r + up - down;
-  }
+  // Then the same rule vectorised (it was a call and two branches per sample, a third of the D
+  // engine's time).
+  for (int64_t i = 0; i < n; ++i) out[i] = round_half_away_small(out[i]);
 }
 
 int32_t round_to_int32(double x) {
@@ -205,8 +199,6 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
       separable_(filter.is_wavelet()),
       int_pairs_(max_abs > 0 && max_abs < (int64_t(1) << 30)),
       rounded_(rounded),
-      fused_round_(separable_ && rounded && int_pairs_ && coarse_bound(filter, max_abs) > 0 &&
-                   coarse_bound(filter, max_abs) < (int64_t(1) << 30)),
       fine_(fine),
       coarse_{coarse_extent(fine.width), coarse_extent(fine.height)},
       threads_(std::max(1, threads)),
@@ -216,6 +208,8 @@ DownsampleEngine::DownsampleEngine(const DownsampleFilter& filter, GridSize fine
   capacity_ = std::min(fine.height, 2 * batch_ + 16);
   rows_.resize(size_t(capacity_ * fine.width));
   scratch_.resize(size_t(threads_));
+  const int64_t out_bound = coarse_bound(filter, max_abs);
+  fused_round_ = separable_ && rounded_ && int_pairs_ && out_bound > 0 && out_bound < (int64_t(1) << 30);
 }
 
 int64_t DownsampleEngine::coarse_bound(const DownsampleFilter& filter, int64_t max_abs) {
@@ -332,13 +326,27 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
   const int64_t half_even = (pw + 1) / 2, half_odd = pw / 2;
   const int32_t* rp[DownsampleFilter::kSize];
   for (int dy = -R; dy <= R; ++dy) rp[dy + R] = fine_row(reflect_index(2 * j + dy, fine_.height));
-  // The separable path writes the output itself; the others accumulate into zeros.
-  if (!separable_) s.acc.assign(size_t(cw), 0.0);
+  s.fold.resize(size_t(pw));
+  double* fold = s.fold.data();
+  if (separable_) {
+    // Columns first (the fold of rows 2j +- k), then the same taps along the row, into the output.
+    // Columns are independent: combining rows and then padding the result gives the padded result.
+    if (int_pairs_)
+      wavelet_columns<true>(rp, w, fold + R);
+    else
+      wavelet_columns<false>(rp, w, fold + R);
+    reflect_padding(fold);
+    if (fused_round_)
+      wavelet_rows<true>(fold, cw, out);
+    else
+      wavelet_rows<false>(fold, cw, out);
+    return;
+  }
+  // The other paths accumulate into zeros, from the padded rows split into even and odd samples.
+  s.acc.assign(size_t(cw), 0.0);
   s.even.resize(size_t(half_even));
   s.odd.resize(size_t(std::max<int64_t>(half_odd, 1)));
-  s.fold.resize(size_t(pw));
   double* acc = s.acc.data();
-  double* fold = s.fold.data();
   const double* E = s.even.data();
   const double* O = s.odd.data();
   // Sample at padded position 2i + 5 + d lives in E[i + (5+d)/2] (5+d even) or O[i + (4+d)/2].
@@ -350,19 +358,7 @@ void DownsampleEngine::compute_row(int64_t j, Scratch& s, double* out) const {
     for (int64_t t = 0; t < half_odd; ++t) s.odd[size_t(t)] = row[2 * t + 1];
   };
   // Columns are independent: combining rows and then padding the result gives the padded result.
-  if (separable_) {
-    // Columns first (the fold of rows 2j +- k), then the same taps along the row.
-    if (int_pairs_)
-      wavelet_columns<true>(rp, w, fold + R);
-    else
-      wavelet_columns<false>(rp, w, fold + R);
-    reflect_padding(fold);
-    if (fused_round_)
-      wavelet_rows<true>(fold, cw, out);
-    else
-      wavelet_rows<false>(fold, cw, out);
-    return;
-  } else if (symmetric_) {
+  if (symmetric_) {
     for (int k = 0; k <= R; ++k) {
       const int32_t* row = rp[R + k];
       if (k > 0) {

@@ -70,7 +70,7 @@ class DownsampleEngine {
   bool separable_;
   bool int_pairs_;  // separable_ with samples below 2^30 in magnitude: wavelet_columns<true>
   bool rounded_;
-  bool fused_round_;  // int_pairs_, rounded_, and outputs below 2^30 in magnitude: wavelet_rows<true>
+  bool fused_round_ = false;  // int_pairs_, rounded_, outputs below 2^30 in magnitude: wavelet_rows<true>
   GridSize fine_, coarse_;
   int threads_;
   int64_t batch_;
