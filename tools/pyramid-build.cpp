@@ -249,7 +249,7 @@ int run(int argc, char** argv) {
         .field("memory_estimate_bytes", r.memory.estimated_bytes + r.memory_outside_builder)
         .field("memory_minimum_bytes", r.memory.minimum_bytes + r.memory_outside_builder)
         .field("bands_in_flight", int64_t(r.memory.bands_in_flight))
-        .field("threads", int64_t(o.threads > 0 ? o.threads : terrain::usable_cores()));
+        .field("threads", int64_t(r.threads));
     j.field("stripes", int64_t(r.stripes)).field("processes", int64_t(ranks));
     j.field("stripes_resumed", int64_t(r.stripes_resumed));
     j.key("levels").begin_array();

@@ -344,6 +344,7 @@ BuildFileResult build_file(const std::string& input, const ReadOptions& read_opt
   bo.level_count = o.levels;
   bo.value_scale = units.value_scale;
   bo.threads = o.threads > 0 ? o.threads : usable_cores();
+  out.threads = bo.threads;
   DownsampleChoice d = resolved_downsample(o);  // at an rms target, Auto is settled by the calibration
   use_fixed_filter(bo, d);
 

@@ -83,6 +83,7 @@ struct BuildFileResult {
   int64_t finest_samples = 0;
   BuildMemoryPlan memory;              // the builder's schedule and estimate under the budget
   int64_t memory_outside_builder = 0;  // the estimate of what the process holds besides the builder
+  int threads = 0;                     // the threads the build ran on (options' threads, or its default)
   int stripes = 0;                     // striped build: stripes (0: the plain build)
   int stripes_resumed = 0;             // parts an earlier, killed build had completed
   bool wrote_output = true;            // false on the ranks other than 0 of a group
