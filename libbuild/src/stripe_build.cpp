@@ -319,6 +319,14 @@ class PartReader {
     }
     return true;
   }
+  // The record's mask bits alone, unchecked: rank 0 reads them for the output's mask while the
+  // part's owner checks the whole record's CRC as it copies the stream (a bad one fails the build).
+  void mask(const PartRecord& r, std::vector<uint8_t>& bits) const {
+    bits.resize(r.mask_size);
+    if (!read_at(bits.data(), r.mask_size, r.offset + kRecordHeader + r.size))
+      throw Error(ErrorCode::Truncated,
+                  path_ + ": cannot read the record at byte " + std::to_string(r.offset));
+  }
   // The record's stream and mask bits, its CRC checked.
   void payload(const PartRecord& r, std::vector<uint8_t>& data, std::vector<uint8_t>& mask) const {
     uint8_t h[kRecordHeader];
@@ -690,56 +698,196 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
                                             "for a resumed build");
   }
   if (stripes_resumed) *stripes_resumed = resumed;
-  if (rank != 0) return result;
   const auto t_assembly = Clock::now();
 
-  // The header and D (the same for every stripe); a resumed rank 0 that coded nothing fits D again.
-  if (!have_result) {
-    CountingSink none;
-    auto reader = open_input();
-    result = build_pyramid_stripe(*reader, options, BuildStripe{0, 0}, coder, none);
-  }
-  container::PyramidFileWriter* writer = &open_output();
-  writer->begin(result.header);
+  // The assembly. Rank 0 lays the output out from the parts' record indexes (each band's stream goes
+  // where a one-process build puts it), writes the band tables, mask and figures, and hands every
+  // process the places of its own parts' streams; each process copies those in (threads share its
+  // parts) and returns their CRCs, which rank 0 combines into the level CRCs. Rank 0 alone copying
+  // every part was the one serial stage after the ranks' work (docs/scale.md "MPI").
+  const int sources = K + (split >= 0 ? 1 : 0);  // the stripes' parts, then the coarse levels' part
+  const auto owner = [&](int source) { return source == K ? 0 : source % ranks; };
+  container::PyramidFileWriter* writer = nullptr;
   std::vector<LevelFigures> figures(static_cast<size_t>(levels));
-  std::vector<uint8_t> data, bits, valid;
+  std::vector<std::vector<std::pair<int, size_t>>> level_records(static_cast<size_t>(levels));
+  std::vector<std::vector<uint64_t>> record_sizes(static_cast<size_t>(sources));
   int64_t voids = 0;
-  const int64_t W = info.width;
-  for (int l = 0; l < levels; ++l)
-    for (int k = 0; k < K; ++k) {
-      // Levels 0..split come from the coarse part (once), the others from the stripes' parts.
-      if (l <= split && k > 0) break;
-      const int source = l <= split ? K : k;
-      PartReader part;
-      part.open(part_path(so.directory, K, source), fp, source, K, levels, W, true);
-      for (const PartRecord& r : part.records()) {
-        if (r.level != l) continue;
-        part.payload(r, data, bits);
+  std::vector<uint8_t> plan;  // rank 0: 1, the temporary path, then per part its records' destinations
+  if (rank == 0) try {
+      // The header and D (the same for every stripe); a resumed rank 0 that coded nothing fits D again.
+      if (!have_result) {
+        CountingSink none;
+        auto reader = open_input();
+        result = build_pyramid_stripe(*reader, options, BuildStripe{0, 0}, coder, none);
+      }
+      writer = &open_output();
+      writer->begin(result.header);
+      std::vector<std::unique_ptr<PartReader>> parts;
+      for (int source = 0; source < sources; ++source) {
+        parts.push_back(std::make_unique<PartReader>());
+        parts.back()->open(part_path(so.directory, K, source), fp, source, K, levels, info.width, true);
+      }
+      std::vector<std::vector<uint64_t>> destination(static_cast<size_t>(sources));
+      for (int source = 0; source < sources; ++source) {
+        destination[size_t(source)].assign(parts[size_t(source)]->records().size(), 0);
+        for (const PartRecord& r : parts[size_t(source)]->records())
+          record_sizes[size_t(source)].push_back(r.size);
+      }
+      std::vector<uint8_t> bits, valid;
+      const int64_t W = info.width;
+      for (int l = 0; l < levels; ++l) {
         const int64_t level_height = result.header.levels[size_t(l)].height;
-        if (r.rows < 1 || r.y0 < 0 || r.y0 > level_height - r.rows)
-          throw Error(ErrorCode::CorruptData, part_path(so.directory, K, source) + ": record at byte " +
-                                                  std::to_string(r.offset) + " has rows outside level " +
-                                                  std::to_string(l));
-        if (l == levels - 1) {
-          if (bits.empty()) {
-            // No voids: one row of ones handed over row by row, not a band of them written each time.
-            valid.assign(size_t(W), 1);
-            for (int64_t y = r.y0; y < r.y0 + r.rows; ++y) writer->mask_rows(y, 1, valid.data());
-          } else {
-            if (bits.size() != size_t((r.rows * W + 7) / 8))
+        std::vector<container::PyramidFileWriter::PlacedBand> placed;
+        int64_t next_row = 0;
+        // Levels 0..split come from the coarse part, the others from the stripes' parts in order.
+        for (int k = 0; k < K; ++k) {
+          if (l <= split && k > 0) break;
+          const int source = l <= split ? K : k;
+          const PartReader& part = *parts[size_t(source)];
+          const std::string where = part_path(so.directory, K, source) + ": record at byte ";
+          for (size_t i = 0; i < part.records().size(); ++i) {
+            const PartRecord& r = part.records()[i];
+            if (r.level != l) continue;
+            if (r.y0 != next_row || r.rows < 1 || r.rows > level_height - r.y0)
+              throw Error(ErrorCode::CorruptData, where + std::to_string(r.offset) + " has rows " +
+                                                      std::to_string(r.y0) + "+" + std::to_string(r.rows) +
+                                                      " where level " + std::to_string(l) +
+                                                      " continues at row " + std::to_string(next_row));
+            next_row += r.rows;
+            placed.push_back({r.rows, r.size});
+            level_records[size_t(l)].push_back({source, i});
+            figures[size_t(l)].add(r.figures, r.size);
+            if (l != levels - 1) continue;
+            if (r.mask_size == 0) {
+              // No voids: one row of ones handed over row by row, not a band of them written each time.
+              valid.assign(size_t(W), 1);
+              for (int64_t y = r.y0; y < r.y0 + r.rows; ++y) writer->mask_rows(y, 1, valid.data());
+              continue;
+            }
+            if (r.mask_size != uint64_t((r.rows * W + 7) / 8))
               throw Error(ErrorCode::CorruptData,
-                          part_path(so.directory, K, source) + ": mask of the wrong size");
+                          where + std::to_string(r.offset) + " has a mask of the wrong size");
+            part.mask(r, bits);
             valid.resize(size_t(r.rows * W));
-            for (int64_t i = 0; i < r.rows * W; ++i) valid[size_t(i)] = (bits[size_t(i / 8)] >> (i % 8)) & 1;
+            for (int64_t i2 = 0; i2 < r.rows * W; ++i2)
+              valid[size_t(i2)] = (bits[size_t(i2 / 8)] >> (i2 % 8)) & 1;
             voids += int64_t(std::count(valid.begin(), valid.end(), uint8_t(0)));
             writer->mask_rows(r.y0, r.rows, valid.data());
           }
         }
-        figures[size_t(l)].add(r.figures, data.size());
-        writer->band(l, r.y0, r.rows, std::move(data));
-        data = {};
+        if (next_row != level_height)
+          throw Error(ErrorCode::CorruptData, so.directory + ": the parts' bands of level " +
+                                                  std::to_string(l) + " cover " + std::to_string(next_row) +
+                                                  " of " + std::to_string(level_height) + " rows");
+        uint64_t at = writer->place_level(l, placed);
+        for (size_t b = 0; b < placed.size(); ++b) {
+          const auto [source, i] = level_records[size_t(l)][b];
+          destination[size_t(source)][i] = at;
+          at += placed[b].size;
+        }
       }
+      const std::string& temp = writer->temp_path();
+      plan.push_back(1);
+      plan.resize(5 + temp.size());
+      bytes::put_u32(plan.data() + 1, uint32_t(temp.size()));
+      std::memcpy(plan.data() + 5, temp.data(), temp.size());
+      for (const std::vector<uint64_t>& d : destination) {
+        const size_t at = plan.size();
+        plan.resize(at + 8 + 8 * d.size());
+        bytes::put_u64(plan.data() + at, d.size());
+        for (size_t i = 0; i < d.size(); ++i) bytes::put_u64(plan.data() + at + 8 + 8 * i, d[i]);
+      }
+    } catch (...) {
+      error = std::current_exception();
+      plan.clear();
     }
+  const std::vector<uint8_t> layout = std::move(group.all_gather(std::move(plan))[0]);
+  if (layout.empty()) {
+    if (error) std::rethrow_exception(error);
+    throw Error(ErrorCode::WriteFailed, so.directory + ": process 0 failed to lay out the output");
+  }
+
+  // This process's parts: each record's stream, its CRC checked, written at its place.
+  std::vector<int> own;
+  for (int source = 0; source < sources; ++source)
+    if (owner(source) == rank) own.push_back(source);
+  std::vector<std::vector<uint32_t>> stream_crcs(own.size());
+  try {
+    const std::string temp(reinterpret_cast<const char*>(layout.data() + 5),
+                           bytes::get_u32(layout.data() + 1));
+    std::vector<size_t> places(
+        static_cast<size_t>(sources));  // where each part's destinations start in `layout`
+    for (size_t at = 5 + temp.size(), source = 0; source < size_t(sources); ++source) {
+      places[source] = at + 8;
+      at += 8 + 8 * bytes::get_u64(layout.data() + at);
+    }
+    const int fd = ::open(temp.c_str(), O_WRONLY | O_CLOEXEC);
+    if (fd < 0) write_failed(temp, "cannot open the output process 0 created");
+    try {
+      run_concurrently(threads, own.size(), [&](size_t n) {
+        const int source = own[n];
+        PartReader part;
+        part.open(part_path(so.directory, K, source), fp, source, K, levels, info.width, true);
+        const uint64_t count = bytes::get_u64(layout.data() + places[size_t(source)] - 8);
+        if (count != part.records().size())
+          throw Error(ErrorCode::CorruptData,
+                      part_path(so.directory, K, source) + ": changed during the assembly");
+        std::vector<uint8_t> data, bits;
+        for (size_t i = 0; i < part.records().size(); ++i) {
+          part.payload(part.records()[i], data, bits);
+          stream_crcs[n].push_back(codec::crc32c(data.data(), data.size()));
+          uint64_t at = bytes::get_u64(layout.data() + places[size_t(source)] + 8 * i);
+          for (size_t done = 0; done < data.size();) {
+            const ssize_t w = ::pwrite(fd, data.data() + done, data.size() - done, off_t(at));
+            if (w < 0 && errno == EINTR) continue;
+            if (w <= 0) write_failed(temp, "cannot write");
+            done += size_t(w), at += uint64_t(w);
+          }
+        }
+      });
+    } catch (...) {
+      ::close(fd);
+      throw;
+    }
+    if (::close(fd) != 0) write_failed(temp, "cannot close");
+  } catch (...) {
+    error = std::current_exception();
+  }
+  std::vector<uint8_t> checksums(1, error ? 0 : 1);
+  for (size_t n = 0; n < own.size() && !error; ++n) {
+    const size_t at = checksums.size();
+    checksums.resize(at + 8 + 4 * stream_crcs[n].size());
+    bytes::put_u32(checksums.data() + at, uint32_t(own[n]));
+    bytes::put_u32(checksums.data() + at + 4, uint32_t(stream_crcs[n].size()));
+    for (size_t i = 0; i < stream_crcs[n].size(); ++i)
+      bytes::put_u32(checksums.data() + at + 8 + 4 * i, stream_crcs[n][i]);
+  }
+  const std::vector<std::vector<uint8_t>> copied = group.all_gather(std::move(checksums));
+  for (const std::vector<uint8_t>& c : copied)
+    if (c.empty() || c[0] != 1) {
+      if (error) std::rethrow_exception(error);
+      throw Error(ErrorCode::WriteFailed,
+                  so.directory + ": another process failed to copy its parts into the output");
+    }
+  if (rank != 0) return result;
+
+  // The level CRCs: the streams' CRCs combined in band order.
+  std::vector<std::vector<uint32_t>> crc_of(static_cast<size_t>(sources));
+  for (const std::vector<uint8_t>& c : copied)
+    for (size_t at = 1; at < c.size();) {
+      const uint32_t source = bytes::get_u32(c.data() + at), n = bytes::get_u32(c.data() + at + 4);
+      if (source >= uint32_t(sources) || n != record_sizes[source].size() ||
+          c.size() - at - 8 < 4 * size_t(n))
+        throw std::logic_error("stripe build: stream checksums out of place");
+      for (uint32_t i = 0; i < n; ++i) crc_of[source].push_back(bytes::get_u32(c.data() + at + 8 + 4 * i));
+      at += 8 + 4 * size_t(n);
+    }
+  for (int l = 0; l < levels; ++l) {
+    uint32_t crc = 0;
+    for (const auto& [source, i] : level_records[size_t(l)])
+      crc = codec::crc32c_combine(crc, crc_of[size_t(source)].at(i), record_sizes[size_t(source)][i]);
+    writer->set_bands_crc(l, crc);
+  }
   for (int l = 0; l < levels; ++l)
     result.levels[size_t(l)] = figures[size_t(l)].stats(result.header.levels[size_t(l)]);
   result.void_count = voids;

@@ -78,7 +78,33 @@ bool cpu_has_sse42() {
 }
 #endif
 
+// Polynomials over GF(2) modulo the CRC polynomial, in the CRC's reflected order (bit 31 holds x^0):
+// the product a b mod P, shifting b up one power of x for each bit of a.
+uint32_t multiply_mod(uint32_t a, uint32_t b) {
+  uint32_t product = 0;
+  for (uint32_t bit = 1u << 31; bit != 0 && a != 0; bit >>= 1) {
+    if (a & bit) {
+      product ^= b;
+      a ^= bit;
+    }
+    b = (b & 1) ? (b >> 1) ^ kPolynomial : b >> 1;
+  }
+  return product;
+}
+
 }  // namespace
+
+// Appending B to A multiplies A's register by x^(8 |B|) and adds B's; the pre- and post-inversion
+// cancel because both CRCs start from the same inverted register.
+uint32_t crc32c_combine(uint32_t crc_a, uint32_t crc_b, uint64_t size_b) {
+  uint32_t shift = 1u << 31;        // x^0
+  uint32_t power = 1u << (31 - 8);  // x^8: one byte
+  for (; size_b != 0; size_b >>= 1) {
+    if (size_b & 1) shift = multiply_mod(shift, power);
+    power = multiply_mod(power, power);
+  }
+  return multiply_mod(shift, crc_a) ^ crc_b;
+}
 
 uint32_t crc32c_portable(const void* data, size_t size, uint32_t crc) {
   return ~update_portable(~crc, static_cast<const uint8_t*>(data), size);

@@ -129,6 +129,29 @@ void ContainerWriter::append_level(uint32_t level, const uint8_t* data, size_t s
   }
 }
 
+uint64_t ContainerWriter::reserve_level(uint32_t level, uint64_t size) {
+  LevelRecord& r = start_level(level);
+  if (level != next_level_ || r.size != 0 || r.held)
+    throw std::logic_error("reserve_level: level " + std::to_string(level) +
+                           " is not the next level, or already has bytes");
+  place_level(level);
+  const uint64_t offset = position_;
+  // The hole: later writes go after it; the file's size covers it once anything follows.
+  if (::lseek(fd_, off_t(offset + size), SEEK_SET) < 0) fail("cannot extend the file");
+  position_ += size;
+  r.size = size;
+  r.reserved = size;
+  return offset;
+}
+
+void ContainerWriter::set_reserved_crc(uint32_t level, uint32_t crc) {
+  // A hole of no bytes has the CRC of nothing, 0.
+  if (level >= records_.size() || (records_[level].reserved == 0 && crc != 0))
+    throw std::logic_error("set_reserved_crc: level " + std::to_string(level) + " has no reserved bytes");
+  records_[level].reserved_crc = crc;
+  records_[level].reserved_crc_set = true;
+}
+
 void ContainerWriter::end_level(uint32_t level) {
   start_level(level).ended = true;
   // Every ended level from the first gap on goes into the file; the level at the gap, if begun,
@@ -183,6 +206,8 @@ void ContainerWriter::finish() {
     if (l >= records_.size() || !records_[l].ended) {
       throw std::invalid_argument("finish: level " + std::to_string(l) + " was never written");
     }
+    if (records_[l].reserved != 0 && !records_[l].reserved_crc_set)
+      throw std::logic_error("finish: level " + std::to_string(l) + "'s reserved bytes have no CRC");
   }
   const uint64_t samples = info.width * info.height;
   if (mask_samples_ != 0 && mask_samples_ != samples) {
@@ -206,8 +231,11 @@ void ContainerWriter::finish() {
   pad_to_alignment();
 
   IndexPlacement placement;
-  for (size_t l = 0; l < level_count; ++l)
-    placement.levels.push_back({records_[l].offset, records_[l].size, records_[l].crc, records_[l].has_crc});
+  for (size_t l = 0; l < level_count; ++l) {
+    const LevelRecord& r = records_[l];
+    const uint32_t crc = r.reserved ? crc32c_combine(r.reserved_crc, r.crc, r.size - r.reserved) : r.crc;
+    placement.levels.push_back({r.offset, r.size, crc, r.has_crc});
+  }
   placement.has_mask = has_mask;
   placement.mask_offset = has_mask ? mask_offset : 0;
   placement.mask_size = mask_size;

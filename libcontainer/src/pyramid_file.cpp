@@ -95,6 +95,32 @@ void PyramidFileWriter::band(int level, int64_t y0, int64_t rows, std::vector<ui
   if (lb.next_row == height) close_level(level);
 }
 
+uint64_t PyramidFileWriter::place_level(int level, const std::vector<PlacedBand>& bands) {
+  if (level < 0 || size_t(level) >= levels_.size())
+    throw std::logic_error("pyramid writer: placed level " + std::to_string(level) +
+                           (levels_.empty() ? " before begin()" : ", which the header does not have"));
+  LevelBands& lb = levels_[size_t(level)];
+  const int64_t height = header_.levels[size_t(level)].height;
+  uint64_t size = 0;
+  int64_t rows = 0;
+  for (const PlacedBand& b : bands) {
+    if (b.rows < 1 || b.rows > height - rows)
+      throw std::logic_error("pyramid writer: placed level " + std::to_string(level) +
+                             " has bands beyond row " + std::to_string(height));
+    rows += b.rows;
+    size += b.size;
+  }
+  if (lb.next_row != 0 || rows != height)
+    throw std::logic_error("pyramid writer: placed level " + std::to_string(level) + " covers " +
+                           std::to_string(rows) + " of " + std::to_string(height) + " rows");
+  const uint64_t offset = writer_.reserve_level(uint32_t(level), size);
+  for (const PlacedBand& b : bands) lb.bands.push_back({b.size, uint64_t(b.rows)});
+  lb.next_row = height;
+  bytes_ += size;
+  close_level(level);
+  return offset;
+}
+
 void PyramidFileWriter::mask_rows(int64_t y0, int64_t rows, const uint8_t* valid) {
   if (y0 != next_mask_row_ || header_.levels.empty())
     throw std::logic_error("pyramid writer: mask rows at " + std::to_string(y0) + " out of order");

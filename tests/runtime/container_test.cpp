@@ -1,6 +1,7 @@
 // Pyramid container: writer/reader round trips, atomic writing, and rejection of damaged files.
 #include "container/container.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -340,6 +341,93 @@ TEST_CASE("container without metadata, mask or filter", "[runtime][container]") 
   CHECK(c.info().filter.empty());
   CHECK_FALSE(c.info().georeference.has_value());
   CHECK_THROWS_AS(c.level(1), std::out_of_range);
+}
+
+TEST_CASE("container levels reserved and filled by another writer", "[runtime][container]") {
+  // The striped build's parallel assembly: a level's first bytes are a hole that another file
+  // descriptor (another process) fills; its CRC is combined with the bytes appended after it.
+  TempDir dir;
+  const std::string path = dir.file("reserved.pyr");
+  std::mt19937 rng(99);
+  std::vector<uint8_t> a(1000), b(37), tail(13), c(5000);
+  for (auto* v : {&a, &b, &tail, &c})
+    for (auto& x : *v) x = uint8_t(rng());
+  ContainerInfo info;
+  info.width = 4;
+  info.height = 4;
+  info.levels = {LevelInfo{1, 1, {}, {}}, LevelInfo{2, 2, {}, {}}, LevelInfo{4, 4, {}, {}}};
+  {
+    ContainerWriter w(path);
+    w.set_info(info);
+    const uint64_t at0 = w.reserve_level(0, a.size() + b.size());
+    w.append_level(0, tail.data(), tail.size());
+    w.end_level(0);
+    CHECK_THROWS_AS(w.reserve_level(2, 10), std::logic_error);  // level 1 comes first
+    const uint64_t at1 = w.reserve_level(1, 0);                 // an empty hole: CRC 0
+    w.end_level(1);
+    CHECK_THROWS_AS(w.reserve_level(1, 4), std::logic_error);  // ended
+    const uint64_t at2 = w.reserve_level(2, c.size());
+    w.end_level(2);
+    CHECK(at1 % 8 == 0);
+    const int fd = ::open(w.temp_path().c_str(), O_WRONLY);
+    REQUIRE(fd >= 0);
+    // Filled out of order, as several writers would.
+    CHECK(::pwrite(fd, c.data(), c.size(), off_t(at2)) == ssize_t(c.size()));
+    CHECK(::pwrite(fd, b.data(), b.size(), off_t(at0 + a.size())) == ssize_t(b.size()));
+    CHECK(::pwrite(fd, a.data(), a.size(), off_t(at0)) == ssize_t(a.size()));
+    ::close(fd);
+    CHECK_THROWS_AS(w.finish(), std::logic_error);  // the holes' CRCs are missing
+  }
+  {
+    ContainerWriter w(path);
+    w.set_info(info);
+    const uint64_t at0 = w.reserve_level(0, a.size());
+    w.append_level(0, tail.data(), tail.size());
+    w.end_level(0);
+    w.reserve_level(1, 0);
+    w.end_level(1);
+    CHECK_THROWS_AS(w.set_reserved_crc(1, 5), std::logic_error);
+    w.set_reserved_crc(1, 0);
+    const uint64_t at2 = w.reserve_level(2, c.size());
+    w.end_level(2);
+    const int fd = ::open(w.temp_path().c_str(), O_WRONLY);
+    REQUIRE(fd >= 0);
+    CHECK(::pwrite(fd, a.data(), a.size(), off_t(at0)) == ssize_t(a.size()));
+    CHECK(::pwrite(fd, c.data(), c.size(), off_t(at2)) == ssize_t(c.size()));
+    ::close(fd);
+    w.set_reserved_crc(0, crc32c(a.data(), a.size()));
+    w.set_reserved_crc(2, crc32c(c.data(), c.size()));
+    w.finish();
+  }
+  const Container got = Container::open(path);
+  got.verify();
+  std::vector<uint8_t> level0(a);
+  level0.insert(level0.end(), tail.begin(), tail.end());
+  REQUIRE(got.level(0).size == level0.size());
+  CHECK(std::equal(level0.begin(), level0.end(), got.level(0).data));
+  CHECK(got.level(1).size == 0);
+  REQUIRE(got.level(2).size == c.size());
+  CHECK(std::equal(c.begin(), c.end(), got.level(2).data));
+  // A hole whose bytes differ from the CRC given for it is caught by verify().
+  const std::string bad = dir.file("bad.pyr");
+  {
+    ContainerWriter w(bad);
+    w.set_info(info);
+    for (uint32_t l = 0; l < 3; ++l) {
+      const uint64_t at = w.reserve_level(l, c.size());
+      w.end_level(l);
+      const int fd = ::open(w.temp_path().c_str(), O_WRONLY);
+      REQUIRE(fd >= 0);
+      CHECK(::pwrite(fd, c.data(), c.size(), off_t(at)) == ssize_t(c.size()));
+      ::close(fd);
+      w.set_reserved_crc(l, crc32c(c.data(), c.size() - (l == 1 ? 1 : 0)));
+    }
+    w.finish();
+  }
+  const Container damaged = Container::open(bad);
+  CHECK(damaged.level_checksum_ok(0));
+  CHECK_FALSE(damaged.level_checksum_ok(1));
+  CHECK_THROWS_AS(damaged.verify(), Error);
 }
 
 TEST_CASE("container is moved and read concurrently", "[runtime][container]") {

@@ -1,8 +1,9 @@
 // The build cut into stripes of finest rows, each coded into a part file of its own, so that the
 // stripes can be shared out among processes (MPI ranks: build/mpi_group.h) and a killed build can
-// resume from the stripes it completed. Rank 0 then writes the .pyr from the parts, level by level,
-// through the same PyramidFileWriter as the one-process build: the bytes are the same
-// (docs/scale.md says why).
+// resume from the stripes it completed. Rank 0 then lays the .pyr out from the parts' record
+// indexes, level by level, through the same PyramidFileWriter as the one-process build (the bytes
+// are the same: docs/scale.md says why), and every process copies its own parts' band streams into
+// their places in it (so the processes must share the output's filesystem, as they share the parts').
 //
 // Layout beside the output OUT: OUT.build/journal (the fingerprint of input and options; a journal
 // that does not match makes the directory start over) and OUT.build/stripe-K-k.part, one per
@@ -65,11 +66,12 @@ struct StripeBuildOptions {
 std::string stripe_directory(const std::string& output);
 
 // Codes this process's stripes (stripe k goes to rank k % size) into parts, skipping those a
-// matching journal already has complete, then (rank 0, when every process succeeded) feeds the parts
-// into the writer `open_output` creates (only then: a killed build leaves no temporary output), level
-// by level, stripe by stripe. Returns, on rank 0, the whole build's result as
-// build_pyramid gives it (figures added in band order); elsewhere the result of this process's
-// first stripe. `open_input` opens the input again at row 0 (each stripe reads from the top).
+// matching journal already has complete; then, when every process succeeded, rank 0 lays out the
+// writer `open_output` creates (only then: a killed build leaves no temporary output) and every
+// process writes its parts' streams into it (on `options.threads` threads), rank 0 combining their
+// CRCs into the level CRCs; the caller's finish() on rank 0 completes the file. Returns, on rank 0, the whole
+// build's result as build_pyramid gives it (figures added in band order); elsewhere the result of this
+// process's first stripe. `open_input` opens the input again at row 0 (each stripe reads from the top).
 // `stripes_resumed` (if not null) receives the number of parts reused. Throws as build_pyramid;
 // Error(WriteFailed) for a part that cannot be written, Error(CorruptData/ChecksumMismatch) for a
 // part damaged between the check and the assembly (a damaged part found at the start is coded

@@ -32,6 +32,7 @@ namespace terrain::container {
 
 // libcodec's implementation (one for the project): pass a previous result as `crc` to continue.
 using codec::crc32c;
+using codec::crc32c_combine;
 using codec::crc32c_portable;
 
 // ---------------------------------------------------------------------------------------------
@@ -183,6 +184,16 @@ class ContainerWriter {
   void end_level(uint32_t level);
   // A whole blob in one piece: append_level then end_level.
   void add_level(uint32_t level, const uint8_t* data, size_t size);
+  // Experimental (the striped build's parallel assembly): makes the first `size` bytes of level
+  // `level`'s blob a hole that other writers fill (threads or processes that open temp_path() and
+  // pwrite there) and returns its file offset; append_level/end_level go on after it. The level must
+  // have nothing yet and be the one streaming to the file (every lower level ended). The hole's
+  // CRC-32C comes later through set_reserved_crc, before finish(); finish() fsyncs the file, so the
+  // other writers must have written their bytes (and, on a network filesystem, closed the file)
+  // by then. Throws std::logic_error when the level is not next or already has bytes,
+  // Error(WriteFailed) when the file cannot be extended.
+  uint64_t reserve_level(uint32_t level, uint64_t size);
+  void set_reserved_crc(uint32_t level, uint32_t crc);
 
   // Appends `count` further mask samples in row-major order (non-zero = data, 0 = void). Call it for all
   // width*height samples or not at all (no call: no voids). Encoded on the fly, O(runs) memory;
@@ -208,8 +219,11 @@ class ContainerWriter {
     bool ended = false;
     bool placed = false;  // its offset is fixed and its bytes go straight to the file
     uint64_t offset = 0, size = 0;
-    uint32_t crc = 0;
+    uint32_t crc = 0;  // of the bytes appended (those after the reserved hole)
     bool has_crc = false;
+    uint64_t reserved = 0;  // the hole at the blob's start (reserve_level)
+    uint32_t reserved_crc = 0;
+    bool reserved_crc_set = false;
     std::unique_ptr<detail::HeldBytes> held;  // bytes waiting for the levels before it
   };
   LevelRecord& start_level(uint32_t level);

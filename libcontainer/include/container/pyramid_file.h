@@ -38,6 +38,21 @@ class PyramidFileWriter final : public PyramidSink {
   // Throws as ContainerWriter::finish (std::invalid_argument when a level is incomplete).
   void finish(const BuildResult& result, ContainerInfo info, const std::string& metadata_json);
   uint64_t bytes_written() const { return bytes_; }
+
+  // Experimental (the striped build's parallel assembly): level `level` whole, in place of its
+  // band() calls: `bands` gives each band's rows and stream size, top to bottom; their streams are
+  // written by others (ContainerWriter::reserve_level) consecutively from the returned file offset,
+  // and their CRC-32C (the streams concatenated in band order) comes through set_bands_crc before
+  // finish(). Levels in order, each once. Throws std::logic_error before begin(), for a level out of
+  // order or rows that do not cover the level, Error(WriteFailed) as band().
+  struct PlacedBand {
+    int64_t rows = 0;
+    uint64_t size = 0;  // 0: an all-zero band
+  };
+  uint64_t place_level(int level, const std::vector<PlacedBand>& bands);
+  void set_bands_crc(int level, uint32_t crc) { writer_.set_reserved_crc(uint32_t(level), crc); }
+  // The temporary file the output is written to (renamed onto the target by finish()).
+  const std::string& temp_path() const { return writer_.temp_path(); }
   // See ContainerWriter::set_level_memory_limit.
   void set_level_memory_limit(size_t bytes) { writer_.set_level_memory_limit(bytes); }
 
