@@ -821,6 +821,9 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       places[source] = at + 8;
       at += 8 + 8 * bytes::get_u64(layout.data() + at);
     }
+    // A test hook: this rank's copy fails (scripts/check-striped-build: no output, the parts kept).
+    if (const char* env = std::getenv("TERRAIN_TEST_FAIL_COPY"); env && std::atoi(env) == rank)
+      throw Error(ErrorCode::WriteFailed, temp + ": the copy failed (TERRAIN_TEST_FAIL_COPY)");
     const int fd = ::open(temp.c_str(), O_WRONLY | O_CLOEXEC);
     if (fd < 0) write_failed(temp, "cannot open the output process 0 created");
     try {
