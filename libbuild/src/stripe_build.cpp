@@ -704,7 +704,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   // where a one-process build puts it), writes the band tables, mask and figures, and hands every
   // process the places of its own parts' streams; each process copies those in (threads share its
   // parts) and returns their CRCs, which rank 0 combines into the level CRCs. Rank 0 alone copying
-  // every part was the one serial stage after the ranks' work (docs/scale.md "MPI").
+  // every part was the one serial stage after the ranks' work (docs/scale.md "The decomposition").
   const int sources = K + (split >= 0 ? 1 : 0);  // the stripes' parts, then the coarse levels' part
   const auto owner = [&](int source) { return source == K ? 0 : source % ranks; };
   container::PyramidFileWriter* writer = nullptr;
@@ -712,7 +712,9 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   std::vector<std::vector<std::pair<int, size_t>>> level_records(static_cast<size_t>(levels));
   std::vector<std::vector<uint64_t>> record_sizes(static_cast<size_t>(sources));
   int64_t voids = 0;
-  std::vector<uint8_t> plan;  // rank 0: 1, the temporary path, then per part its records' destinations
+  // Rank 0's plan for every process: 1, the temporary path, then per part its record count and each
+  // record's destination and stream size (an owner that finds another size stops: no overlaps).
+  std::vector<uint8_t> plan;
   if (rank == 0) try {
       // The header and D (the same for every stripe); a resumed rank 0 that coded nothing fits D again.
       if (!have_result) {
@@ -769,8 +771,7 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
                           where + std::to_string(r.offset) + " has a mask of the wrong size");
             part.mask(r, bits);
             valid.resize(size_t(r.rows * W));
-            for (int64_t i2 = 0; i2 < r.rows * W; ++i2)
-              valid[size_t(i2)] = (bits[size_t(i2 / 8)] >> (i2 % 8)) & 1;
+            for (int64_t n = 0; n < r.rows * W; ++n) valid[size_t(n)] = (bits[size_t(n / 8)] >> (n % 8)) & 1;
             voids += int64_t(std::count(valid.begin(), valid.end(), uint8_t(0)));
             writer->mask_rows(r.y0, r.rows, valid.data());
           }
@@ -791,11 +792,15 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
       plan.resize(5 + temp.size());
       bytes::put_u32(plan.data() + 1, uint32_t(temp.size()));
       std::memcpy(plan.data() + 5, temp.data(), temp.size());
-      for (const std::vector<uint64_t>& d : destination) {
+      for (int source = 0; source < sources; ++source) {
+        const std::vector<uint64_t>& d = destination[size_t(source)];
         const size_t at = plan.size();
-        plan.resize(at + 8 + 8 * d.size());
+        plan.resize(at + 8 + 16 * d.size());
         bytes::put_u64(plan.data() + at, d.size());
-        for (size_t i = 0; i < d.size(); ++i) bytes::put_u64(plan.data() + at + 8 + 8 * i, d[i]);
+        for (size_t i = 0; i < d.size(); ++i) {
+          bytes::put_u64(plan.data() + at + 8 + 16 * i, d[i]);
+          bytes::put_u64(plan.data() + at + 16 + 16 * i, record_sizes[size_t(source)][i]);
+        }
       }
     } catch (...) {
       error = std::current_exception();
@@ -815,11 +820,11 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
   try {
     const std::string temp(reinterpret_cast<const char*>(layout.data() + 5),
                            bytes::get_u32(layout.data() + 1));
-    std::vector<size_t> places(
-        static_cast<size_t>(sources));  // where each part's destinations start in `layout`
+    // Where each part's records start in the plan.
+    std::vector<size_t> places(static_cast<size_t>(sources));
     for (size_t at = 5 + temp.size(), source = 0; source < size_t(sources); ++source) {
       places[source] = at + 8;
-      at += 8 + 8 * bytes::get_u64(layout.data() + at);
+      at += 8 + 16 * bytes::get_u64(layout.data() + at);
     }
     // A test hook: this rank's copy fails (scripts/check-striped-build: no output, the parts kept).
     if (const char* env = std::getenv("TERRAIN_TEST_FAIL_COPY"); env && std::atoi(env) == rank)
@@ -838,8 +843,12 @@ BuildResult build_stripes(const std::function<std::unique_ptr<BandReader>()>& op
         std::vector<uint8_t> data, bits;
         for (size_t i = 0; i < part.records().size(); ++i) {
           part.payload(part.records()[i], data, bits);
+          const uint8_t* place = layout.data() + places[size_t(source)] + 16 * i;
+          if (data.size() != bytes::get_u64(place + 8))
+            throw Error(ErrorCode::CorruptData,
+                        part_path(so.directory, K, source) + ": changed during the assembly");
           stream_crcs[n].push_back(codec::crc32c(data.data(), data.size()));
-          uint64_t at = bytes::get_u64(layout.data() + places[size_t(source)] + 8 * i);
+          uint64_t at = bytes::get_u64(place);
           for (size_t done = 0; done < data.size();) {
             const ssize_t w = ::pwrite(fd, data.data() + done, data.size() - done, off_t(at));
             if (w < 0 && errno == EINTR) continue;
