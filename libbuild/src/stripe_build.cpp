@@ -323,21 +323,18 @@ class PartReader {
   // part's owner checks the whole record's CRC as it copies the stream (a bad one fails the build).
   void mask(const PartRecord& r, std::vector<uint8_t>& bits) const {
     bits.resize(r.mask_size);
-    if (!read_at(bits.data(), r.mask_size, r.offset + kRecordHeader + r.size))
-      throw Error(ErrorCode::Truncated,
-                  path_ + ": cannot read the record at byte " + std::to_string(r.offset));
+    if (!read_at(bits.data(), r.mask_size, r.offset + kRecordHeader + r.size)) truncated(r);
   }
   // The record's stream and mask bits, its CRC checked.
-  void payload(const PartRecord& r, std::vector<uint8_t>& data, std::vector<uint8_t>& mask) const {
+  void payload(const PartRecord& r, std::vector<uint8_t>& data, std::vector<uint8_t>& bits) const {
     uint8_t h[kRecordHeader];
-    data.resize(r.size), mask.resize(r.mask_size);
-    if (!read_at(h, kRecordHeader, r.offset) || !read_at(data.data(), r.size, r.offset + kRecordHeader) ||
-        !read_at(mask.data(), r.mask_size, r.offset + kRecordHeader + r.size))
-      throw Error(ErrorCode::Truncated,
-                  path_ + ": cannot read the record at byte " + std::to_string(r.offset));
+    data.resize(r.size);
+    if (!read_at(h, kRecordHeader, r.offset) || !read_at(data.data(), r.size, r.offset + kRecordHeader))
+      truncated(r);
+    mask(r, bits);
     uint32_t crc = codec::crc32c(h, 80);
     crc = codec::crc32c(data.data(), data.size(), crc);
-    crc = codec::crc32c(mask.data(), mask.size(), crc);
+    crc = codec::crc32c(bits.data(), bits.size(), crc);
     if (crc != bytes::get_u32(h + 80))
       throw Error(ErrorCode::ChecksumMismatch,
                   path_ + ": record at byte " + std::to_string(r.offset) +
@@ -345,6 +342,9 @@ class PartReader {
   }
 
  private:
+  [[noreturn]] void truncated(const PartRecord& r) const {
+    throw Error(ErrorCode::Truncated, path_ + ": cannot read the record at byte " + std::to_string(r.offset));
+  }
   bool read_at(uint8_t* p, size_t n, uint64_t at) const {
     while (n > 0) {
       const ssize_t got = ::pread(fd_, p, n, off_t(at));
